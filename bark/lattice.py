@@ -1,0 +1,77 @@
+"""The phyllotactic lattice of leaf bases on a cylinder (paper: "Fracture simulation", Table 2).
+
+Leaf base ``i`` sits at angle ``i·φ`` and height ``i·h``.  Springs join it to the bases at the
+index offsets ``±o`` for each ``o`` in ``offsets`` (Table 2: ±21, ±34), giving each interior base
+four neighbours.  The exact lattice is degenerate (NOTES.md §1: every spring of one offset has the
+same length and reaches its threshold in the same step), so the lattice carries an explicit,
+seeded position jitter; ``jitter=0`` keeps the exact lattice available.
+
+Units: lengths in model length units (1 = 0.3 m), angles in radians inside the code and degrees in
+parameters that a person types (``divergence_deg``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from bark._validate import in_range, non_negative, positive, positive_int
+
+__all__ = ["GOLDEN_ANGLE_DEG", "Lattice"]
+
+#: The golden angle 360°·(2 − φ) ≈ 137.5078°, the divergence angle of grasstree seedlings.
+GOLDEN_ANGLE_DEG = 360.0 * (2.0 - (1.0 + math.sqrt(5.0)) / 2.0)
+
+
+def _offsets(value) -> tuple[int, ...]:
+    return tuple(int(v) for v in value) if not isinstance(value, (int, str)) else (value,)
+
+
+def _check_offsets(instance, attribute, value) -> None:
+    if not value or any(isinstance(o, bool) or o < 1 for o in value) or len(set(value)) != len(value):
+        raise ValueError(f"offsets = {list(value)!r}: must be distinct integers >= 1, e.g. [21, 34]")
+
+
+@attrs.frozen(kw_only=True)
+class Lattice:
+    """Where the leaf bases start and which of them are joined by springs."""
+
+    n_bases: int = attrs.field(default=3000, validator=positive_int)
+    """Number of leaf bases on the trunk segment (Table 2: 3000)."""
+    divergence_deg: float = attrs.field(default=GOLDEN_ANGLE_DEG, validator=in_range(0.0, 360.0, lo_open=True, hi_open=True))
+    """Divergence angle φ between successive bases, degrees (default: the golden angle)."""
+    rise: float = attrs.field(default=0.0005, validator=positive)
+    """Vertical displacement h between successive bases (Table 2: 0.0005)."""
+    offsets: tuple[int, ...] = attrs.field(default=(21, 34), converter=_offsets, validator=_check_offsets)
+    """Index offsets to neighbouring bases; each offset o joins base i to base i+o (Table 2: 21, 34)."""
+    jitter: float = attrs.field(default=0.05, validator=non_negative)
+    """Standard deviation of the Gaussian jitter of each base's initial angle and height, as a
+    fraction of the base spacing √(2π r h).  0 gives the exact (degenerate) lattice."""
+
+    def spacing(self, radius: float) -> float:
+        """Typical distance between neighbouring bases: the side of the area 2πr·h one base covers."""
+        return math.sqrt(2.0 * math.pi * radius * self.rise)
+
+    def sites(self, radius: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Initial angle θ (radians) and height z of every base on a cylinder of ``radius``.
+
+        The jitter is drawn from ``rng`` (the simulation's one seeded generator) even when it is
+        zero, so that the generator's later draws do not depend on whether jitter is on.
+        """
+        i = np.arange(self.n_bases, dtype=float)
+        noise = rng.standard_normal((2, self.n_bases))
+        sigma = self.jitter * self.spacing(radius)
+        theta = i * math.radians(self.divergence_deg) + noise[0] * (sigma / radius)
+        z = i * self.rise + noise[1] * sigma
+        return theta, z
+
+    def pairs(self) -> np.ndarray:
+        """Spring end points as an ``(m, 2)`` integer array, ordered by offset then by base index."""
+        blocks = [
+            np.column_stack([np.arange(self.n_bases - o), np.arange(o, self.n_bases)])
+            for o in self.offsets
+            if o < self.n_bases
+        ]
+        return np.concatenate(blocks).astype(np.int64) if blocks else np.empty((0, 2), np.int64)

@@ -1,0 +1,142 @@
+"""Writing a run's results: atomically, without plotting, readable without pickle.
+
+Every file is written to a temporary name in the same folder and moved into place with
+``os.replace``, so a reader (or a crash) never sees half a file.  Files of one run:
+
+* ``patches.csv`` — one row per patch of ≥ min_size bases (from the patch analyzer).
+* ``breaks.csv`` — the break log: spring, i, j, step, t, tension, in the order of breaking.
+* ``summary.json`` — every setting, the seed, bark's version, the stop condition and why the run
+  stopped, t and radius at the end, counts and pattern statistics, degenerate events.
+* ``state.npz`` — the mechanical state at the end (x, v, anchor, pairs, rest, fmax, intact, patch
+  labels, t); ``np.load(path)`` reads it with ``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+__all__ = ["atomic_write", "write_csv", "write_json", "write_npz", "run_summary", "write_run"]
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _umask()
+
+
+def atomic_write(path: str | Path, write: Callable[[io.BufferedWriter], None]) -> Path:
+    """Call ``write(fh)`` on a temporary file beside ``path``, then move it onto ``path``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_csv(path: str | Path, rows: list[dict[str, Any]], columns: list[str]) -> Path:
+    def write(fh):
+        text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
+        w = csv.DictWriter(text, fieldnames=columns, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+        text.flush()
+        text.detach()
+
+    return atomic_write(path, write)
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def write_json(path: str | Path, obj: Any) -> Path:
+    data = json.dumps(_jsonable(obj), indent=2, allow_nan=False).encode() + b"\n"
+    return atomic_write(path, lambda fh: fh.write(data))
+
+
+def write_npz(path: str | Path, **arrays: np.ndarray) -> Path:
+    return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
+
+
+PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
+
+
+def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s: float | None = None) -> dict[str, Any]:
+    """Everything summary.json holds about a finished (or stopped) run; ``analyses`` from ``sim.analyze()``."""
+    from bark import __version__
+
+    stats = next((a.summary for a in analyses.values() if "n_patches" in a.summary), {})
+    return {
+        "bark_version": __version__,
+        "seed": sim.seed,
+        "settings": scene.to_dict(),
+        "stop": {k: getattr(scene.run, k) for k in ("until_time", "until_radius", "until_patches", "min_patch_size")},
+        "stop_reason": stop_reason,
+        "t": sim.state.t,
+        "steps": sim.step_count,
+        "radius": sim.radius,
+        "n_bases": sim.state.n_bases,
+        "n_springs": sim.state.n_springs,
+        "n_broken": sim.n_broken,
+        "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size)),
+        "mean_orientation_deg": stats.get("mean_orientation_deg"),
+        "circular_sd_deg": stats.get("circular_sd_deg"),
+        "mean_anisotropy": stats.get("mean_anisotropy"),
+        "fraction_within_45_deg": stats.get("fraction_within_45_deg"),
+        "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
+        "wall_time_s": wall_time_s,
+        "conventions": "orientation: degrees from horizontal in [0, 180), 90 = along the trunk axis; "
+        "horizontal = increasing theta seen from outside; anisotropy = 2A - 1",
+    }
+
+
+def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None) -> dict:
+    """Write patches.csv, breaks.csv, summary.json and state.npz of ``sim`` into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    analyses = sim.analyze()
+    rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), [])
+    write_csv(out / "patches.csv", rows, PATCH_COLUMNS)
+    log = sim.breaks.arrays()
+    write_csv(
+        out / "breaks.csv",
+        [dict(zip(log, vals)) for vals in zip(*(v.tolist() for v in log.values()))],
+        list(log),
+    )
+    s = sim.state
+    write_npz(
+        out / "state.npz",
+        x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs, rest=s.rest, fmax=s.fmax, intact=s.intact,
+        labels=sim.patch_labels(), t=np.float64(s.t),
+    )
+    summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s)
+    write_json(out / "summary.json", summary)
+    return summary

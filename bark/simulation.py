@@ -1,0 +1,264 @@
+"""The :class:`Simulation`: one growth law, one integrator, breakers and analyzers, composed.
+
+The leaf-base graph (networkx) is the topology of record: nodes are leaf bases (with their initial
+site ``theta0``, ``z0``), edges are *intact* springs (with their row number ``spring`` in the
+arrays).  :class:`~bark.state.State` mirrors it as arrays for the hot loop, and
+:meth:`Simulation.break_springs` is the only place where springs break — in both at once.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Iterator
+
+import attrs
+import networkx as nx
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from bark._validate import in_range, one_of, optional, positive, positive_int
+from bark.errors import NonFiniteStateError
+from bark.forces import Mechanics, spring_geometry
+from bark.lattice import Lattice
+from bark.state import State, cylinder_points, project_to_surface
+from bark.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
+
+__all__ = ["Simulation", "Stop", "BreakLog"]
+
+
+@attrs.frozen(kw_only=True)
+class Stop:
+    """When a run ends: the first of these conditions to hold (NOTES.md §2).  At least one is needed."""
+
+    until_time: float | None = attrs.field(default=None, validator=optional(positive))
+    """Stop once simulated time ≥ this."""
+    until_radius: float | None = attrs.field(default=None, validator=optional(positive))
+    """Stop once the mean trunk radius ≥ this."""
+    until_patches: int | None = attrs.field(default=None, validator=optional(positive_int))
+    """Stop once the number of patches of at least ``min_patch_size`` bases ≥ this."""
+    min_patch_size: int = attrs.field(default=7, validator=positive_int)
+    """Smallest patch that counts (the paper drops patches under 7 bases)."""
+
+    def __attrs_post_init__(self) -> None:
+        if self.until_time is None and self.until_radius is None and self.until_patches is None:
+            raise ValueError("no stop condition: give until_time, until_radius or until_patches")
+
+    def reason(self, sim: "Simulation") -> str | None:
+        """Which condition holds now (``'time'``, ``'radius'``, ``'patches'``), or ``None``."""
+        eps = 1e-9 * sim.dt
+        if self.until_time is not None and sim.state.t >= self.until_time - eps:
+            return "time"
+        if self.until_radius is not None and sim.radius >= self.until_radius:
+            return "radius"
+        if self.until_patches is not None and sim.patch_count(self.min_patch_size) >= self.until_patches:
+            return "patches"
+        return None
+
+
+@attrs.define(eq=False)
+class BreakLog:
+    """Every break: spring id, its end bases, the step and time it broke, and its tension then."""
+
+    _chunks: list[tuple[np.ndarray, ...]] = attrs.field(factory=list)
+
+    def record(self, ids: np.ndarray, pairs: np.ndarray, step: int, t: float, tension: np.ndarray) -> None:
+        n = ids.size
+        self._chunks.append((ids.copy(), pairs[ids, 0], pairs[ids, 1], np.full(n, step), np.full(n, t), tension[ids]))
+
+    def __len__(self) -> int:
+        return sum(c[0].size for c in self._chunks)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Columns ``spring, i, j, step, t, tension`` in the order the breaks happened."""
+        names = ("spring", "i", "j", "step", "t", "tension")
+        if not self._chunks:
+            return {n: np.empty(0, dtype=float if n in ("t", "tension") else np.int64) for n in names}
+        return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(names)}
+
+
+@attrs.define(eq=False, kw_only=True)
+class Simulation:
+    """A trunk segment whose leaf-base layer grows and cracks.
+
+    Build it from parts (every part is an attrs object; ``attrs.evolve`` makes variants for sweeps)::
+
+        sim = Simulation(lattice=Lattice(), mechanics=Mechanics(), growth=SqrtGrowth(),
+                         integrator=EulerCromer(), breakers=[ThresholdBreaker()], dt=0.01, seed=1)
+        sim.run(Stop(until_patches=110))
+    """
+
+    lattice: Lattice = attrs.field(factory=Lattice)
+    mechanics: Mechanics = attrs.field(factory=Mechanics)
+    growth: Growth
+    integrator: Integrator
+    breakers: tuple[Breaker, ...] = attrs.field(converter=tuple)
+    analyzers: tuple[Analyzer, ...] = attrs.field(default=(), converter=tuple)
+    dt: float = attrs.field(default=0.01, validator=positive)
+    """Time step (Table 2: 0.01)."""
+    seed: int = attrs.field(default=0)
+    """Seed of the simulation's one random generator (jitter, thresholds, stochastic breakers)."""
+    degenerate_fraction: float = attrs.field(default=0.1, validator=in_range(0.0, 1.0, lo_open=True))
+    """A step that breaks more than this share of all springs is a degenerate event (NOTES.md §1)."""
+    on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
+    """What a degenerate event does: ``warn`` records it and goes on; ``stop`` ends the run."""
+
+    rng: np.random.Generator = attrs.field(init=False)
+    graph: nx.Graph = attrs.field(init=False)
+    state: State = attrs.field(init=False)
+    breaks: BreakLog = attrs.field(init=False, factory=BreakLog)
+    events: list[dict] = attrs.field(init=False, factory=list)
+    """Degenerate events and other notable happenings, as dicts with at least ``kind``, ``t``, ``step``."""
+    step_count: int = attrs.field(init=False, default=0)
+    stop_reason: str | None = attrs.field(init=False, default=None)
+    _labels: np.ndarray | None = attrs.field(init=False, default=None)
+
+    def __attrs_post_init__(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        r_ref = float(np.mean(self.growth.radius(0.0, np.zeros(1))))
+        theta, z = self.lattice.sites(r_ref, self.rng)
+        pairs = self.lattice.pairs()
+        x = cylinder_points(theta, z, np.broadcast_to(self.growth.radius(0.0, z), z.shape))
+        self.graph = nx.Graph()
+        self.graph.add_nodes_from((i, {"theta0": t, "z0": h}) for i, (t, h) in enumerate(zip(theta, z)))
+        self.graph.add_edges_from((int(i), int(j), {"spring": s}) for s, (i, j) in enumerate(pairs))
+        _, rest = spring_geometry(x, pairs)
+        self.state = State(
+            x=x,
+            v=np.zeros_like(x),
+            anchor=x.copy(),
+            pairs=pairs,
+            rest=rest,
+            fmax=self.mechanics.thresholds(len(pairs), self.rng),
+            intact=np.ones(len(pairs), dtype=bool),
+            mechanics=self.mechanics,
+        )
+
+    # -- the loop ---------------------------------------------------------------------------
+
+    def run(self, stop: Stop, observe: Callable[["Simulation"], None] | None = None) -> str:
+        """Run until ``stop`` holds; return why it stopped (``'time'``, ``'radius'``, ``'patches'``,
+        ``'degenerate'``).  ``observe(sim)`` is called after every step.
+
+        The loop, literally::
+
+            while stop.reason(sim) is None:
+                integrator.step(state, dt)      # forces (eq. 4) -> velocities (eq. 7) -> positions (eq. 8)
+                t += dt
+                constrain to surface r(t, z)    # eq. 9 on bases and anchors; radial velocity removed
+                tension = k(|d| - l)            # every spring, at the constrained positions
+                stop with an error if any tension is NaN or inf
+                ids = union of breaker.select(state, tension, rng) over breakers
+                if len(ids) > degenerate_fraction * n_springs: record a degenerate event
+                break_springs(ids, tension)     # graph and arrays together; logged
+                observe(sim)
+
+        Every spring over its threshold at the end of a step breaks in that step, all at once;
+        compression never breaks a spring; a broken spring never comes back.
+        """
+        for _ in self.irun(stop):
+            if observe is not None:
+                observe(self)
+        return self.stop_reason
+
+    def irun(self, stop: Stop) -> Iterator["Simulation"]:
+        """The loop of :meth:`run` as a generator that yields after every step (for progress bars)."""
+        self.stop_reason = None
+        while (reason := stop.reason(self)) is None and self.stop_reason is None:
+            self.step()
+            yield self
+        self.stop_reason = self.stop_reason or reason
+
+    def step(self) -> None:
+        """One step of the loop in :meth:`run`."""
+        s = self.state
+        self.integrator.step(s, self.dt)
+        s.t = (self.step_count + 1) * self.dt  # not a running sum: no drift over 10^5 steps
+        self.constrain()
+        tension = s.tension()
+        if not np.isfinite(tension).all():
+            raise NonFiniteStateError(
+                f"state became non-finite at t = {s.t:.6g} (step {self.step_count + 1}); "
+                f"dt = {self.dt} is probably above the stability limit of {self.integrator.__class__.__name__}"
+            )
+        ids = self._select(tension)
+        self.step_count += 1
+        if ids.size:
+            if ids.size > self.degenerate_fraction * s.n_springs:
+                self._degenerate(ids.size)
+            self.break_springs(ids, tension)
+
+    def constrain(self) -> None:
+        """Surface constraint (eq. 9): bases (with their velocities) and anchors onto ``r(t, z)``."""
+        s = self.state
+        project_to_surface(s.x, self._radius_at(s.x[:, 2]), s.v)
+        project_to_surface(s.anchor, self._radius_at(s.anchor[:, 2]))
+
+    def _radius_at(self, z: np.ndarray) -> np.ndarray:
+        return np.broadcast_to(self.growth.radius(self.state.t, z), z.shape)
+
+    def _select(self, tension: np.ndarray) -> np.ndarray:
+        picks = [np.asarray(b.select(self.state, tension, self.rng), dtype=np.int64) for b in self.breakers]
+        ids = np.unique(np.concatenate(picks)) if picks else np.empty(0, np.int64)
+        return ids[self.state.intact[ids]]
+
+    def _degenerate(self, n: int) -> None:
+        self.events.append(
+            {
+                "kind": "degenerate",
+                "t": self.state.t,
+                "step": self.step_count,
+                "n_springs": int(n),
+                "fraction": n / self.state.n_springs,
+            }
+        )
+        if self.on_degenerate == "stop":
+            self.stop_reason = "degenerate"
+
+    # -- the one place springs break ------------------------------------------------------------
+
+    def break_springs(self, ids, tension: np.ndarray | None = None) -> np.ndarray:
+        """Break springs ``ids`` for good, in the graph and in the arrays, and log them.
+
+        Already-broken ids are ignored.  Returns the ids actually broken.
+        """
+        s = self.state
+        ids = np.unique(np.asarray(ids, dtype=np.int64))
+        ids = ids[s.intact[ids]]
+        if ids.size == 0:
+            return ids
+        if tension is None:
+            tension = s.tension()
+        s.intact[ids] = False
+        self.graph.remove_edges_from(s.pairs[ids].tolist())
+        self.breaks.record(ids, s.pairs, self.step_count, s.t, tension)
+        self._labels = None
+        return ids
+
+    # -- observables ----------------------------------------------------------------------------
+
+    @property
+    def radius(self) -> float:
+        """Mean trunk radius now (at the anchors' heights)."""
+        return float(np.mean(self._radius_at(self.state.anchor[:, 2])))
+
+    @property
+    def n_broken(self) -> int:
+        return int(self.state.n_springs - np.count_nonzero(self.state.intact))
+
+    def patch_labels(self) -> np.ndarray:
+        """Patch id of every base: connected components of the intact springs (cached until a break)."""
+        if self._labels is None:
+            s = self.state
+            p = s.pairs[s.intact]
+            adj = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(s.n_bases, s.n_bases))
+            self._labels = connected_components(adj, directed=False)[1]
+        return self._labels
+
+    def patch_count(self, min_size: int = 7) -> int:
+        """Number of patches of at least ``min_size`` bases."""
+        return int(np.count_nonzero(np.bincount(self.patch_labels()) >= min_size))
+
+    def analyze(self) -> dict[str, Analysis]:
+        """Run every analyzer on the current pattern; results by analyzer class name."""
+        labels = self.patch_labels()
+        return {type(a).__name__: a.analyze(self.state.x, labels) for a in self.analyzers}

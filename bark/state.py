@@ -1,0 +1,98 @@
+"""The mechanical state the hot loop works on: arrays mirrored from the leaf-base graph.
+
+The networkx graph held by :class:`bark.simulation.Simulation` is the topology of record (which
+bases exist, which springs are intact).  :class:`State` mirrors it as flat arrays so that one step is
+a handful of vectorised numpy operations.  Only ``Simulation.break_springs`` changes ``intact``,
+and it changes the graph in the same call, so the two never drift.
+
+Coordinates: Cartesian ``(x, y, z)`` with the trunk axis along ``z`` through the origin; a base at
+angle θ sits at ``(r cos θ, r sin θ, z)``.
+"""
+
+from __future__ import annotations
+
+import attrs
+import numpy as np
+
+from bark.forces import Mechanics, anchor_forces, damping_forces, spring_forces, tensions
+
+__all__ = ["State", "project_to_surface", "cylinder_points"]
+
+
+def cylinder_points(theta: np.ndarray, z: np.ndarray, radius) -> np.ndarray:
+    """Cartesian points at angle ``theta`` (radians), height ``z`` on a cylinder of ``radius``."""
+    return np.column_stack([radius * np.cos(theta), radius * np.sin(theta), z])
+
+
+def project_to_surface(points: np.ndarray, radius, velocities: np.ndarray | None = None) -> None:
+    """Surface constraint (eq. 9), in place: move each point radially onto the trunk surface.
+
+    ``radius`` is the trunk radius at each point's height (a scalar or one value per point).  When
+    ``velocities`` is given, their radial component is removed as well: a base constrained to the
+    surface has no velocity through it, and a radial velocity left in place would leak into the
+    tangential motion as the base moves round the trunk.
+    """
+    rho = np.hypot(points[:, 0], points[:, 1])
+    points[:, :2] *= (radius / rho)[:, None]
+    if velocities is not None:
+        e_r = points[:, :2] / np.asarray(radius, dtype=float).reshape(-1, 1)
+        v_r = np.einsum("ij,ij->i", velocities[:, :2], e_r)
+        velocities[:, :2] -= v_r[:, None] * e_r
+
+
+@attrs.define(eq=False, kw_only=True)
+class State:
+    """Positions, velocities and springs of the leaf-base layer at time ``t``.
+
+    Integrators change ``x`` and ``v`` (and only those); the simulation changes ``t``, projects onto
+    the surface and breaks springs.
+    """
+
+    x: np.ndarray
+    """Positions of the bases, shape ``(n, 3)``."""
+    v: np.ndarray
+    """Velocities of the bases, shape ``(n, 3)``."""
+    anchor: np.ndarray
+    """Anchor points (each base's original site, moved with the trunk surface), ``(n, 3)``."""
+    pairs: np.ndarray
+    """Spring end points ``(i, j)``, shape ``(m, 2)``; row number = spring id."""
+    rest: np.ndarray
+    """Rest length of every spring, ``(m,)``."""
+    fmax: np.ndarray
+    """Breaking threshold of every spring (force units), ``(m,)``."""
+    intact: np.ndarray
+    """Whether each spring is still intact, ``(m,)`` bool.  Changed only by ``Simulation.break_springs``."""
+    mechanics: Mechanics
+    """Material constants (k, c, b, m)."""
+    t: float = 0.0
+    """Simulated time."""
+
+    @property
+    def n_bases(self) -> int:
+        return self.x.shape[0]
+
+    @property
+    def n_springs(self) -> int:
+        return self.pairs.shape[0]
+
+    def forces(self, x: np.ndarray | None = None, v: np.ndarray | None = None) -> np.ndarray:
+        """Total force on every base (eq. 4): intact neighbour springs + anchors + damping.
+
+        ``x`` and ``v`` default to the state's own; integrators may evaluate at trial points.
+        """
+        x = self.x if x is None else x
+        v = self.v if v is None else v
+        mech = self.mechanics
+        f = spring_forces(x, self.pairs, self.rest, mech.k, self.intact)
+        if mech.c:
+            f += anchor_forces(x, self.anchor, mech.c)
+        if mech.b:
+            f += damping_forces(v, mech.b)
+        return f
+
+    def tension(self) -> np.ndarray:
+        """Tension of every spring at the current positions (broken ones included; mask with ``intact``)."""
+        return tensions(self.x, self.pairs, self.rest, self.mechanics.k)
+
+    def is_finite(self) -> bool:
+        return bool(np.isfinite(self.x).all() and np.isfinite(self.v).all())

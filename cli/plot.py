@@ -1,0 +1,63 @@
+"""The pattern image: the trunk surface unwrapped, patches coloured, intact springs drawn (Fig. 7A).
+
+Horizontal axis: arc length ``r·θ`` with θ increasing to the right as seen from outside the trunk;
+vertical axis: height ``z``.  Patches of at least ``min_size`` bases get a colour each, smaller
+fragments are grey.  Uses matplotlib's object API with the Agg canvas (no pyplot, no global state).
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+
+from bark.output import atomic_write
+
+
+def unwrap(x: np.ndarray, radius: float) -> np.ndarray:
+    """``(arc length, height)`` of 3-D points, arc length in ``[0, 2πr)``."""
+    theta = np.mod(np.arctan2(x[:, 1], x[:, 0]), 2 * np.pi)
+    return np.column_stack([radius * theta, x[:, 2]])
+
+
+def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = None) -> Path:
+    s = sim.state
+    r = sim.radius
+    uv = unwrap(s.x, r)
+    labels = sim.patch_labels()
+    sizes = np.bincount(labels)
+    big = sizes[labels] >= min_size
+    # one colour per big patch, stable across runs: index patches by their label
+    palette = np.array([[*c, 1.0] for i, c in enumerate(_tab20()) if i not in (14, 15)])  # no greys
+    colours = np.where(big[:, None], palette[labels % len(palette)], [0.7, 0.7, 0.7, 1.0])
+
+    p = s.pairs[s.intact]
+    seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
+    seg = seg[np.abs(seg[:, 0, 0] - seg[:, 1, 0]) < np.pi * r]  # drop springs across the seam
+
+    width = 2 * np.pi * r
+    height = float(np.ptp(uv[:, 1])) or 1.0
+    fig = Figure(figsize=(7.0, max(3.0, 7.0 * height / width) + 0.6), dpi=150)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.add_collection(LineCollection(seg, colors="0.15", alpha=0.6, linewidths=0.4))
+    ax.scatter(uv[:, 0], uv[:, 1], s=4, c=colours, linewidths=0)
+    ax.set_xlim(0, width)
+    ax.set_ylim(uv[:, 1].min() - 0.01, uv[:, 1].max() + 0.01)
+    ax.set_aspect("equal")
+    ax.set_xlabel("arc length r·θ (length units; θ increases to the right seen from outside)")
+    ax.set_ylabel("height z (length units)")
+    ax.set_title(title or f"t = {s.t:.2f}, r = {r:.4f}, {sim.patch_count(min_size)} patches, {sim.n_broken} broken", fontsize=9)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+
+
+def _tab20():
+    from matplotlib import colormaps
+
+    return colormaps["tab20"].colors
