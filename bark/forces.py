@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import attrs
 import numpy as np
+import scipy.sparse as sp
 
 from bark._validate import non_negative, positive
 
@@ -27,6 +28,7 @@ __all__ = [
     "damping_forces",
     "tensions",
     "scatter",
+    "incidence",
 ]
 
 
@@ -58,16 +60,24 @@ class Mechanics:
 
 def spring_geometry(x: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vector ``d = x_j − x_i`` and length ``|d|`` of every spring ``(i, j)``."""
-    d = x[pairs[:, 1]] - x[pairs[:, 0]]
+    d = np.take(x, pairs[:, 1], axis=0) - np.take(x, pairs[:, 0], axis=0)
     return d, np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
-def scatter(pairs: np.ndarray, f: np.ndarray, n: int) -> np.ndarray:
-    """Sum per-spring forces onto the bases: ``+f`` on end ``i``, ``−f`` on end ``j``."""
-    out = np.empty((n, f.shape[1]))
-    for a in range(f.shape[1]):  # loop over the 3 coordinates, not over springs
-        out[:, a] = np.bincount(pairs[:, 0], f[:, a], n) - np.bincount(pairs[:, 1], f[:, a], n)
-    return out
+def incidence(pairs: np.ndarray, n: int) -> sp.csr_matrix:
+    """The ``(n, m)`` matrix that sums per-spring forces onto bases: ``+1`` at ``(i, s)``, ``−1`` at
+    ``(j, s)`` for spring ``s = (i, j)``.  Build it once per topology; :func:`scatter` takes it."""
+    m = pairs.shape[0]
+    cols = np.concatenate([np.arange(m), np.arange(m)])
+    vals = np.concatenate([np.ones(m), -np.ones(m)])
+    return sp.csr_matrix((vals, (pairs.T.ravel(), cols)), shape=(n, m))
+
+
+def scatter(pairs: np.ndarray, f: np.ndarray, n: int, inc: sp.csr_matrix | None = None) -> np.ndarray:
+    """Sum per-spring forces onto the bases: ``+f`` on end ``i``, ``−f`` on end ``j``.
+
+    ``inc`` is :func:`incidence` of ``pairs`` (built here when not given)."""
+    return np.asarray((incidence(pairs, n) if inc is None else inc) @ f)
 
 
 def tensions(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float) -> np.ndarray:
@@ -77,17 +87,24 @@ def tensions(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float) -> np
 
 
 def spring_forces(
-    x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float, active: np.ndarray | None = None
+    x: np.ndarray,
+    pairs: np.ndarray,
+    rest: np.ndarray,
+    k: float,
+    active: np.ndarray | None = None,
+    inc: sp.csr_matrix | None = None,
 ) -> np.ndarray:
     """Net neighbour-spring force on every base (eq. 1); springs with ``active == False`` are skipped.
 
     A spring of zero length exerts no force (its direction is undefined), rather than a NaN.
+    ``inc`` is the :func:`incidence` matrix of ``pairs``, if the caller keeps one.
     """
     d, length = spring_geometry(x, pairs)
     scale = k * (length - rest) / np.where(length > 0.0, length, np.inf)
     if active is not None:
-        scale = scale * active
-    return scatter(pairs, d * scale[:, None], x.shape[0])
+        scale *= active
+    d *= scale[:, None]
+    return scatter(pairs, d, x.shape[0], inc)
 
 
 def anchor_forces(x: np.ndarray, anchor: np.ndarray, c: float) -> np.ndarray:

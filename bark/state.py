@@ -14,7 +14,9 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from bark.forces import Mechanics, anchor_forces, damping_forces, spring_forces, tensions
+import scipy.sparse as sp
+
+from bark.forces import Mechanics, anchor_forces, damping_forces, incidence, spring_forces, tensions
 
 __all__ = ["State", "project_to_surface", "cylinder_points"]
 
@@ -32,12 +34,12 @@ def project_to_surface(points: np.ndarray, radius, velocities: np.ndarray | None
     surface has no velocity through it, and a radial velocity left in place would leak into the
     tangential motion as the base moves round the trunk.
     """
-    rho = np.hypot(points[:, 0], points[:, 1])
-    points[:, :2] *= (radius / rho)[:, None]
+    xy = points[:, :2]
+    radius = np.asarray(radius, dtype=float)
+    xy *= (radius / np.sqrt(np.einsum("ij,ij->i", xy, xy)))[:, None]
     if velocities is not None:
-        e_r = points[:, :2] / np.asarray(radius, dtype=float).reshape(-1, 1)
-        v_r = np.einsum("ij,ij->i", velocities[:, :2], e_r)
-        velocities[:, :2] -= v_r[:, None] * e_r
+        vxy = velocities[:, :2]
+        vxy -= (np.einsum("ij,ij->i", vxy, xy) / (radius * radius))[:, None] * xy
 
 
 @attrs.define(eq=False, kw_only=True)
@@ -66,6 +68,14 @@ class State:
     """Material constants (k, c, b, m)."""
     t: float = 0.0
     """Simulated time."""
+    _inc: tuple[np.ndarray, sp.csr_matrix] | None = attrs.field(default=None, init=False, repr=False)
+
+    @property
+    def incidence(self) -> sp.csr_matrix:
+        """Spring-to-base incidence of ``pairs`` (derived, rebuilt whenever ``pairs`` is replaced)."""
+        if self._inc is None or self._inc[0] is not self.pairs:
+            self._inc = (self.pairs, incidence(self.pairs, self.n_bases))
+        return self._inc[1]
 
     @property
     def n_bases(self) -> int:
@@ -83,7 +93,7 @@ class State:
         x = self.x if x is None else x
         v = self.v if v is None else v
         mech = self.mechanics
-        f = spring_forces(x, self.pairs, self.rest, mech.k, self.intact)
+        f = spring_forces(x, self.pairs, self.rest, mech.k, self.intact, self.incidence)
         if mech.c:
             f += anchor_forces(x, self.anchor, mech.c)
         if mech.b:
