@@ -100,6 +100,13 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "settings": scene.to_dict(),
         "stop": {k: getattr(scene.run, k) for k in ("until_time", "until_radius", "until_patches", "min_patch_size")},
         "stop_reason": stop_reason,
+        "final_state": (
+            "last finite state: the step after it made the state NaN or infinite"
+            if stop_reason == "non-finite" else "the state at the stop"
+        ),
+        "dt": sim.dt,
+        "h": sim.h,
+        "stability_limit": sim.stability_limit,
         "t": sim.state.t,
         "steps": sim.step_count,
         "radius": sim.radius,

@@ -60,6 +60,8 @@ class RunSettings:
     """A step breaking more than this share of all springs is reported as degenerate."""
     on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
     """``warn``: record the event and go on; ``stop``: end the run there."""
+    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto"))
+    """``fixed``: refuse a dt above the integrator's stability limit; ``auto``: split it into sub-steps."""
 
     def stop(self) -> Stop:
         return Stop(
@@ -99,11 +101,13 @@ def merge(base: dict, overrides: dict) -> dict:
     all stop conditions of ``base``.
     """
     out = copy.deepcopy(base)
-    for section, table in overrides.items():
+    for section, table in [*base.items(), *overrides.items()]:
         if not isinstance(table, dict):
             raise BarkError(f"scene key {section!r} must be a table like [{section}], not a value")
+    for section, table in overrides.items():
         target = out.setdefault(section, {})
-        if section in STRATEGY_SECTIONS and "name" in table and table["name"] != target.get("name"):
+        current = target.get("name", DEFAULT_STRATEGIES.get(section))
+        if section in STRATEGY_SECTIONS and "name" in table and table["name"] != current:
             target.clear()
         if section == "run" and any(k in table for k in STOP_KEYS):
             for k in STOP_KEYS:
@@ -173,6 +177,7 @@ class Scene:
             seed=self.run.seed,
             degenerate_fraction=self.run.degenerate_fraction,
             on_degenerate=self.run.on_degenerate,
+            stepping=self.run.stepping,
         )
 
     def stop(self) -> Stop:

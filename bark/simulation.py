@@ -8,6 +8,7 @@ arrays).  :class:`~bark.state.State` mirrors it as arrays for the hot loop, and
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Iterator
 
 import attrs
@@ -17,13 +18,23 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from bark._validate import in_range, one_of, optional, positive, positive_int
-from bark.errors import NonFiniteStateError
+from bark.errors import BarkError, NonFiniteStateError
 from bark.forces import Mechanics, spring_geometry
 from bark.lattice import Lattice
 from bark.state import State, cylinder_points, project_to_surface
 from bark.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
 
 __all__ = ["Simulation", "Stop", "BreakLog"]
+
+
+SAFETY = 0.9
+"""Automatic stepping keeps sub-steps at or below this fraction of the stability limit."""
+
+
+def _round_down(x: float) -> str:
+    """``x`` rounded down to two significant digits, as text (for suggestions)."""
+    exp = math.floor(math.log10(x)) - 1
+    return f"{math.floor(x / 10**exp) * 10**exp:.{max(0, -exp)}f}"
 
 
 @attrs.frozen(kw_only=True)
@@ -45,7 +56,7 @@ class Stop:
 
     def reason(self, sim: "Simulation") -> str | None:
         """Which condition holds now (``'time'``, ``'radius'``, ``'patches'``), or ``None``."""
-        eps = 1e-9 * sim.dt
+        eps = 1e-9 * sim.h
         if self.until_time is not None and sim.state.t >= self.until_time - eps:
             return "time"
         if self.until_radius is not None and sim.radius >= self.until_radius:
@@ -101,6 +112,9 @@ class Simulation:
     """A step that breaks more than this share of all springs is a degenerate event (NOTES.md §1)."""
     on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
     """What a degenerate event does: ``warn`` records it and goes on; ``stop`` ends the run."""
+    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto"))
+    """``fixed``: a ``dt`` above the integrator's stability limit is refused (BarkError);
+    ``auto``: such a ``dt`` is split into equal sub-steps below the limit."""
 
     rng: np.random.Generator = attrs.field(init=False)
     graph: nx.Graph = attrs.field(init=False)
@@ -108,9 +122,14 @@ class Simulation:
     breaks: BreakLog = attrs.field(init=False, factory=BreakLog)
     events: list[dict] = attrs.field(init=False, factory=list)
     """Degenerate events and other notable happenings, as dicts with at least ``kind``, ``t``, ``step``."""
+    h: float = attrs.field(init=False)
+    """The step actually taken: ``dt``, or ``dt`` split into sub-steps by automatic stepping."""
+    stability_limit: float = attrs.field(init=False)
+    """The integrator's largest stable step for this scene (``inf`` for unconditionally stable ones)."""
     step_count: int = attrs.field(init=False, default=0)
     stop_reason: str | None = attrs.field(init=False, default=None)
     _labels: np.ndarray | None = attrs.field(init=False, default=None)
+    _last_finite: tuple[np.ndarray, ...] | None = attrs.field(init=False, default=None)
 
     def __attrs_post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
@@ -132,21 +151,39 @@ class Simulation:
             intact=np.ones(len(pairs), dtype=bool),
             mechanics=self.mechanics,
         )
+        self._guard()
+
+    def _guard(self) -> None:
+        """Refuse, or split into sub-steps, a ``dt`` above the integrator's stability limit."""
+        limit = self.stability_limit = float(self.integrator.stability_limit(self.state))
+        self.h = self.dt
+        if self.dt <= limit:
+            return
+        if self.stepping == "fixed":
+            name = type(self.integrator).__name__
+            raise BarkError(
+                f"dt = {self.dt:g} is above {name}'s stability limit h_max = {limit:.4g} for this scene "
+                f"(NOTES.md §3): use dt <= {_round_down(limit)}, or stepping = auto for sub-steps, "
+                f"or the implicit-overdamped integrator"
+            )
+        self.h = self.dt / math.ceil(self.dt / (SAFETY * limit))
 
     # -- the loop ---------------------------------------------------------------------------
 
     def run(self, stop: Stop, observe: Callable[["Simulation"], None] | None = None) -> str:
         """Run until ``stop`` holds; return why it stopped (``'time'``, ``'radius'``, ``'patches'``,
-        ``'degenerate'``).  ``observe(sim)`` is called after every step.
+        ``'degenerate'``).  ``observe(sim)`` is called after every step.  A step that makes the
+        state NaN or infinite raises :class:`~bark.errors.NonFiniteStateError` and leaves the
+        simulation at the last finite state.
 
         The loop, literally::
 
             while stop.reason(sim) is None:
-                integrator.step(state, dt)      # forces (eq. 4) -> velocities (eq. 7) -> positions (eq. 8)
-                t += dt
+                integrator.step(state, h)       # forces (eq. 4) -> velocities (eq. 7) -> positions (eq. 8)
+                t += h                          # h = dt, or dt / n with automatic sub-stepping
                 constrain to surface r(t, z)    # eq. 9 on bases and anchors; radial velocity removed
                 tension = k(|d| - l)            # every spring, at the constrained positions
-                stop with an error if any tension is NaN or inf
+                if any tension is NaN or inf: restore the last finite state, raise NonFiniteStateError
                 ids = union of breaker.select(state, tension, rng) over breakers
                 if len(ids) > degenerate_fraction * n_springs: record a degenerate event
                 break_springs(ids, tension)     # graph and arrays together; logged
@@ -171,14 +208,17 @@ class Simulation:
     def step(self) -> None:
         """One step of the loop in :meth:`run`."""
         s = self.state
-        self.integrator.step(s, self.dt)
-        s.t = (self.step_count + 1) * self.dt  # not a running sum: no drift over 10^5 steps
+        self._keep_last_finite()
+        self.integrator.step(s, self.h)
+        s.t = (self.step_count + 1) * self.h  # not a running sum: no drift over 10^5 steps
         self.constrain()
         tension = s.tension()
         if not np.isfinite(tension).all():
+            bad_t = s.t
+            self._restore_last_finite()
             raise NonFiniteStateError(
-                f"state became non-finite at t = {s.t:.6g} (step {self.step_count + 1}); "
-                f"dt = {self.dt} is probably above the stability limit of {self.integrator.__class__.__name__}"
+                f"the state became NaN or infinite at t = {bad_t:.6g} (step {self.step_count + 1}); "
+                f"the simulation holds the last finite state, t = {s.t:.6g}"
             )
         ids = self._select(tension)
         self.step_count += 1
@@ -186,6 +226,20 @@ class Simulation:
             if ids.size > self.degenerate_fraction * s.n_springs:
                 self._degenerate(ids.size)
             self.break_springs(ids, tension)
+
+    def _keep_last_finite(self) -> None:
+        s = self.state
+        if self._last_finite is None or self._last_finite[0].shape != s.x.shape:
+            self._last_finite = (s.x.copy(), s.v.copy(), s.anchor.copy())
+        else:
+            for keep, now in zip(self._last_finite, (s.x, s.v, s.anchor)):
+                np.copyto(keep, now)
+
+    def _restore_last_finite(self) -> None:
+        s = self.state
+        for keep, now in zip(self._last_finite, (s.x, s.v, s.anchor)):
+            np.copyto(now, keep)
+        s.t = self.step_count * self.h
 
     def constrain(self) -> None:
         """Surface constraint (eq. 9): bases (with their velocities) and anchors onto ``r(t, z)``."""

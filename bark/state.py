@@ -90,14 +90,18 @@ class State:
 
         ``x`` and ``v`` default to the state's own; integrators may evaluate at trial points.
         """
+        f = self.elastic_forces(x)
+        if self.mechanics.b:
+            f += damping_forces(self.v if v is None else v, self.mechanics.b)
+        return f
+
+    def elastic_forces(self, x: np.ndarray | None = None) -> np.ndarray:
+        """Spring and anchor forces only (no damping), at ``x`` (default: the state's own)."""
         x = self.x if x is None else x
-        v = self.v if v is None else v
         mech = self.mechanics
         f = spring_forces(x, self.pairs, self.rest, mech.k, self.intact, self.incidence)
         if mech.c:
             f += anchor_forces(x, self.anchor, mech.c)
-        if mech.b:
-            f += damping_forces(v, mech.b)
         return f
 
     def tension(self) -> np.ndarray:

@@ -14,7 +14,8 @@ Growth         ``radius(t, z) -> r``           trunk radius at time ``t`` for he
 Integrator     ``step(state, dt) -> None``     advance ``state.x`` and ``state.v`` by ``dt`` in place
                                                using ``state.forces(x, v)``.  Touches nothing else: the
                                                simulation advances ``t``, applies the surface
-                                               constraint and breaks springs.
+                                               constraint and breaks springs.  Explicit methods also
+                                               override ``stability_limit(state)`` (largest stable dt).
 Breaker        ``select(state, tension, rng)`` ids (int array) of *intact* springs to break now.
                ``-> ids``                      Must not change anything; ``rng`` is the simulation's
                                                one seeded generator (draw from it only).
@@ -65,6 +66,12 @@ class Integrator(Strategy):
     @abc.abstractmethod
     def step(self, state, dt: float) -> None:
         """Advance ``state.x`` and ``state.v`` by ``dt`` in place."""
+
+    def stability_limit(self, state) -> float:
+        """Largest ``dt`` for which this method is stable on ``state``; ``inf`` if unconditionally stable.
+
+        The simulation refuses (or, with automatic stepping, sub-steps) a ``dt`` above it."""
+        return float("inf")
 
 
 @attrs.frozen(kw_only=True)

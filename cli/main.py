@@ -126,8 +126,8 @@ def simulate(scene_file, growth_name, integrator_name, breaker_name, analyzer_na
     except KeyboardInterrupt:
         reason, code = "interrupted", 130
     except NonFiniteStateError as err:
-        click.echo(f"bark: error: {err}", err=True)
-        return 1
+        click.echo(f"bark: error: {err}; writing that state to {out}", err=True)
+        reason, code = "non-finite", 1
     wall = time.perf_counter() - t0
     summary = write_run(sim, scene, out, reason, wall)
     plot_pattern(sim, out / "pattern.png", scene.run.min_patch_size)

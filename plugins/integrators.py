@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 import attrs
+import numpy as np
+from scipy.sparse.linalg import LinearOperator, cg
 
+from bark._validate import one_of, positive, positive_int
+from bark.errors import BarkError
+from bark.forces import stiffness_matvec
+from bark.stability import euler_cromer_h_max
 from bark.strategies import Integrator
 
-__all__ = ["EulerCromer"]
+__all__ = ["EulerCromer", "ImplicitOverdamped"]
 
 
 @attrs.frozen(kw_only=True)
@@ -17,9 +23,56 @@ class EulerCromer(Integrator):
         x ← x + v · dt
 
     First order; stable while ``dt`` is below ``h_max = (√(β² + 4ω²) − β)/ω²`` with ``β = b/m`` and
-    ``ω² = λ_max(K)/m`` (NOTES.md §3; ≈ 0.369 for Table 2's values).
+    ``ω² = λ_max(K)/m`` (NOTES.md §3; ≈ 0.36 for Table 2's values).
     """
+
+    bound: str = attrs.field(default="gershgorin", validator=one_of("gershgorin", "lanczos"))
+    """How λ_max(K) is bounded for the stability guard: ``gershgorin`` (c + 2k·max degree; holds for
+    every state of the run, however stretched) or ``lanczos`` (the current state's exact value, a
+    little less conservative)."""
 
     def step(self, state, dt: float) -> None:
         state.v += state.forces() * (dt / state.mechanics.m)
         state.x += state.v * dt
+
+    def stability_limit(self, state) -> float:
+        return euler_cromer_h_max(state, self.bound)
+
+
+@attrs.frozen(kw_only=True)
+class ImplicitOverdamped(Integrator):
+    """The massless (overdamped) limit ``b·dx/dt = F(x)``, by linearised backward Euler::
+
+        (b·I + dt·K) Δx = dt·F(x),    x ← x + Δx,    v ← Δx/dt
+
+    with ``K = −∂F/∂x`` the stiffness of springs and anchors at the current state (its transverse
+    term clamped at zero for compressed springs, so ``K`` is positive semi-definite).  Stable for any
+    ``dt``; first order.  The mass ``m`` plays no part (the limit m → 0).
+
+    The linear system is solved by conjugate gradients (``scipy.sparse.linalg.cg``), matrix-free,
+    with a Jacobi preconditioner.  Why CG and not a sparse direct solve: the matrix is symmetric
+    positive definite (``b > 0``), it changes every step (a direct solver would refactorise every
+    step, with fill-in), and ``b·I`` dominates its diagonal, so CG converges in a few tens of
+    iterations at a cost of about one force evaluation each, in O(springs) memory, at 70 000 bases
+    as at 3000.
+    """
+
+    rtol: float = attrs.field(default=1e-8, validator=positive)
+    """Relative residual at which CG stops."""
+    maxiter: int = attrs.field(default=1000, validator=positive_int)
+    """Most CG iterations per step."""
+
+    def step(self, state, dt: float) -> None:
+        mech = state.mechanics
+        if mech.b <= 0:
+            raise BarkError("integrator 'implicit-overdamped' needs damping: mechanics.b must be > 0")
+        matvec, diag = stiffness_matvec(state.x, state.pairs, state.rest, mech.k, state.intact, mech.c, state.incidence)
+        size = diag.size
+        a = LinearOperator((size, size), matvec=lambda p: mech.b * p + dt * matvec(p), dtype=float)
+        precond = 1.0 / (mech.b + dt * diag)
+        m = LinearOperator((size, size), matvec=lambda r: precond * r, dtype=float)
+        rhs = dt * state.elastic_forces().ravel()
+        dx, _ = cg(a, rhs, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)
+        dx = dx.reshape(state.x.shape)
+        state.x += dx
+        np.divide(dx, dt, out=state.v)

@@ -1,0 +1,52 @@
+"""Explicit stability bound (NOTES.md §3) and the largest stiffness eigenvalue it needs.
+
+For Euler–Cromer on the damped mass-spring system with ``β = b/m`` and ``ω² = λ_max(K)/m``:
+stable iff ``βh < 2`` and ``ω²h² + 2βh < 4``, i.e. ``h < h_max = (√(β² + 4ω²) − β)/ω²``.
+
+``λ_max(K)`` comes either from Gershgorin's theorem (cheap, always an upper bound:
+``c + 2k · max springs per base``) or from a few Lanczos iterations on the matrix-free stiffness
+operator (``scipy.sparse.linalg.eigsh``; tight).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
+
+from bark.forces import stiffness_matvec
+
+__all__ = ["lambda_max", "explicit_h_max", "euler_cromer_h_max"]
+
+
+def lambda_max(state, method: str = "lanczos") -> float:
+    """Largest eigenvalue of the stiffness ``K`` of ``state`` (intact springs + anchors)."""
+    mech = state.mechanics
+    if method == "gershgorin":
+        degree = np.bincount(state.pairs[state.intact].ravel(), minlength=state.n_bases)
+        return mech.c + 2.0 * mech.k * float(degree.max(initial=0))
+    if method != "lanczos":
+        raise ValueError(f"method = {method!r}: must be one of gershgorin, lanczos")
+    matvec, _ = stiffness_matvec(state.x, state.pairs, state.rest, mech.k, state.intact, mech.c, state.incidence)
+    size = 3 * state.n_bases
+    op = LinearOperator((size, size), matvec=matvec, dtype=float)
+    v0 = np.ones(size)  # fixed start vector: the bound is deterministic
+    try:
+        top = eigsh(op, k=1, which="LA", v0=v0, tol=1e-4, maxiter=2000, return_eigenvectors=False)
+    except ArpackNoConvergence:
+        return lambda_max(state, "gershgorin")
+    return float(top[0]) * (1.0 + 1e-4)  # the tolerance, on the safe side
+
+
+def explicit_h_max(beta: float, omega2: float) -> float:
+    """``h_max = (√(β² + 4ω²) − β)/ω²`` (``2/β`` as ω → 0; ``2/ω`` without damping)."""
+    if omega2 <= 0.0:
+        return 2.0 / beta if beta > 0 else math.inf
+    return (math.sqrt(beta * beta + 4.0 * omega2) - beta) / omega2
+
+
+def euler_cromer_h_max(state, method: str = "lanczos") -> float:
+    """Largest stable Euler–Cromer step for ``state`` (NOTES.md §3)."""
+    m = state.mechanics.m
+    return explicit_h_max(state.mechanics.b / m, lambda_max(state, method) / m)
