@@ -25,13 +25,24 @@ __all__ = ["GOLDEN_ANGLE_DEG", "Lattice"]
 GOLDEN_ANGLE_DEG = 360.0 * (2.0 - (1.0 + math.sqrt(5.0)) / 2.0)
 
 
-def _offsets(value) -> tuple[int, ...]:
-    return tuple(int(v) for v in value) if not isinstance(value, (int, str)) else (value,)
+def _offsets(value):
+    """Lists become tuples, a single integer a 1-tuple; anything else is left for the validator."""
+    if isinstance(value, (list, tuple)):
+        return tuple(value)
+    if isinstance(value, int) and not isinstance(value, bool):
+        return (value,)
+    return value
 
 
 def _check_offsets(instance, attribute, value) -> None:
-    if not value or any(isinstance(o, bool) or o < 1 for o in value) or len(set(value)) != len(value):
-        raise ValueError(f"offsets = {list(value)!r}: must be distinct integers >= 1, e.g. [21, 34]")
+    ok = (
+        isinstance(value, tuple)
+        and len(value) > 0
+        and all(isinstance(o, int) and not isinstance(o, bool) and o >= 1 for o in value)
+        and len(set(value)) == len(value)
+    )
+    if not ok:
+        raise ValueError(f"offsets = {value!r}: must be a list of distinct integers >= 1, e.g. [21, 34]")
 
 
 @attrs.frozen(kw_only=True)

@@ -29,6 +29,7 @@ from bark import registry
 from bark._validate import in_range, one_of, optional, positive, positive_int
 from bark.errors import BarkError
 from bark.forces import Mechanics
+from bark.kernels import BACKENDS
 from bark.lattice import Lattice
 from bark.simulation import Simulation, Stop
 
@@ -62,6 +63,8 @@ class RunSettings:
     """``warn``: record the event and go on; ``stop``: end the run there."""
     stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto"))
     """``fixed``: refuse a dt above the integrator's stability limit; ``auto``: split it into sub-steps."""
+    backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
+    """Compute backend: ``numpy``, ``numba``, or ``auto`` (numba if installed, else numpy)."""
 
     def stop(self) -> Stop:
         return Stop(
@@ -133,6 +136,9 @@ class Scene:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Scene":
         """Validate a scene dictionary (as read from TOML); missing tables take their defaults."""
+        for section, table in data.items():
+            if not isinstance(table, dict):
+                raise BarkError(f"scene key {section!r} must be a table like [{section}], not a value")
         unknown = sorted(set(data) - set(SECTIONS))
         if unknown:
             raise BarkError(f"unknown table [{unknown[0]}] in scene: allowed are {', '.join(f'[{s}]' for s in SECTIONS)}")
@@ -178,6 +184,7 @@ class Scene:
             degenerate_fraction=self.run.degenerate_fraction,
             on_degenerate=self.run.on_degenerate,
             stepping=self.run.stepping,
+            backend=self.run.backend,
         )
 
     def stop(self) -> Stop:

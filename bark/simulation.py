@@ -17,11 +17,12 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from bark import kernels
 from bark._validate import in_range, one_of, optional, positive, positive_int
 from bark.errors import BarkError, NonFiniteStateError
 from bark.forces import Mechanics, spring_geometry
 from bark.lattice import Lattice
-from bark.state import State, cylinder_points, project_to_surface
+from bark.state import State, cylinder_points
 from bark.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
 
 __all__ = ["Simulation", "Stop", "BreakLog"]
@@ -115,6 +116,8 @@ class Simulation:
     stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto"))
     """``fixed``: a ``dt`` above the integrator's stability limit is refused (BarkError);
     ``auto``: such a ``dt`` is split into equal sub-steps below the limit."""
+    backend: str = attrs.field(default="auto", validator=one_of(*kernels.BACKENDS))
+    """Compute backend of the hot loop: ``numpy``, ``numba``, or ``auto`` (numba if installed)."""
 
     rng: np.random.Generator = attrs.field(init=False)
     graph: nx.Graph = attrs.field(init=False)
@@ -130,6 +133,7 @@ class Simulation:
     stop_reason: str | None = attrs.field(init=False, default=None)
     _labels: np.ndarray | None = attrs.field(init=False, default=None)
     _last_finite: tuple[np.ndarray, ...] | None = attrs.field(init=False, default=None)
+    _tension: np.ndarray | None = attrs.field(init=False, default=None)
 
     def __attrs_post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
@@ -150,7 +154,9 @@ class Simulation:
             fmax=self.mechanics.thresholds(len(pairs), self.rng),
             intact=np.ones(len(pairs), dtype=bool),
             mechanics=self.mechanics,
+            kernels=kernels.load(self.backend),
         )
+        self._tension = np.zeros(len(pairs))
         self._guard()
 
     def _guard(self) -> None:
@@ -211,16 +217,17 @@ class Simulation:
         self._keep_last_finite()
         self.integrator.step(s, self.h)
         s.t = (self.step_count + 1) * self.h  # not a running sum: no drift over 10^5 steps
-        self.constrain()
-        tension = s.tension()
-        if not np.isfinite(tension).all():
+        tension = self._tension
+        # surface constraint (eq. 9), then every spring's tension and the largest tension/fmax of intact ones
+        max_load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), tension)
+        if math.isnan(max_load):
             bad_t = s.t
             self._restore_last_finite()
             raise NonFiniteStateError(
                 f"the state became NaN or infinite at t = {bad_t:.6g} (step {self.step_count + 1}); "
                 f"the simulation holds the last finite state, t = {s.t:.6g}"
             )
-        ids = self._select(tension)
+        ids = self._select(tension, max_load)
         self.step_count += 1
         if ids.size:
             if ids.size > self.degenerate_fraction * s.n_springs:
@@ -230,29 +237,36 @@ class Simulation:
     def _keep_last_finite(self) -> None:
         s = self.state
         if self._last_finite is None or self._last_finite[0].shape != s.x.shape:
-            self._last_finite = (s.x.copy(), s.v.copy(), s.anchor.copy())
+            self._last_finite = (s.x.copy(), s.v.copy())
         else:
-            for keep, now in zip(self._last_finite, (s.x, s.v, s.anchor)):
-                np.copyto(keep, now)
+            np.copyto(self._last_finite[0], s.x)
+            np.copyto(self._last_finite[1], s.v)
 
     def _restore_last_finite(self) -> None:
+        """Back to the state before the last step (anchors follow from t alone)."""
         s = self.state
-        for keep, now in zip(self._last_finite, (s.x, s.v, s.anchor)):
-            np.copyto(now, keep)
+        np.copyto(s.x, self._last_finite[0])
+        np.copyto(s.v, self._last_finite[1])
         s.t = self.step_count * self.h
+        self.constrain()
 
     def constrain(self) -> None:
         """Surface constraint (eq. 9): bases (with their velocities) and anchors onto ``r(t, z)``."""
         s = self.state
-        project_to_surface(s.x, self._radius_at(s.x[:, 2]), s.v)
-        project_to_surface(s.anchor, self._radius_at(s.anchor[:, 2]))
+        s.kernels.constrain(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]))
 
     def _radius_at(self, z: np.ndarray) -> np.ndarray:
         return np.broadcast_to(self.growth.radius(self.state.t, z), z.shape)
 
-    def _select(self, tension: np.ndarray) -> np.ndarray:
-        picks = [np.asarray(b.select(self.state, tension, self.rng), dtype=np.int64) for b in self.breakers]
-        ids = np.unique(np.concatenate(picks)) if picks else np.empty(0, np.int64)
+    def _select(self, tension: np.ndarray, max_load: float) -> np.ndarray:
+        picks = [
+            np.asarray(b.select(self.state, tension, self.rng), dtype=np.int64)
+            for b in self.breakers
+            if max_load > 1.0 or not b.overload_only
+        ]
+        if not picks:
+            return np.empty(0, np.int64)
+        ids = np.unique(np.concatenate(picks))
         return ids[self.state.intact[ids]]
 
     def _degenerate(self, n: int) -> None:
@@ -277,6 +291,8 @@ class Simulation:
         """
         s = self.state
         ids = np.unique(np.asarray(ids, dtype=np.int64))
+        if ids.size and (ids[0] < 0 or ids[-1] >= s.n_springs):
+            raise IndexError(f"spring ids must be in [0, {s.n_springs}): got {ids[0] if ids[0] < 0 else ids[-1]}")
         ids = ids[s.intact[ids]]
         if ids.size == 0:
             return ids

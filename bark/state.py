@@ -11,12 +11,14 @@ angle θ sits at ``(r cos θ, r sin θ, z)``.
 
 from __future__ import annotations
 
+from types import ModuleType
+
 import attrs
 import numpy as np
 
 import scipy.sparse as sp
 
-from bark.forces import Mechanics, anchor_forces, damping_forces, incidence, spring_forces, tensions
+from bark.forces import Mechanics, damping_forces, incidence
 
 __all__ = ["State", "project_to_surface", "cylinder_points"]
 
@@ -40,6 +42,12 @@ def project_to_surface(points: np.ndarray, radius, velocities: np.ndarray | None
     if velocities is not None:
         vxy = velocities[:, :2]
         vxy -= (np.einsum("ij,ij->i", vxy, xy) / (radius * radius))[:, None] * xy
+
+
+def _default_kernels() -> ModuleType:
+    from bark.kernels import load
+
+    return load("numpy")
 
 
 @attrs.define(eq=False, kw_only=True)
@@ -68,6 +76,10 @@ class State:
     """Material constants (k, c, b, m)."""
     t: float = 0.0
     """Simulated time."""
+    kernels: ModuleType = attrs.field(factory=lambda: _default_kernels(), repr=False)
+    """The compute backend (a module of ``bark.kernels``); the simulation sets it."""
+    scratch: dict = attrs.field(factory=dict, init=False, repr=False)
+    """Work buffers a backend keeps between steps (derived; never part of the state proper)."""
     _inc: tuple[np.ndarray, sp.csr_matrix] | None = attrs.field(default=None, init=False, repr=False)
 
     @property
@@ -97,16 +109,13 @@ class State:
 
     def elastic_forces(self, x: np.ndarray | None = None) -> np.ndarray:
         """Spring and anchor forces only (no damping), at ``x`` (default: the state's own)."""
-        x = self.x if x is None else x
-        mech = self.mechanics
-        f = spring_forces(x, self.pairs, self.rest, mech.k, self.intact, self.incidence)
-        if mech.c:
-            f += anchor_forces(x, self.anchor, mech.c)
-        return f
+        return self.kernels.elastic_forces(self, self.x if x is None else x)
 
     def tension(self) -> np.ndarray:
         """Tension of every spring at the current positions (broken ones included; mask with ``intact``)."""
-        return tensions(self.x, self.pairs, self.rest, self.mechanics.k)
+        out = np.empty(self.n_springs)
+        self.kernels.measure(self, out)
+        return out
 
     def is_finite(self) -> bool:
         return bool(np.isfinite(self.x).all() and np.isfinite(self.v).all())

@@ -79,6 +79,9 @@ class Breaker(Strategy):
     """Which intact springs break now."""
 
     kind: ClassVar[str] = "breaker"
+    overload_only: ClassVar[bool] = False
+    """Set ``True`` if ``select`` only ever picks springs whose tension exceeds their ``fmax``: the
+    simulation then skips the call while no intact spring is over its threshold."""
 
     @abc.abstractmethod
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import attrs
 import numpy as np
 
@@ -14,6 +16,8 @@ __all__ = ["ThresholdBreaker"]
 class ThresholdBreaker(Breaker):
     """The paper's rule: an intact spring breaks when its tension ``k(|d| − l)`` exceeds its own
     threshold ``state.fmax`` (per spring, never collapsed to per base).  Deterministic."""
+
+    overload_only: ClassVar[bool] = True
 
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return np.flatnonzero(state.intact & (tension > state.fmax))

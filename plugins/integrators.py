@@ -32,8 +32,7 @@ class EulerCromer(Integrator):
     little less conservative)."""
 
     def step(self, state, dt: float) -> None:
-        state.v += state.forces() * (dt / state.mechanics.m)
-        state.x += state.v * dt
+        state.kernels.euler_cromer_step(state, dt)  # fused forces → v → x on the state's backend
 
     def stability_limit(self, state) -> float:
         return euler_cromer_h_max(state, self.bound)

@@ -1,0 +1,53 @@
+"""Compute backends for the hot loop: the same four functions, in numpy or compiled with numba.
+
+=======================================  ========================================================
+function                                 does
+=======================================  ========================================================
+``elastic_forces(state, x) -> f``        spring (eq. 1) + anchor (eq. 2) forces at ``x``
+``euler_cromer_step(state, h)``          eqs. 4, 7, 8 in place: forces, then ``v``, then ``x``
+``constrain(state, r_x, r_anchor)``      eq. 9 in place on bases (radial velocity removed) and anchors
+``measure(state, out) -> max_load``      tension ``k(|d| − l)`` of every spring into ``out``; returns
+                                         the largest ``tension / fmax`` over intact springs (NaN if
+                                         any tension is not finite)
+``constrain_measure(state, r_x, r_a,     ``constrain`` then ``measure``, in one pass where compiled
+out) -> max_load``
+=======================================  ========================================================
+
+``numpy`` is always there; ``numba`` is used when importable.  ``auto`` picks numba if it imports,
+else numpy.  Both give the same results to round-off (summation order differs).
+"""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+from bark.errors import BarkError
+
+__all__ = ["BACKENDS", "resolve", "load"]
+
+BACKENDS = ("auto", "numpy", "numba")
+
+
+def _numba_available() -> bool:
+    try:
+        importlib.import_module("numba")
+    except ImportError:
+        return False
+    return True
+
+
+def resolve(name: str) -> str:
+    """The concrete backend ``name`` stands for (``auto`` → ``numba`` if importable, else ``numpy``)."""
+    if name not in BACKENDS:
+        raise BarkError(f"backend = {name!r}: must be one of {', '.join(BACKENDS)}")
+    if name == "auto":
+        return "numba" if _numba_available() else "numpy"
+    if name == "numba" and not _numba_available():
+        raise BarkError("backend = 'numba' but numba is not installed: pip install numba, or use backend = 'numpy'")
+    return name
+
+
+def load(name: str) -> ModuleType:
+    """The kernel module of backend ``name`` (imported only when asked for)."""
+    return importlib.import_module(f"bark.kernels.{resolve(name)}_backend")

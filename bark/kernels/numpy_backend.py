@@ -1,0 +1,42 @@
+"""The numpy backend: vectorised array operations, no compiled code (the reference)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bark.forces import anchor_forces, spring_forces, tensions
+from bark.state import project_to_surface
+
+NAME = "numpy"
+
+
+def elastic_forces(state, x: np.ndarray) -> np.ndarray:
+    mech = state.mechanics
+    f = spring_forces(x, state.pairs, state.rest, mech.k, state.intact, state.incidence)
+    if mech.c:
+        f += anchor_forces(x, state.anchor, mech.c)
+    return f
+
+
+def euler_cromer_step(state, h: float) -> None:
+    state.v += state.forces() * (h / state.mechanics.m)
+    state.x += state.v * h
+
+
+def constrain(state, r_x, r_anchor) -> None:
+    project_to_surface(state.x, r_x, state.v)
+    project_to_surface(state.anchor, r_anchor)
+
+
+def measure(state, out: np.ndarray) -> float:
+    out[:] = tensions(state.x, state.pairs, state.rest, state.mechanics.k)
+    if not np.isfinite(out).all():
+        return float("nan")
+    if not state.intact.any():
+        return float("-inf")
+    return float(np.max(out[state.intact] / state.fmax[state.intact]))
+
+
+def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
+    constrain(state, r_x, r_anchor)
+    return measure(state, out)

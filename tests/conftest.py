@@ -1,0 +1,80 @@
+"""Shared fixtures and hypothesis profiles for bark's test suite.
+
+Profiles: ``ci`` (30 examples, no deadline) is loaded when the environment variable ``CI`` is set;
+otherwise ``HYPOTHESIS_PROFILE`` names the profile, defaulting to ``dev`` (100 examples).
+
+Every simulation here is small (a few hundred bases) and uses a large growth constant or a coarse
+(stable) time step, so that springs break within a few dozen to a few hundred steps.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, settings
+
+from bark import Lattice, Mechanics, Simulation
+from bark_plugins.breakers import ThresholdBreaker
+from bark_plugins.growth import SqrtGrowth
+from bark_plugins.integrators import EulerCromer
+
+settings.register_profile("ci", max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("dev", max_examples=100, deadline=None)
+settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+def build_sim(
+    *,
+    n_bases: int = 300,
+    jitter: float = 0.05,
+    G: float = 0.05,
+    f_max: float = 0.0028,
+    fmax_spread: float = 0.0,
+    dt: float = 0.05,
+    seed: int = 0,
+    **kwargs,
+) -> Simulation:
+    """A small simulation: sqrt growth, Euler–Cromer, threshold breaker (Table 2 k, c, b, m)."""
+    return Simulation(
+        lattice=Lattice(n_bases=n_bases, jitter=jitter),
+        mechanics=Mechanics(f_max=f_max, fmax_spread=fmax_spread),
+        growth=SqrtGrowth(G=G),
+        integrator=EulerCromer(),
+        breakers=[ThresholdBreaker()],
+        dt=dt,
+        seed=seed,
+        **kwargs,
+    )
+
+
+@pytest.fixture
+def make_sim():
+    """Factory fixture: ``make_sim(n_bases=..., G=..., ...)`` → a fresh small :class:`Simulation`."""
+    return build_sim
+
+
+@pytest.fixture
+def small_sim() -> Simulation:
+    """400 bases, G = 0.05 (first breaks within ~20 steps at dt = 0.05), jittered, seed 1."""
+    return build_sim(n_bases=400, seed=1)
+
+
+@pytest.fixture
+def broken_sim() -> Simulation:
+    """A small simulation already run to t = 4, with many springs broken."""
+    sim = build_sim(n_bases=400, seed=2, fmax_spread=0.05)
+    from bark import Stop
+
+    sim.run(Stop(until_time=4.0))
+    assert sim.n_broken > 0
+    return sim
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)

@@ -1,0 +1,258 @@
+"""The `bark` command line, through click's CliRunner (no subprocess, no network)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bark_cli.main import cli
+
+from conftest import REPO_ROOT
+
+SUMMARY_KEYS = {
+    "settings", "seed", "bark_version", "stop", "stop_reason", "t", "radius", "n_broken", "n_patches",
+    "mean_orientation_deg", "circular_sd_deg", "mean_anisotropy",
+}
+SMALL = ["--n-bases", "300", "--until-time", "1", "--quiet"]
+
+
+@pytest.fixture
+def runner() -> CliRunner:
+    return CliRunner()
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    """One small simulate run shared by the output tests."""
+    out = tmp_path_factory.mktemp("run") / "out"
+    result = CliRunner().invoke(
+        cli, ["simulate", "--n-bases", "400", "--until-time", "20", "-G", "0.03", "--out", str(out), "--quiet"]
+    )
+    return result, out
+
+
+def _one_line(result) -> str:
+    text = result.output.strip()
+    assert text, "expected an error message"
+    assert "\n" not in text, text
+    assert "Traceback" not in text
+    return text
+
+
+def _names(text: str, name: str) -> bool:
+    return re.search(rf"(?<![A-Za-z0-9_]){re.escape(name)}(?![A-Za-z0-9_])", text) is not None
+
+
+# -- a successful run --------------------------------------------------------------------------
+
+
+def test_simulate_writes_all_outputs(small_run):
+    result, out = small_run
+    assert result.exit_code == 0, result.output
+    for name in ("pattern.png", "patches.csv", "breaks.csv", "summary.json", "state.npz"):
+        assert (out / name).is_file(), name
+    assert (out / "pattern.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # atomic writes leave no temporary files behind
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_quiet_run_prints_nothing_on_stdout(small_run):
+    result, _ = small_run
+    assert result.stdout == ""
+
+
+def test_summary_json(small_run):
+    _, out = small_run
+    summary = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary)
+    assert summary["stop_reason"] == "time"
+    assert summary["t"] == pytest.approx(20.0, abs=1e-9)
+    assert summary["stop"]["until_time"] == 20.0
+    assert summary["stop"]["until_patches"] is None  # --until-time replaces the default conditions
+    assert summary["settings"]["lattice"]["n_bases"] == 400
+    assert summary["settings"]["growth"] == {"name": "sqrt", "r0": 0.2, "G": 0.03}
+    assert summary["seed"] == 0
+    assert summary["radius"] == pytest.approx(0.2 + 0.03 * 20**0.5, rel=1e-12)
+    assert summary["n_broken"] > 0 and summary["n_patches"] > 0
+    assert 0.0 <= summary["mean_orientation_deg"] < 180.0
+    assert isinstance(summary["bark_version"], str) and summary["bark_version"]
+
+
+def test_state_npz_loads_without_pickle(small_run):
+    _, out = small_run
+    summary = json.loads((out / "summary.json").read_text())
+    with np.load(out / "state.npz", allow_pickle=False) as data:
+        assert {"x", "v", "anchor", "pairs", "rest", "fmax", "intact", "labels", "t"} <= set(data.files)
+        assert data["x"].shape == (400, 3)
+        assert data["intact"].dtype == bool
+        assert int(np.count_nonzero(~data["intact"])) == summary["n_broken"]
+        assert float(data["t"]) == pytest.approx(summary["t"])
+        r = np.hypot(data["x"][:, 0], data["x"][:, 1])
+        np.testing.assert_allclose(r, summary["radius"], rtol=1e-12)
+
+
+def test_csv_tables_agree_with_summary(small_run):
+    _, out = small_run
+    summary = json.loads((out / "summary.json").read_text())
+    with open(out / "breaks.csv", newline="") as fh:
+        breaks = list(csv.DictReader(fh))
+    assert len(breaks) == summary["n_broken"]
+    assert set(breaks[0]) == {"spring", "i", "j", "step", "t", "tension"}
+    assert len({row["spring"] for row in breaks}) == len(breaks)
+    with open(out / "patches.csv", newline="") as fh:
+        patches = list(csv.DictReader(fh))
+    assert len(patches) == summary["n_patches"]
+    assert all(int(row["size"]) >= 7 for row in patches)
+    assert all(0.0 <= float(row["orientation_deg"]) < 180.0 for row in patches)
+
+
+def test_same_seed_same_outputs(runner, tmp_path):
+    outs = []
+    for name in ("a", "b"):
+        result = runner.invoke(cli, ["simulate", *SMALL, "-G", "0.1", "--seed", "3", "--out", str(tmp_path / name)])
+        assert result.exit_code == 0, result.output
+        outs.append(tmp_path / name)
+    assert (outs[0] / "breaks.csv").read_bytes() == (outs[1] / "breaks.csv").read_bytes()
+    with np.load(outs[0] / "state.npz") as a, np.load(outs[1] / "state.npz") as b:
+        np.testing.assert_array_equal(a["x"], b["x"])
+
+
+def test_scene_file_and_options_override(runner, tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text('[lattice]\nn_bases = 250\n[growth]\nname = "linear"\nG = 0.01\n[run]\nuntil_time = 0.5\n')
+    out = tmp_path / "out"
+    result = runner.invoke(cli, ["simulate", "--scene", str(scene), "--r0", "0.3", "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    settings = json.loads((out / "summary.json").read_text())["settings"]
+    assert settings["lattice"]["n_bases"] == 250
+    assert settings["growth"] == {"name": "linear", "r0": 0.3, "G": 0.01}
+
+
+def test_shipped_scene_runs_shortened(runner, tmp_path):
+    out = tmp_path / "out"
+    scene = REPO_ROOT / "examples" / "scenes" / "diamond.toml"
+    result = runner.invoke(cli, ["simulate", "--scene", str(scene), *SMALL, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["mechanics"]["f_max"] == 0.008
+    assert summary["stop_reason"] == "time"
+
+
+def test_degenerate_run_warns_on_stderr(runner, tmp_path):
+    out = tmp_path / "out"
+    args = ["simulate", "--n-bases", "600", "--jitter", "0", "--fmax-spread", "0", "--dt", "0.05", "--until-time", "17", "--quiet"]
+    result = runner.invoke(cli, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "degenerate" in result.stderr
+    assert json.loads((out / "summary.json").read_text())["degenerate_events"]
+
+
+def test_set_sets_a_strategy_parameter(runner, tmp_path):
+    out = tmp_path / "out"
+    result = runner.invoke(cli, ["simulate", *SMALL, "--set", "growth.G=0.03", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "summary.json").read_text())["settings"]["growth"]["G"] == 0.03
+
+
+def test_set_then_restating_default_strategy_keeps_the_parameter(runner, tmp_path):
+    """Regression: `--growth sqrt` used to drop a G given by --set (merge cleared the table)."""
+    out = tmp_path / "out"
+    result = runner.invoke(cli, ["simulate", *SMALL, "--set", "growth.G=0.05", "--growth", "sqrt", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "summary.json").read_text())["settings"]["growth"]["G"] == 0.05
+
+
+# -- bad input: one line, status 2, nothing written --------------------------------------------
+
+
+def _write(tmp_path, name: str, text: str) -> str:
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+BAD_INPUTS = {
+    "negative-k": (lambda p: ["--k", "-1"], "k"),
+    "dt-zero": (lambda p: ["--dt", "0"], "dt"),
+    "dt-negative": (lambda p: ["--dt", "-1"], "dt"),
+    "dt-above-stability-limit": (lambda p: ["--dt", "1"], "dt"),
+    "unknown-growth": (lambda p: ["--growth", "nope"], "nope"),
+    "unknown-breaker": (lambda p: ["--breaker", "nope"], "nope"),
+    "unknown-scene-key": (lambda p: ["--scene", _write(p, "k.toml", "[lattice]\nfoo = 1\n")], "foo"),
+    "unknown-table": (lambda p: ["--scene", _write(p, "t.toml", "[nope]\nx = 1\n")], "nope"),
+    "malformed-toml": (lambda p: ["--scene", _write(p, "bad.toml", "[lattice\nn_bases = \n")], "bad.toml"),
+    "missing-scene": (lambda p: ["--scene", str(p / "missing.toml")], "missing.toml"),
+    "set-no-equals": (lambda p: ["--set", "garbage"], "--set"),
+    "set-no-section": (lambda p: ["--set", "G=0.1"], "--set"),
+    "set-no-value-sep": (lambda p: ["--set", "growth.G"], "--set"),
+    "set-unknown-key": (lambda p: ["--set", "lattice.foo=1"], "foo"),
+    "set-bad-value": (lambda p: ["--set", "mechanics.k=-3"], "k"),
+    "set-unknown-table": (lambda p: ["--set", "nosuch.key=1"], "nosuch"),
+    "bad-int": (lambda p: ["--n-bases", "many"], "--n-bases"),
+    "bad-offsets": (lambda p: ["--offsets", "a,b"], "--offsets"),
+    "negative-G": (lambda p: ["-G", "-1"], "G"),
+    "bad-on-degenerate": (lambda p: ["--on-degenerate", "explode"], "on_degenerate"),
+    "unknown-option": (lambda p: ["--bogus"], "--bogus"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS))
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(runner, tmp_path, case):
+    make_args, name = BAD_INPUTS[case]
+    out = tmp_path / "out"
+    result = runner.invoke(cli, ["simulate", "--n-bases", "300", "--until-time", "1", *make_args(tmp_path), "--out", str(out), "--quiet"])
+    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
+    text = _one_line(result)
+    assert _names(text, name), f"{name!r} not named in {text!r}"
+    assert result.stdout == ""  # the message goes to stderr
+    assert not out.exists()
+
+
+def test_scene_value_instead_of_table_is_one_line(runner, tmp_path):
+    """Regression: `growth = "sqrt"` at the top of a scene file used to crash with a traceback."""
+    scene = _write(tmp_path, "v.toml", 'growth = "sqrt"\n')
+    out = tmp_path / "out"
+    result = runner.invoke(cli, ["simulate", "--scene", scene, "--until-time", "1", "--out", str(out), "--quiet"])
+    assert result.exit_code == 2
+    assert _names(_one_line(result), "growth")
+    assert not out.exists()
+
+
+def test_out_that_is_a_file_is_rejected(runner, tmp_path):
+    target = tmp_path / "file"
+    target.write_text("keep me")
+    result = runner.invoke(cli, ["simulate", *SMALL, "--out", str(target)])
+    assert result.exit_code == 2
+    _one_line(result)
+    assert target.read_text() == "keep me"
+
+
+# -- other commands ----------------------------------------------------------------------------
+
+
+def test_strategies_lists_builtins(runner):
+    result = runner.invoke(cli, ["strategies"])
+    assert result.exit_code == 0, result.output
+    for name in ("sqrt", "linear", "euler-cromer", "threshold", "patches"):
+        assert _names(result.output, name), name
+    for kind in ("growth", "integrator", "breaker", "analyzer"):
+        assert kind in result.output
+
+
+def test_version(runner):
+    from bark import __version__
+
+    result = runner.invoke(cli, ["--version"])
+    assert result.exit_code == 0
+    assert __version__ in result.output
+
+
+def test_unknown_command_is_one_line(runner):
+    result = runner.invoke(cli, ["grow"])
+    assert result.exit_code == 2
+    assert _names(_one_line(result), "grow")

@@ -1,0 +1,126 @@
+"""How bark is installed: entry points, import hygiene of the core, top-level names."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from importlib import metadata
+
+import pytest
+
+from bark import registry, strategies
+
+BUILTINS = {
+    "bark.growth": {"sqrt": strategies.Growth, "linear": strategies.Growth},
+    "bark.integrator": {"euler-cromer": strategies.Integrator},
+    "bark.breaker": {"threshold": strategies.Breaker},
+    "bark.analyzer": {"patches": strategies.Analyzer},
+}
+
+
+@pytest.mark.parametrize("group", list(BUILTINS))
+def test_builtins_are_registered_as_entry_points(group):
+    eps = {ep.name: ep for ep in metadata.entry_points(group=group)}
+    for name, base in BUILTINS[group].items():
+        assert name in eps, f"{name} not registered under {group}"
+        assert eps[name].dist is None or eps[name].dist.name == "bark"
+        assert eps[name].value.startswith("bark_plugins.")
+        cls = eps[name].load()
+        assert isinstance(cls, type) and issubclass(cls, base)
+        assert cls.kind == group.split(".", 1)[1]
+        assert cls() is not None  # instantiable with defaults
+
+
+@pytest.mark.parametrize("kind", strategies.KINDS)
+def test_registry_uses_the_same_entry_points(kind):
+    group = f"bark.{kind}"
+    assert registry.GROUPS[kind] == group
+    assert set(BUILTINS[group]) <= set(registry.available(kind))
+    for name in BUILTINS[group]:
+        assert registry.load(kind, name) is metadata.entry_points(group=group)[name].load()
+
+
+def _run(code: str, cwd) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True, text=True, timeout=120)
+
+
+def test_core_never_imports_click_rich_or_matplotlib(tmp_path):
+    code = (
+        "import bark, bark.scene, bark.simulation, bark.output, bark.analysis, bark.registry, sys\n"
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('click', 'rich', 'matplotlib'))\n"
+        "assert not bad, bad\n"
+    )
+    proc = _run(code, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_the_import_check_can_fail(tmp_path):
+    """The same check flags the command line, which does import click (so the check is live)."""
+    code = (
+        "import bark_cli.main, sys\n"
+        "assert not any(m.split('.')[0] in ('click', 'rich', 'matplotlib') for m in sys.modules)\n"
+    )
+    assert _run(code, tmp_path).returncode != 0
+
+
+_TOP_LEVEL_CODE = r"""
+import json
+from importlib import metadata
+from pathlib import PurePosixPath
+
+dist = metadata.distribution("bark")
+names = set()
+for f in dist.files or []:
+    parts = PurePosixPath(str(f)).parts
+    if not parts or parts[0] in ("..", "__pycache__") or parts[0].endswith((".dist-info", ".egg-info")):
+        continue
+    if len(parts) > 1:  # a package folder in site-packages
+        names.add(parts[0])
+    elif parts[0].endswith(".py") and not parts[0].startswith("__editable__"):
+        names.add(parts[0][:-3])
+top = dist.read_text("top_level.txt") or ""
+names |= {line.strip() for line in top.splitlines() if line.strip()}
+print(json.dumps(sorted(names)))
+"""
+
+
+def test_installed_top_level_names_start_with_bark(tmp_path):
+    """The installed distribution (read away from the source tree, whose bark.egg-info lists
+    source paths) puts only bark* names into site-packages."""
+    proc = _run(_TOP_LEVEL_CODE, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    names = set(json.loads(proc.stdout))
+    assert "bark" in names
+    assert "cli" not in names and "plugins" not in names
+    assert all(n.startswith("bark") for n in names), names
+
+
+def test_no_top_level_cli_or_plugins_outside_the_repo(tmp_path):
+    """Away from the source tree, only bark* names are importable from the installation."""
+    code = (
+        "import importlib.util as u\n"
+        "assert u.find_spec('cli') is None, u.find_spec('cli')\n"
+        "assert u.find_spec('plugins') is None, u.find_spec('plugins')\n"
+        "for name in ('bark', 'bark_cli', 'bark_plugins'):\n"
+        "    assert u.find_spec(name) is not None, name\n"
+    )
+    proc = _run(code, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_editable_finder_maps_only_bark_names():
+    import importlib.util
+
+    for name in ("bark_cli", "bark_plugins"):
+        spec = importlib.util.find_spec(name)
+        assert spec is not None and spec.origin
+    finders = [m for m in sys.modules if m.startswith("__editable__") and "bark" in m]
+    for mod in finders:
+        mapping = getattr(sys.modules[mod], "MAPPING", {})
+        assert mapping and all(k.startswith("bark") for k in mapping), mapping
+
+
+def test_console_script_is_registered():
+    scripts = {ep.name: ep.value for ep in metadata.entry_points(group="console_scripts") if ep.name == "bark"}
+    assert scripts == {"bark": "bark_cli.main:main"}

@@ -1,0 +1,255 @@
+"""Scenes: defaults, validation messages, merge rules, shipped scene files."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from bark.errors import BarkError
+from bark.lattice import GOLDEN_ANGLE_DEG
+from bark.scene import Scene, merge, read_toml
+
+from conftest import REPO_ROOT
+
+SCENE_DIR = REPO_ROOT / "examples" / "scenes"
+
+
+def _assert_one_line_naming(err: BaseException, *names: str) -> None:
+    msg = str(err)
+    assert msg and "\n" not in msg, msg
+    for name in names:
+        assert re.search(rf"(?<![A-Za-z0-9_]){re.escape(name)}(?![A-Za-z0-9_])", msg), f"{name!r} not in {msg!r}"
+
+
+# -- defaults ----------------------------------------------------------------------------------
+
+
+def test_empty_scene_is_table_2_vertical_regime():
+    s = Scene.from_dict({})
+    assert s.lattice.n_bases == 3000
+    assert s.lattice.rise == 0.0005
+    assert s.lattice.offsets == (21, 34)
+    assert s.lattice.divergence_deg == pytest.approx(137.5078, abs=1e-4) == GOLDEN_ANGLE_DEG
+    assert s.lattice.jitter > 0  # symmetry breaking on by default
+    m = s.mechanics
+    assert (m.k, m.c, m.b, m.m, m.f_max) == (0.4, 0.1, 5.0, 1.0, 0.0028)
+    assert s.names == {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
+    assert s.strategies["growth"].r0 == 0.2 and s.strategies["growth"].G == 0.014
+    assert s.run.dt == 0.01
+    assert s.strategies["analyzer"].min_size == 7 and s.run.min_patch_size == 7
+
+
+def test_scene_builds_the_simulation_it_describes():
+    s = Scene.from_dict({"lattice": {"n_bases": 300}, "run": {"dt": 0.02, "seed": 9}, "growth": {"G": 0.03}})
+    sim = s.simulation()
+    assert sim.lattice is s.lattice and sim.mechanics is s.mechanics
+    assert sim.growth is s.strategies["growth"]
+    assert sim.dt == 0.02 and sim.seed == 9
+    assert sim.state.n_bases == 300
+    assert list(sim.breakers) == [s.strategies["breaker"]]
+
+
+@given(
+    n=st.integers(1, 5000),
+    G=st.floats(0.0, 1.0),
+    dt=st.floats(1e-4, 1.0),
+    seed=st.integers(0, 2**32),
+    name=st.sampled_from(["sqrt", "linear"]),
+)
+def test_to_dict_round_trips(n, G, dt, seed, name):
+    s = Scene.from_dict({"lattice": {"n_bases": n}, "growth": {"name": name, "G": G}, "run": {"dt": dt, "seed": seed}})
+    again = Scene.from_dict(s.to_dict())
+    assert again == s
+    assert again.to_dict() == s.to_dict()
+
+
+# -- validation --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "data, names",
+    [
+        ({"nope": {}}, ["nope"]),
+        ({"lattice": {"foo": 1}}, ["foo", "lattice"]),
+        ({"mechanics": {"stiffness": 1}}, ["stiffness"]),
+        ({"run": {"until": 3}}, ["until"]),
+        ({"scene": {"title": "x"}}, ["title"]),
+        ({"growth": {"name": "nope"}}, ["nope", "growth"]),
+        ({"integrator": {"name": "rk4"}}, ["rk4"]),
+        ({"breaker": {"name": "nope"}}, ["nope", "breaker"]),
+        ({"analyzer": {"name": "nope"}}, ["nope"]),
+        ({"growth": {"name": 3}}, ["name"]),
+        ({"growth": {"H": 1.0}}, ["H"]),
+        ({"growth": {"name": "linear", "r0": 0}}, ["r0"]),
+        ({"growth": {"G": -1}}, ["G"]),
+        ({"mechanics": {"k": -1}}, ["k"]),
+        ({"mechanics": {"k": "stiff"}}, ["k"]),
+        ({"mechanics": {"m": 0}}, ["m"]),
+        ({"mechanics": {"f_max": 0.0}}, ["f_max"]),
+        ({"run": {"dt": 0}}, ["dt"]),
+        ({"run": {"dt": -0.01}}, ["dt"]),
+        ({"run": {"seed": -1}}, ["seed"]),
+        ({"run": {"seed": 1.5}}, ["seed"]),
+        ({"run": {"on_degenerate": "explode"}}, ["on_degenerate"]),
+        ({"run": {"degenerate_fraction": 0}}, ["degenerate_fraction"]),
+        ({"run": {"until_time": None, "until_patches": None}}, ["until_time"]),
+        ({"run": {"until_patches": 0}}, ["until_patches"]),
+        ({"lattice": {"n_bases": 0}}, ["n_bases"]),
+        ({"lattice": {"n_bases": 2.5}}, ["n_bases"]),
+        ({"lattice": {"n_bases": True}}, ["n_bases"]),
+        ({"lattice": {"jitter": -0.1}}, ["jitter"]),
+        ({"lattice": {"offsets": [21, 21]}}, ["offsets"]),
+        ({"lattice": {"offsets": [0, 34]}}, ["offsets"]),
+        ({"lattice": {"divergence_deg": 360}}, ["divergence_deg"]),
+        ({"lattice": {"rise": float("inf")}}, ["rise"]),
+    ],
+)
+def test_bad_scene_raises_one_line_naming_the_key(data, names):
+    with pytest.raises(BarkError) as info:
+        Scene.from_dict(data)
+    _assert_one_line_naming(info.value, *names)
+
+
+@pytest.mark.parametrize("data, key", [({"growth": "sqrt"}, "growth"), ({"lattice": 5}, "lattice"), ({"scene": "x"}, "scene")])
+def test_value_instead_of_table_is_a_bark_error(data, key):
+    with pytest.raises(BarkError) as info:
+        Scene.from_dict(data)
+    _assert_one_line_naming(info.value, key)
+
+
+def test_offsets_as_string_names_the_key():
+    with pytest.raises(BarkError) as info:
+        Scene.from_dict({"lattice": {"offsets": "21,34"}})
+    _assert_one_line_naming(info.value, "offsets")
+
+
+def test_bark_error_is_a_value_error():
+    assert issubclass(BarkError, ValueError)
+
+
+def test_malformed_toml_file(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("[lattice\nn_bases = \n")
+    with pytest.raises(BarkError) as info:
+        Scene.from_toml(path)
+    _assert_one_line_naming(info.value)
+    assert "bad.toml" in str(info.value)
+
+
+def test_missing_toml_file(tmp_path):
+    with pytest.raises(BarkError) as info:
+        read_toml(tmp_path / "nowhere.toml")
+    _assert_one_line_naming(info.value)
+    assert "nowhere.toml" in str(info.value)
+
+
+def test_directory_as_toml_file(tmp_path):
+    with pytest.raises(BarkError) as info:
+        read_toml(tmp_path)
+    _assert_one_line_naming(info.value)
+
+
+def test_unknown_key_in_toml_file(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text("[lattice]\nfoo = 1\n")
+    with pytest.raises(BarkError) as info:
+        Scene.from_toml(path)
+    _assert_one_line_naming(info.value, "foo")
+
+
+def test_toml_overrides_apply(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text('[lattice]\nn_bases = 500\njitter = 0.1\n[growth]\nname = "linear"\nG = 0.02\n')
+    s = Scene.from_toml(path, {"lattice": {"n_bases": 700}})
+    assert s.lattice.n_bases == 700 and s.lattice.jitter == 0.1
+    assert s.names["growth"] == "linear" and s.strategies["growth"].G == 0.02
+
+
+# -- merge rules -------------------------------------------------------------------------------
+
+
+def test_merge_changing_strategy_name_drops_old_params():
+    base = {"growth": {"name": "sqrt", "G": 0.05, "r0": 0.3}}
+    out = merge(base, {"growth": {"name": "linear"}})
+    assert out["growth"] == {"name": "linear"}
+    out = merge(base, {"growth": {"name": "linear", "r0": 0.4}})
+    assert out["growth"] == {"name": "linear", "r0": 0.4}
+    assert base == {"growth": {"name": "sqrt", "G": 0.05, "r0": 0.3}}  # inputs unchanged
+
+
+def test_merge_same_strategy_name_keeps_params():
+    out = merge({"growth": {"name": "sqrt", "G": 0.05}}, {"growth": {"name": "sqrt", "r0": 0.3}})
+    assert out["growth"] == {"name": "sqrt", "G": 0.05, "r0": 0.3}
+    out = merge({"growth": {"name": "sqrt", "G": 0.05}}, {"growth": {"r0": 0.3}})
+    assert out["growth"] == {"name": "sqrt", "G": 0.05, "r0": 0.3}
+
+
+def test_merge_restating_the_default_strategy_name_keeps_params():
+    """A table without ``name`` is the default strategy: naming it again is no change (regression)."""
+    out = merge({"growth": {"G": 0.05}}, {"growth": {"name": "sqrt"}})
+    assert Scene.from_dict(out).strategies["growth"].G == 0.05
+
+
+def test_merge_any_until_replaces_all_stop_conditions():
+    base = {"run": {"until_time": 50.0, "until_patches": 20, "dt": 0.02}}
+    out = merge(base, {"run": {"until_radius": 0.3}})
+    assert out["run"]["until_radius"] == 0.3
+    assert out["run"]["until_time"] is None and out["run"]["until_patches"] is None
+    assert out["run"]["dt"] == 0.02
+    s = Scene.from_dict(out)
+    assert (s.run.until_time, s.run.until_radius, s.run.until_patches) == (None, 0.3, None)
+    # also against the defaults (until_time 1000, until_patches 110)
+    s = Scene.from_dict(merge({}, {"run": {"until_time": 5.0}}))
+    assert (s.run.until_time, s.run.until_radius, s.run.until_patches) == (5.0, None, None)
+    # a [run] override without until_* keeps the stop conditions
+    out = merge(base, {"run": {"dt": 0.05}})
+    assert out["run"]["until_time"] == 50.0 and out["run"]["until_patches"] == 20
+
+
+@pytest.mark.parametrize("base, overrides", [({}, {"growth": "sqrt"}), ({"lattice": 5}, {}), ({"run": 1}, {"run": {"dt": 0.1}})])
+def test_merge_value_instead_of_table_is_a_bark_error(base, overrides):
+    with pytest.raises(BarkError) as info:
+        merge(base, overrides)
+    _assert_one_line_naming(info.value, next(iter({**base, **overrides})))
+
+
+# -- shipped scenes ----------------------------------------------------------------------------
+
+SHIPPED = sorted(SCENE_DIR.glob("*.toml"))
+
+
+def test_at_least_three_shipped_scenes():
+    names = {p.stem for p in SHIPPED}
+    assert len(SHIPPED) >= 3
+    assert {"vertical", "reticulate", "diamond"} <= names
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name)
+def test_shipped_scene_loads(path):
+    s = Scene.from_toml(path)
+    assert s.name
+    assert Scene.from_dict(s.to_dict()) == s
+    small = Scene.from_toml(path, {"lattice": {"n_bases": 50}})
+    assert small.simulation().state.n_bases == 50
+
+
+@pytest.mark.parametrize(
+    "name, f_max, G", [("vertical", 0.0028, 0.014), ("reticulate", 0.005, 0.011), ("diamond", 0.008, 0.007)]
+)
+def test_shipped_regimes_match_table_2(name, f_max, G):
+    s = Scene.from_toml(SCENE_DIR / f"{name}.toml")
+    assert s.mechanics.f_max == f_max
+    assert s.strategies["growth"].G == G
+    assert s.lattice.n_bases == 3000 and s.lattice.offsets == (21, 34)
+    assert s.lattice.jitter > 0 or s.mechanics.fmax_spread > 0  # symmetry breaking
+
+
+def test_vertical_scene_equals_defaults():
+    """The default scene is the vertical regime: same settings apart from the [scene] text."""
+    shipped = Scene.from_toml(SCENE_DIR / "vertical.toml").to_dict()
+    default = Scene.from_dict({}).to_dict()
+    shipped.pop("scene"), default.pop("scene")
+    assert shipped == default
