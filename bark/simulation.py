@@ -31,6 +31,16 @@ __all__ = ["Simulation", "Stop", "BreakLog"]
 SAFETY = 0.9
 """Automatic stepping keeps sub-steps at or below this fraction of the stability limit."""
 
+QUIET_CHUNK = 128
+"""Most steps one call of a compiled quiet-step kernel takes (progress and Ctrl-C are seen between calls)."""
+QUIET_START = 8
+"""Steps in the first call after a break; doubled after each call that ended quiet."""
+
+
+def _first(flags: np.ndarray) -> int:
+    """Index of the first True in ``flags``, or ``len(flags)`` if none."""
+    return int(np.argmax(flags)) if flags.any() else len(flags)
+
 
 def _round_down(x: float) -> str:
     """``x`` rounded down to two significant digits, as text (for suggestions)."""
@@ -134,6 +144,7 @@ class Simulation:
     _labels: np.ndarray | None = attrs.field(init=False, default=None)
     _last_finite: tuple[np.ndarray, ...] | None = attrs.field(init=False, default=None)
     _tension: np.ndarray | None = attrs.field(init=False, default=None)
+    _quiet_n: int = attrs.field(init=False, default=QUIET_START)
 
     def __attrs_post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
@@ -204,12 +215,40 @@ class Simulation:
         return self.stop_reason
 
     def irun(self, stop: Stop) -> Iterator["Simulation"]:
-        """The loop of :meth:`run` as a generator that yields after every step (for progress bars)."""
+        """The loop of :meth:`run` as a generator that yields after every :meth:`advance`."""
         self.stop_reason = None
         while (reason := stop.reason(self)) is None and self.stop_reason is None:
-            self.step()
+            self.advance(stop)
             yield self
         self.stop_reason = self.stop_reason or reason
+
+    def advance(self, stop: Stop | None = None) -> int:
+        """One :meth:`step`; or, where a compiled quiet-step kernel applies, up to ``QUIET_CHUNK``
+        steps in one call.  Returns the number of steps taken.
+
+        The quiet path runs exactly the loop of :meth:`run`, step by step, inside compiled code; it
+        applies when the integrator names a ``quiet_kernel`` that the backend has, every breaker is
+        ``overload_only`` (so nothing needs Python until a spring is over its threshold) and the
+        growth law is uniform (the radius does not depend on height).  It returns after the first
+        step that overloads a spring (whose breaks are then made here, as in :meth:`step`), on a
+        non-finite state, or at the step where ``stop``'s time or radius is reached.
+        """
+        kernel = self._quiet_kernel()
+        rows = self._quiet_radii(stop) if kernel is not None else None
+        if rows is None:
+            self.step()
+            return 1
+        s = self.state
+        start = self.step_count
+        done, max_load = kernel(s, self.h, rows, rows, self._tension)
+        s.t = (start + done) * self.h
+        # quiet steps come in runs: grow the next call while they last, start small after a break
+        self._quiet_n = min(2 * self._quiet_n, QUIET_CHUNK) if max_load <= 1.0 else QUIET_START
+        if math.isnan(max_load):  # the kernel put x and v back to the state before the bad step
+            self._non_finite(start + done - 1)
+        self.step_count = start + done
+        self._break_selected(max_load)
+        return done
 
     def step(self) -> None:
         """One step of the loop in :meth:`run`."""
@@ -217,22 +256,57 @@ class Simulation:
         self._keep_last_finite()
         self.integrator.step(s, self.h)
         s.t = (self.step_count + 1) * self.h  # not a running sum: no drift over 10^5 steps
-        tension = self._tension
         # surface constraint (eq. 9), then every spring's tension and the largest tension/fmax of intact ones
-        max_load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), tension)
+        max_load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)
         if math.isnan(max_load):
-            bad_t = s.t
-            self._restore_last_finite()
-            raise NonFiniteStateError(
-                f"the state became NaN or infinite at t = {bad_t:.6g} (step {self.step_count + 1}); "
-                f"the simulation holds the last finite state, t = {s.t:.6g}"
-            )
-        ids = self._select(tension, max_load)
+            np.copyto(s.x, self._last_finite[0])
+            np.copyto(s.v, self._last_finite[1])
+            self._non_finite(self.step_count)
         self.step_count += 1
+        self._break_selected(max_load)
+
+    def _break_selected(self, max_load: float) -> None:
+        ids = self._select(self._tension, max_load)
         if ids.size:
-            if ids.size > self.degenerate_fraction * s.n_springs:
+            if ids.size > self.degenerate_fraction * self.state.n_springs:
                 self._degenerate(ids.size)
-            self.break_springs(ids, tension)
+            self.break_springs(ids, self._tension)
+
+    def _non_finite(self, good_steps: int) -> None:
+        """Raise after a non-finite step, the simulation left at the last finite state (x, v restored
+        by the caller; t and the anchors follow from the step count)."""
+        bad_t = self.state.t
+        self.step_count = good_steps
+        self.state.t = good_steps * self.h
+        self.constrain()
+        raise NonFiniteStateError(
+            f"the state became NaN or infinite at t = {bad_t:.6g} (step {good_steps + 1}); "
+            f"the simulation holds the last finite state, t = {self.state.t:.6g}"
+        )
+
+    def _quiet_kernel(self):
+        name = self.integrator.quiet_kernel
+        if name is None or not all(b.overload_only for b in self.breakers):
+            return None
+        return getattr(self.state.kernels, name, None)
+
+    def _quiet_radii(self, stop: Stop | None) -> np.ndarray | None:
+        """Radius of each of the next steps, one row per step — or ``None`` where the quiet path does
+        not apply (height-dependent growth, or fewer than two steps before a stop condition)."""
+        ts = (self.step_count + 1 + np.arange(self._quiet_n)) * self.h
+        radii = []
+        for t in ts:
+            r = self.growth.radius(float(t), self.state.x[:, 2])
+            if np.ndim(r) != 0:
+                return None
+            radii.append(float(r))
+        r = np.array(radii)
+        n = len(r)
+        if stop is not None and stop.until_time is not None:
+            n = min(n, _first(ts >= stop.until_time - 1e-9 * self.h) + 1)
+        if stop is not None and stop.until_radius is not None:
+            n = min(n, _first(r >= stop.until_radius) + 1)
+        return r[:n, None] if n >= 2 else None
 
     def _keep_last_finite(self) -> None:
         s = self.state
@@ -241,14 +315,6 @@ class Simulation:
         else:
             np.copyto(self._last_finite[0], s.x)
             np.copyto(self._last_finite[1], s.v)
-
-    def _restore_last_finite(self) -> None:
-        """Back to the state before the last step (anchors follow from t alone)."""
-        s = self.state
-        np.copyto(s.x, self._last_finite[0])
-        np.copyto(s.v, self._last_finite[1])
-        s.t = self.step_count * self.h
-        self.constrain()
 
     def constrain(self) -> None:
         """Surface constraint (eq. 9): bases (with their velocities) and anchors onto ``r(t, z)``."""

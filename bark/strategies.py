@@ -62,6 +62,9 @@ class Integrator(Strategy):
     """Time integration of the equations of motion (eqs. 5–8)."""
 
     kind: ClassVar[str] = "integrator"
+    quiet_kernel: ClassVar[str | None] = None
+    """Name of a backend function that takes many steps of this method in one compiled call (see
+    ``Simulation.advance``); ``None`` (the default) means one ``step`` per call, always correct."""
 
     @abc.abstractmethod
     def step(self, state, dt: float) -> None:

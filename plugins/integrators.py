@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import attrs
 import numpy as np
 from scipy.sparse.linalg import LinearOperator, cg
@@ -25,6 +27,8 @@ class EulerCromer(Integrator):
     First order; stable while ``dt`` is below ``h_max = (√(β² + 4ω²) − β)/ω²`` with ``β = b/m`` and
     ``ω² = λ_max(K)/m`` (NOTES.md §3; ≈ 0.36 for Table 2's values).
     """
+
+    quiet_kernel: ClassVar[str | None] = "euler_cromer_quiet"
 
     bound: str = attrs.field(default="gershgorin", validator=one_of("gershgorin", "lanczos"))
     """How λ_max(K) is bounded for the stability guard: ``gershgorin`` (c + 2k·max degree; holds for

@@ -13,7 +13,11 @@ import numpy as np
 
 NAME = "numba"
 
-_jit = numba.njit(cache=True, fastmath=False, nogil=True)
+# error_model="numpy": no Python-style zero-division branches (they block SIMD).  The fastmath
+# flags allow reassociation and fused multiply-add, but deliberately not 'nnan'/'ninf': the NaN
+# check in _measure must never be optimised away.
+_FASTMATH = {"nsz", "arcp", "contract", "reassoc", "afn"}
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
 
 
 @_jit
@@ -143,3 +147,105 @@ def measure(state, out: np.ndarray) -> float:
 def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
     return float(_constrain_measure(state.x, state.v, state.anchor, _radii(r_x), _radii(r_anchor), state.pairs,
                                     state.rest, state.mechanics.k, state.fmax, state.intact, out))
+
+
+@_jit
+def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fmax, r_x, r_a, tension, f, u_a):
+    """Up to ``r_x.shape[0]`` whole steps (integrate, constrain, measure) in one call.
+
+    Stops after the first step whose max load exceeds 1 (a spring to break) or whose tensions are
+    not finite.  Returns ``(steps taken, max load of the last step)``, the load NaN if that step
+    went non-finite.  The spring pass that measures tensions also accumulates the next step's
+    spring forces into ``f`` (first same as last).  Anchors only ever move radially, so their unit
+    directions ``u_a`` are found once per call.
+    """
+    n = x.shape[0]
+    hm = h / m
+    f[:] = 0.0
+    _spring_forces(x, pairs, rest, k, intact, f)
+    for q in range(n):
+        inv = 1.0 / math.sqrt(anchor[q, 0] * anchor[q, 0] + anchor[q, 1] * anchor[q, 1])
+        u_a[q, 0] = anchor[q, 0] * inv
+        u_a[q, 1] = anchor[q, 1] * inv
+    top = -np.inf
+    ux = r_x.shape[1] == 1
+    ua = r_a.shape[1] == 1
+    for step in range(r_x.shape[0]):
+        r = r_x[step, 0]
+        inv_r2 = 1.0 / (r * r)
+        for q in range(n):
+            for a in range(3):
+                force = f[q, a] - c * (x[q, a] - anchor[q, a]) - b * v[q, a]
+                f[q, a] = 0.0  # consumed: ready for the next spring pass
+                v[q, a] += force * hm
+                x[q, a] += v[q, a] * h
+            if not ux:
+                r = r_x[step, q]
+                inv_r2 = 1.0 / (r * r)
+            px, py = x[q, 0], x[q, 1]
+            sc = r / math.sqrt(px * px + py * py)
+            px *= sc
+            py *= sc
+            x[q, 0] = px
+            x[q, 1] = py
+            vr = (v[q, 0] * px + v[q, 1] * py) * inv_r2
+            v[q, 0] -= vr * px
+            v[q, 1] -= vr * py
+            ra = r_a[step, 0] if ua else r_a[step, q]
+            anchor[q, 0] = ra * u_a[q, 0]
+            anchor[q, 1] = ra * u_a[q, 1]
+        top = -np.inf
+        finite = True
+        for s in range(pairs.shape[0]):
+            i, j = pairs[s, 0], pairs[s, 1]
+            d0 = x[j, 0] - x[i, 0]
+            d1 = x[j, 1] - x[i, 1]
+            d2 = x[j, 2] - x[i, 2]
+            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            t = k * (length - rest[s])
+            tension[s] = t
+            if not math.isfinite(t):
+                finite = False
+            elif intact[s]:
+                load = t * inv_fmax[s]
+                if load > top:
+                    top = load
+                if length > 0.0:
+                    g = t / length
+                    f[i, 0] += g * d0
+                    f[i, 1] += g * d1
+                    f[i, 2] += g * d2
+                    f[j, 0] -= g * d0
+                    f[j, 1] -= g * d1
+                    f[j, 2] -= g * d2
+        if not finite:
+            return step + 1, np.nan
+        if top > 1.0:
+            return step + 1, top
+    return r_x.shape[0], top
+
+
+def euler_cromer_quiet(state, h: float, r_x: np.ndarray, r_a: np.ndarray, tension: np.ndarray) -> tuple[int, float]:
+    """Euler–Cromer steps with radii ``r_x``/``r_a`` (one row per step, 1 or n columns); see
+    :func:`_euler_cromer_quiet`.  Returns ``(steps, max load)``.  If a step goes non-finite, the
+    state is put back to the one before it (by replaying the call's steps up to there from its
+    start: nothing breaks inside a call, so the replay is exact) and the load is NaN."""
+    mech = state.mechanics
+    sc = state.scratch
+    if sc.get("anchor_dir") is None or sc["anchor_dir"].shape[0] != state.n_bases:
+        sc["anchor_dir"] = np.empty((state.n_bases, 2))
+    start = (state.x.copy(), state.v.copy(), state.anchor.copy())
+
+    def call(rows_x, rows_a):
+        return _euler_cromer_quiet(
+            state.x, state.v, state.anchor, state.pairs, state.rest, mech.k, mech.c, mech.b, mech.m, h,
+            state.intact, 1.0 / state.fmax, rows_x, rows_a, tension, _scratch(state), sc["anchor_dir"],
+        )
+
+    done, load = call(r_x, r_a)
+    if math.isnan(load):
+        for keep, now in zip(start, (state.x, state.v, state.anchor)):
+            np.copyto(now, keep)
+        if done > 1:
+            call(r_x[: done - 1], r_a[: done - 1])
+    return int(done), float(load)
