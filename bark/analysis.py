@@ -28,6 +28,9 @@ __all__ = [
     "axial_difference",
     "patch_statistics",
     "pattern_summary",
+    "hellinger",
+    "orientation_hellinger",
+    "standard_error_difference",
 ]
 
 
@@ -118,3 +121,30 @@ def pattern_summary(rows: list[dict]) -> dict:
         "mean_anisotropy": float(np.mean([r["anisotropy"] for r in rows])),
         "fraction_within_45_deg": float(np.mean(np.abs(axial_difference(deg, mean)) <= 45.0)),
     }
+
+
+def hellinger(mean_p: float, sd_p: float, mean_q: float, sd_q: float, axial: bool = False) -> float:
+    """Hellinger distance between two normal distributions (paper, eqs. 12–14), in [0, 1].
+
+    ``d = √(1 − β e^γ)``, ``β = √(2 SD_P SD_Q / (SD_P² + SD_Q²))``,
+    ``γ = −¼ (μ_P − μ_Q)² / (SD_P² + SD_Q²)``.  With ``axial=True`` the means are orientations in
+    degrees and their difference is taken as axes (``axial_difference``).
+    """
+    diff = float(axial_difference(mean_p, mean_q)) if axial else mean_p - mean_q
+    var = sd_p * sd_p + sd_q * sd_q
+    if var == 0.0:
+        return 0.0 if diff == 0.0 else 1.0
+    beta = np.sqrt(2.0 * sd_p * sd_q / var)
+    gamma = -0.25 * diff * diff / var
+    return float(np.sqrt(max(0.0, 1.0 - beta * np.exp(gamma))))
+
+
+def orientation_hellinger(deg_p: np.ndarray, deg_q: np.ndarray) -> float:
+    """Hellinger distance between two sets of patch orientations (axial mean and circular SD)."""
+    return hellinger(axial_mean(deg_p), axial_sd(deg_p), axial_mean(deg_q), axial_sd(deg_q), axial=True)
+
+
+def standard_error_difference(mean_p: float, se_p: float, mean_q: float, axial: bool = False) -> float:
+    """``d_P(P, Q) = |μ_Q − μ_P| / SE_P`` (paper, eq. 15): asymmetric, in standard errors of P."""
+    diff = float(axial_difference(mean_q, mean_p)) if axial else mean_q - mean_p
+    return abs(diff) / se_p

@@ -61,8 +61,13 @@ class RunSettings:
     """A step breaking more than this share of all springs is reported as degenerate."""
     on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
     """``warn``: record the event and go on; ``stop``: end the run there."""
-    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto"))
-    """``fixed``: refuse a dt above the integrator's stability limit; ``auto``: split it into sub-steps."""
+    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto", "adaptive"))
+    """``fixed``: refuse a dt above the integrator's stability limit; ``auto``: split it into
+    sub-steps; ``adaptive``: also halve steps around breaks to keep overshoot below overshoot_tol."""
+    overshoot_tol: float = attrs.field(default=0.05, validator=positive)
+    """Adaptive stepping: largest relative overshoot tension/fmax − 1 allowed at a break."""
+    max_halvings: int = attrs.field(default=10, validator=positive_int)
+    """Adaptive stepping: the smallest step is the full step / 2**max_halvings."""
     backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
     """Compute backend: ``numpy``, ``numba``, or ``auto`` (numba if installed, else numpy)."""
 
@@ -146,7 +151,11 @@ class Scene:
         bad = sorted(set(meta) - {"name", "description"})
         if bad:
             raise BarkError(f"unknown key {bad[0]!r} in [scene]: allowed are name, description")
-        parts = {s: _build(s, c, dict(data.get(s, {}))) for s, c in PARAM_SECTIONS.items()}
+        tables = {s: dict(data.get(s, {})) for s in PARAM_SECTIONS}
+        if any(k in tables["run"] for k in STOP_KEYS):  # stop conditions given replace the default ones
+            for k in STOP_KEYS:
+                tables["run"].setdefault(k, None)
+        parts = {s: _build(s, c, tables[s]) for s, c in PARAM_SECTIONS.items()}
         if parts["run"].until_time is None and parts["run"].until_radius is None and parts["run"].until_patches is None:
             raise BarkError("[run] no stop condition: give until_time, until_radius or until_patches")
         strategies, names = {}, {}
@@ -184,6 +193,8 @@ class Scene:
             degenerate_fraction=self.run.degenerate_fraction,
             on_degenerate=self.run.on_degenerate,
             stepping=self.run.stepping,
+            overshoot_tol=self.run.overshoot_tol,
+            max_halvings=self.run.max_halvings,
             backend=self.run.backend,
         )
 

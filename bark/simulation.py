@@ -123,9 +123,17 @@ class Simulation:
     """A step that breaks more than this share of all springs is a degenerate event (NOTES.md §1)."""
     on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
     """What a degenerate event does: ``warn`` records it and goes on; ``stop`` ends the run."""
-    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto"))
-    """``fixed``: a ``dt`` above the integrator's stability limit is refused (BarkError);
-    ``auto``: such a ``dt`` is split into equal sub-steps below the limit."""
+    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto", "adaptive"))
+    """``fixed``: every step is ``dt``, and a ``dt`` above the integrator's stability limit is
+    refused (BarkError).  ``auto``: such a ``dt`` is split into equal sub-steps below the limit.
+    ``adaptive``: as ``auto``, and around breaks a step whose largest tension overshoots its
+    threshold by more than ``overshoot_tol`` is undone and retried at half the size; steps double
+    again (up to the full step, on its grid) once no spring is over its threshold."""
+    overshoot_tol: float = attrs.field(default=0.05, validator=positive)
+    """Adaptive stepping's accuracy knob: largest allowed relative overshoot ``tension/fmax − 1``
+    at a break (0.05 = a spring may break at up to 105 % of its threshold)."""
+    max_halvings: int = attrs.field(default=10, validator=positive_int)
+    """Adaptive stepping's smallest step is the full step / 2**max_halvings."""
     backend: str = attrs.field(default="auto", validator=one_of(*kernels.BACKENDS))
     """Compute backend of the hot loop: ``numpy``, ``numba``, or ``auto`` (numba if installed)."""
 
@@ -136,7 +144,8 @@ class Simulation:
     events: list[dict] = attrs.field(init=False, factory=list)
     """Degenerate events and other notable happenings, as dicts with at least ``kind``, ``t``, ``step``."""
     h: float = attrs.field(init=False)
-    """The step actually taken: ``dt``, or ``dt`` split into sub-steps by automatic stepping."""
+    """The full step: ``dt``, or ``dt`` split into sub-steps below the stability limit (auto,
+    adaptive).  Adaptive stepping takes ``h / 2**j`` around breaks."""
     stability_limit: float = attrs.field(init=False)
     """The integrator's largest stable step for this scene (``inf`` for unconditionally stable ones)."""
     step_count: int = attrs.field(init=False, default=0)
@@ -145,6 +154,10 @@ class Simulation:
     _last_finite: tuple[np.ndarray, ...] | None = attrs.field(init=False, default=None)
     _tension: np.ndarray | None = attrs.field(init=False, default=None)
     _quiet_n: int = attrs.field(init=False, default=QUIET_START)
+    _levels: int = attrs.field(init=False, default=0)  # halvings allowed (0 unless adaptive)
+    _halvings: int = attrs.field(init=False, default=0)  # current step = h / 2**_halvings
+    _ticks: int = attrs.field(init=False, default=0)  # t = _ticks * _h_min, exactly
+    _h_min: float = attrs.field(init=False, default=0.0)
 
     def __attrs_post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
@@ -175,7 +188,7 @@ class Simulation:
         limit = self.stability_limit = float(self.integrator.stability_limit(self.state))
         self.h = self.dt
         if self.dt <= limit:
-            return
+            return self._set_grid()
         if self.stepping == "fixed":
             name = type(self.integrator).__name__
             raise BarkError(
@@ -184,6 +197,11 @@ class Simulation:
                 f"or the implicit-overdamped integrator"
             )
         self.h = self.dt / math.ceil(self.dt / (SAFETY * limit))
+        self._set_grid()
+
+    def _set_grid(self) -> None:
+        self._levels = self.max_halvings if self.stepping == "adaptive" else 0
+        self._h_min = self.h / (1 << self._levels)
 
     # -- the loop ---------------------------------------------------------------------------
 
@@ -196,14 +214,18 @@ class Simulation:
         The loop, literally::
 
             while stop.reason(sim) is None:
-                integrator.step(state, h)       # forces (eq. 4) -> velocities (eq. 7) -> positions (eq. 8)
-                t += h                          # h = dt, or dt / n with automatic sub-stepping
-                constrain to surface r(t, z)    # eq. 9 on bases and anchors; radial velocity removed
-                tension = k(|d| - l)            # every spring, at the constrained positions
-                if any tension is NaN or inf: restore the last finite state, raise NonFiniteStateError
+                integrator.step(state, h)        # forces (eq. 4) -> velocities (eq. 7) -> positions (eq. 8)
+                t += h                           # h = dt, or dt/n below the stability limit (auto, adaptive)
+                constrain to surface r(t, z)     # eq. 9 on bases and anchors; radial velocity removed
+                tension = k(|d| - l)             # every spring, at the constrained positions
+                load = max(tension / fmax)       # over intact springs; NaN if any tension is not finite
+                if adaptive and (load is NaN or load > 1 + overshoot_tol) and h can be halved:
+                    undo the step, halve h, try again
+                if load is NaN: back to the last finite state, raise NonFiniteStateError
                 ids = union of breaker.select(state, tension, rng) over breakers
                 if len(ids) > degenerate_fraction * n_springs: record a degenerate event
-                break_springs(ids, tension)     # graph and arrays together; logged
+                break_springs(ids, tension)      # graph and arrays together; logged
+                if adaptive and load <= 1: double h (up to the full step, staying on its grid)
                 observe(sim)
 
         Every spring over its threshold at the end of a step breaks in that step, all at once;
@@ -224,46 +246,69 @@ class Simulation:
 
     def advance(self, stop: Stop | None = None) -> int:
         """One :meth:`step`; or, where a compiled quiet-step kernel applies, up to ``QUIET_CHUNK``
-        steps in one call.  Returns the number of steps taken.
+        full steps in one call.  Returns the number of steps taken.
 
         The quiet path runs exactly the loop of :meth:`run`, step by step, inside compiled code; it
         applies when the integrator names a ``quiet_kernel`` that the backend has, every breaker is
-        ``overload_only`` (so nothing needs Python until a spring is over its threshold) and the
-        growth law is uniform (the radius does not depend on height).  It returns after the first
-        step that overloads a spring (whose breaks are then made here, as in :meth:`step`), on a
-        non-finite state, or at the step where ``stop``'s time or radius is reached.
+        ``overload_only`` (so nothing needs Python until a spring is over its threshold), the
+        growth law is uniform (the radius does not depend on height) and the step is full size.
+        It returns after the first step that overloads a spring (whose breaks are then made here,
+        as in :meth:`step`), on a non-finite state, or at the step where ``stop``'s time or radius
+        is reached.  A last step that adaptive stepping rejects comes back undone (the kernel
+        replays its call up to the step before, exactly) and is retried here at half the size.
         """
-        kernel = self._quiet_kernel()
+        kernel = self._quiet_kernel() if self._halvings == 0 else None
         rows = self._quiet_radii(stop) if kernel is not None else None
         if rows is None:
             self.step()
             return 1
         s = self.state
-        start = self.step_count
-        done, max_load = kernel(s, self.h, rows, rows, self._tension)
-        s.t = (start + done) * self.h
+        adaptive = self._levels > 0
+        done, load = kernel(s, self.h, rows, rows, self._tension, 1.0 + self.overshoot_tol if adaptive else math.inf)
+        self._ticks += done << self._levels
+        self.step_count += done
+        s.t = self._ticks * self._h_min
         # quiet steps come in runs: grow the next call while they last, start small after a break
-        self._quiet_n = min(2 * self._quiet_n, QUIET_CHUNK) if max_load <= 1.0 else QUIET_START
-        if math.isnan(max_load):  # the kernel put x and v back to the state before the bad step
-            self._non_finite(start + done - 1)
-        self.step_count = start + done
-        self._break_selected(max_load)
+        self._quiet_n = min(2 * self._quiet_n, QUIET_CHUNK) if load <= 1.0 else QUIET_START
+        if adaptive and (math.isnan(load) or load > 1.0 + self.overshoot_tol):
+            self._halvings = 1  # the kernel undid that step: take it again, smaller
+            self.step()
+            return done + 1
+        if math.isnan(load):  # the kernel put x and v back to the state before the bad step
+            self._non_finite(s.t + self.h)
+        self._break_selected(load)
         return done
 
     def step(self) -> None:
-        """One step of the loop in :meth:`run`."""
+        """One step of the loop in :meth:`run` (adaptive: one accepted step, after the halvings it needed)."""
         s = self.state
-        self._keep_last_finite()
-        self.integrator.step(s, self.h)
-        s.t = (self.step_count + 1) * self.h  # not a running sum: no drift over 10^5 steps
-        # surface constraint (eq. 9), then every spring's tension and the largest tension/fmax of intact ones
-        max_load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)
-        if math.isnan(max_load):
-            np.copyto(s.x, self._last_finite[0])
-            np.copyto(s.v, self._last_finite[1])
-            self._non_finite(self.step_count)
+        while True:
+            self._keep_last_finite()
+            size = 1 << (self._levels - self._halvings)  # this step, in ticks
+            self.integrator.step(s, size * self._h_min)
+            s.t = (self._ticks + size) * self._h_min  # from integer ticks: no drift over 10^5 steps
+            # surface constraint (eq. 9), then every spring's tension and the largest tension/fmax of intact ones
+            load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)
+            overshoot = math.isnan(load) or (self._levels > 0 and load > 1.0 + self.overshoot_tol)
+            if not overshoot:
+                break
+            bad_t = s.t
+            self._restore_last_finite()
+            if self._halvings == self._levels:  # cannot halve any more
+                if math.isnan(load):
+                    self._non_finite(bad_t)
+                self._keep_last_finite()
+                self.integrator.step(s, size * self._h_min)  # accept the overshoot at the smallest step
+                s.t = bad_t
+                load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)
+                self.events.append({"kind": "overshoot", "t": s.t, "step": self.step_count + 1, "load": load})
+                break
+            self._halvings += 1
+        self._ticks += size
         self.step_count += 1
-        self._break_selected(max_load)
+        self._break_selected(load)
+        if self._halvings and load <= 1.0 and self._ticks % (size << 1) == 0:
+            self._halvings -= 1  # quiet again: double the step, staying on the coarser grid
 
     def _break_selected(self, max_load: float) -> None:
         ids = self._select(self._tension, max_load)
@@ -272,17 +317,23 @@ class Simulation:
                 self._degenerate(ids.size)
             self.break_springs(ids, self._tension)
 
-    def _non_finite(self, good_steps: int) -> None:
+    def _non_finite(self, bad_t: float) -> None:
         """Raise after a non-finite step, the simulation left at the last finite state (x, v restored
-        by the caller; t and the anchors follow from the step count)."""
-        bad_t = self.state.t
-        self.step_count = good_steps
-        self.state.t = good_steps * self.h
+        by the caller; t and the anchors follow from the tick count)."""
+        self.state.t = self._ticks * self._h_min
         self.constrain()
         raise NonFiniteStateError(
-            f"the state became NaN or infinite at t = {bad_t:.6g} (step {good_steps + 1}); "
+            f"the state became NaN or infinite at t = {bad_t:.6g} (step {self.step_count + 1}); "
             f"the simulation holds the last finite state, t = {self.state.t:.6g}"
         )
+
+    def _restore_last_finite(self) -> None:
+        """Undo the step just taken: x and v from the copy kept before it; t and anchors from the ticks."""
+        s = self.state
+        np.copyto(s.x, self._last_finite[0])
+        np.copyto(s.v, self._last_finite[1])
+        s.t = self._ticks * self._h_min
+        self.constrain()
 
     def _quiet_kernel(self):
         name = self.integrator.quiet_kernel
@@ -293,7 +344,7 @@ class Simulation:
     def _quiet_radii(self, stop: Stop | None) -> np.ndarray | None:
         """Radius of each of the next steps, one row per step — or ``None`` where the quiet path does
         not apply (height-dependent growth, or fewer than two steps before a stop condition)."""
-        ts = (self.step_count + 1 + np.arange(self._quiet_n)) * self.h
+        ts = (self._ticks + (np.arange(self._quiet_n) + 1.0) * (1 << self._levels)) * self._h_min
         radii = []
         for t in ts:
             r = self.growth.radius(float(t), self.state.x[:, 2])

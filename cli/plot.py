@@ -61,3 +61,53 @@ def _tab20():
     from matplotlib import colormaps
 
     return colormaps["tab20"].colors
+
+
+def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None, title=""):
+    """Work-precision diagram: log-log error against wall time, one line per method, one marker per
+    dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""
+    from bark.accuracy import METRICS
+
+    fig = Figure(figsize=(13, 9), dpi=120)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, 2).ravel()
+    names = {
+        "error": "(a) max position error, no breaking",
+        "broken_rel_diff": "(b) |Δ broken springs| / reference",
+        "patch_count_diff": "(b) |Δ patch count|",
+        "hellinger": "(b) Hellinger distance of orientations",
+    }
+
+    def lines(ax, rows, key, floor):
+        for method in dict.fromkeys(r["method"] for r in rows):
+            mine = [r for r in rows if r["method"] == method and np.isfinite(r[key])]
+            if not mine:
+                continue
+            x = [r["wall_s"] for r in mine]
+            y = [max(r[key], floor) for r in mine]
+            label = method + (f" (order {orders[method]:.2f})" if key == "error" and method in orders else "")
+            (line,) = ax.plot(x, y, "o-", label=label, ms=5)
+            for r, xi, yi in zip(mine, x, y):
+                ax.annotate(f"{r['param']:g}", (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=7,
+                            color=line.get_color())
+                if highlight and (r["method"], r["param"]) == tuple(highlight):
+                    ax.plot([xi], [yi], "*", ms=16, color=line.get_color(), mec="k", label="default")
+
+    lines(axes[0], pos_rows, "error", 1e-12)
+    for ax, key in zip(axes[1:], METRICS):
+        floor = 1e-4 if key != "patch_count_diff" else 0.1
+        lines(ax, pat_rows, key, floor)
+        if np.isfinite(spread[key]) and spread[key] > floor:
+            ax.axhspan(floor, spread[key], color="0.85", zorder=0, label="within seed-to-seed spread")
+    for ax, key in zip(axes, ["error", *METRICS]):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time (s)")
+        ax.set_title(names[key], fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
+    fig.suptitle(f"bark work-precision — {title}; markers: dt (fixed) or overshoot tolerance (adaptive)", fontsize=11)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))

@@ -44,7 +44,7 @@ def build_sim(
         lattice=Lattice(n_bases=n_bases, jitter=jitter),
         mechanics=Mechanics(f_max=f_max, fmax_spread=fmax_spread),
         growth=SqrtGrowth(G=G),
-        integrator=EulerCromer(),
+        integrator=kwargs.pop("integrator", None) or EulerCromer(),
         breakers=[ThresholdBreaker()],
         dt=dt,
         seed=seed,

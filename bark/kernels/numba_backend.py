@@ -225,11 +225,15 @@ def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fm
     return r_x.shape[0], top
 
 
-def euler_cromer_quiet(state, h: float, r_x: np.ndarray, r_a: np.ndarray, tension: np.ndarray) -> tuple[int, float]:
+def euler_cromer_quiet(
+    state, h: float, r_x: np.ndarray, r_a: np.ndarray, tension: np.ndarray, accept_load: float = math.inf
+) -> tuple[int, float]:
     """Euler–Cromer steps with radii ``r_x``/``r_a`` (one row per step, 1 or n columns); see
-    :func:`_euler_cromer_quiet`.  Returns ``(steps, max load)``.  If a step goes non-finite, the
-    state is put back to the one before it (by replaying the call's steps up to there from its
-    start: nothing breaks inside a call, so the replay is exact) and the load is NaN."""
+    :func:`_euler_cromer_quiet`.  Returns ``(accepted steps, max load of the last step tried)``.
+
+    If the last step tried went non-finite, or its load exceeds ``accept_load``, it is undone: the
+    state is put back to the one before it by replaying the call's steps up to there from its start
+    (nothing breaks inside a call, so the replay is exact), and it is not counted."""
     mech = state.mechanics
     sc = state.scratch
     if sc.get("anchor_dir") is None or sc["anchor_dir"].shape[0] != state.n_bases:
@@ -243,9 +247,10 @@ def euler_cromer_quiet(state, h: float, r_x: np.ndarray, r_a: np.ndarray, tensio
         )
 
     done, load = call(r_x, r_a)
-    if math.isnan(load):
+    if math.isnan(load) or load > accept_load:
         for keep, now in zip(start, (state.x, state.v, state.anchor)):
             np.copyto(now, keep)
         if done > 1:
             call(r_x[: done - 1], r_a[: done - 1])
+        done -= 1
     return int(done), float(load)

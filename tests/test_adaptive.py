@@ -1,0 +1,108 @@
+"""Adaptive stepping: the overshoot tolerance holds, time stays on its grid, and the compiled
+quiet path makes exactly the decisions the step-by-step path makes."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bark import Stop
+from bark.errors import BarkError
+from conftest import build_sim
+
+
+def _overshoots(sim) -> np.ndarray:
+    log = sim.breaks.arrays()
+    return log["tension"] / sim.state.fmax[log["spring"]] - 1.0
+
+
+@given(
+    tol=st.sampled_from([0.002, 0.01, 0.05]),
+    dt=st.sampled_from([0.1, 0.2, 0.3]),
+    seed=st.integers(0, 1000),
+    backend=st.sampled_from(["numpy", "numba"]),
+)
+@settings(max_examples=12)
+def test_no_spring_breaks_beyond_the_overshoot_tolerance(tol, dt, seed, backend):
+    sim = build_sim(n_bases=300, G=0.05, dt=dt, seed=seed, stepping="adaptive", overshoot_tol=tol, backend=backend)
+    sim.run(Stop(until_time=6.0))
+    over = _overshoots(sim)
+    assert over.size > 20  # the run really cracked
+    floor_hits = [e for e in sim.events if e["kind"] == "overshoot"]
+    assert not floor_hits
+    assert over.max() <= tol + 1e-12
+
+
+def test_fixed_steps_do_overshoot_where_adaptive_ones_do_not(make_sim):
+    """The tolerance is not vacuous: with the same largest step, fixed stepping overshoots more."""
+    fixed = make_sim(n_bases=300, G=0.05, dt=0.3, seed=4)
+    fixed.run(Stop(until_time=6.0))
+    adaptive = make_sim(n_bases=300, G=0.05, dt=0.3, seed=4, stepping="adaptive", overshoot_tol=0.002)
+    adaptive.run(Stop(until_time=6.0))
+    assert _overshoots(fixed).max() > 0.002
+    assert adaptive.step_count > fixed.step_count  # it took smaller steps somewhere
+
+
+def test_adaptive_time_stays_on_the_grid_and_stops_exactly(make_sim):
+    sim = make_sim(n_bases=300, G=0.05, dt=0.3, seed=2, stepping="adaptive", overshoot_tol=0.001, max_halvings=6)
+    sim.run(Stop(until_time=6.0))
+    assert sim.state.t == pytest.approx(6.0, abs=1e-12)
+    h_min = 0.3 / 2**6
+    assert abs(sim.state.t / h_min - round(sim.state.t / h_min)) < 1e-9
+
+
+def test_smallest_step_overshoot_is_recorded_not_silent(make_sim):
+    """With no room to halve, an overshoot is accepted and recorded as an event."""
+    sim = make_sim(n_bases=300, G=0.2, dt=0.3, seed=1, stepping="adaptive", overshoot_tol=1e-9, max_halvings=1)
+    sim.run(Stop(until_time=3.0))
+    events = [e for e in sim.events if e["kind"] == "overshoot"]
+    assert events and all(e["load"] > 1.0 for e in events)
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_quiet_kernel_and_step_by_step_agree_under_adaptive_stepping(make_sim, seed):
+    """advance() (compiled chunks, rejected last steps replayed) and step() decide alike."""
+    kw = dict(n_bases=300, G=0.05, dt=0.3, seed=seed, stepping="adaptive", overshoot_tol=0.005, backend="numba")
+    chunked, stepped = make_sim(**kw), make_sim(**kw)
+    stop = Stop(until_time=8.0)
+    chunked.run(stop)
+    while stop.reason(stepped) is None:
+        stepped.step()
+    a, b = chunked.breaks.arrays(), stepped.breaks.arrays()
+    assert np.array_equal(a["spring"], b["spring"]) and np.array_equal(a["step"], b["step"])
+    assert chunked.step_count == stepped.step_count
+    np.testing.assert_allclose(chunked.state.x, stepped.state.x, rtol=0, atol=1e-12)
+
+
+def test_adaptive_numpy_and_numba_agree(make_sim):
+    kw = dict(n_bases=300, G=0.05, dt=0.3, seed=3, stepping="adaptive", overshoot_tol=0.005)
+    runs = {}
+    for backend in ("numpy", "numba"):
+        runs[backend] = make_sim(backend=backend, **kw)
+        runs[backend].run(Stop(until_time=8.0))
+    a, b = runs["numpy"].breaks.arrays(), runs["numba"].breaks.arrays()
+    assert np.array_equal(a["spring"], b["spring"]) and np.array_equal(a["step"], b["step"])
+    np.testing.assert_allclose(runs["numpy"].state.x, runs["numba"].state.x, rtol=0, atol=1e-12)
+
+
+def test_adaptive_stepping_also_keeps_explicit_steps_stable(make_sim):
+    """A largest step above the stability limit is split, as with stepping = auto."""
+    sim = make_sim(n_bases=200, dt=2.0, stepping="adaptive")
+    assert sim.h <= 0.9 * sim.stability_limit
+    assert math.isclose(2.0 / sim.h, round(2.0 / sim.h))
+    with pytest.raises(BarkError):
+        make_sim(n_bases=200, dt=2.0, stepping="fixed")
+
+
+def test_adaptive_implicit_respects_the_tolerance(make_sim):
+    from bark_plugins.integrators import ImplicitOverdamped
+
+    sim = make_sim(n_bases=200, G=0.05, dt=2.0, seed=1, stepping="adaptive", overshoot_tol=0.01,
+                   integrator=ImplicitOverdamped())
+    sim.run(Stop(until_time=6.0))
+    assert _overshoots(sim).size > 10
+    assert _overshoots(sim).max() <= 0.01 + 1e-12
