@@ -150,79 +150,98 @@ def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
 
 
 @_jit
-def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fmax, r_x, r_a, tension, f, u_a):
+def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fmax, r_x, r_a, f, u_a):
     """Up to ``r_x.shape[0]`` whole steps (integrate, constrain, measure) in one call.
 
     Stops after the first step whose max load exceeds 1 (a spring to break) or whose tensions are
     not finite.  Returns ``(steps taken, max load of the last step)``, the load NaN if that step
-    went non-finite.  The spring pass that measures tensions also accumulates the next step's
-    spring forces into ``f`` (first same as last).  Anchors only ever move radially, so their unit
-    directions ``u_a`` are found once per call.
+    went non-finite.  The spring pass that finds the load also accumulates the next step's spring
+    forces into ``f`` (first same as last).  The loop is memory-bound, so it touches as little as it
+    can: anchors move only radially and are computed from their unit directions and radius ``u_a``
+    (written back once at the end); the caller fills the tensions once, for the last step.  A step
+    is non-finite if any coordinate of any base is (summed into ``total``) or any intact tension is.
     """
     n = x.shape[0]
     hm = h / m
     f[:] = 0.0
     _spring_forces(x, pairs, rest, k, intact, f)
-    for q in range(n):
-        inv = 1.0 / math.sqrt(anchor[q, 0] * anchor[q, 0] + anchor[q, 1] * anchor[q, 1])
-        u_a[q, 0] = anchor[q, 0] * inv
-        u_a[q, 1] = anchor[q, 1] * inv
+    for q in range(n):  # u_a[q] = (unit direction of the anchor, its radius now)
+        ra0 = math.sqrt(anchor[q, 0] * anchor[q, 0] + anchor[q, 1] * anchor[q, 1])
+        u_a[q, 0] = anchor[q, 0] / ra0
+        u_a[q, 1] = anchor[q, 1] / ra0
+        u_a[q, 2] = ra0
     top = -np.inf
+    total = 0.0
     ux = r_x.shape[1] == 1
     ua = r_a.shape[1] == 1
+    done = 0
     for step in range(r_x.shape[0]):
         r = r_x[step, 0]
         inv_r2 = 1.0 / (r * r)
+        total = 0.0
         for q in range(n):
-            for a in range(3):
-                force = f[q, a] - c * (x[q, a] - anchor[q, a]) - b * v[q, a]
-                f[q, a] = 0.0  # consumed: ready for the next spring pass
-                v[q, a] += force * hm
-                x[q, a] += v[q, a] * h
+            # the anchor before this step: at the previous step's radius (or where it is now)
+            if step == 0:
+                ra = u_a[q, 2]
+            else:
+                ra = r_a[step - 1, 0] if ua else r_a[step - 1, q]
+            ax = ra * u_a[q, 0]
+            ay = ra * u_a[q, 1]
+            f0 = f[q, 0] - c * (x[q, 0] - ax) - b * v[q, 0]
+            f1 = f[q, 1] - c * (x[q, 1] - ay) - b * v[q, 1]
+            f2 = f[q, 2] - c * (x[q, 2] - anchor[q, 2]) - b * v[q, 2]
+            f[q, 0] = 0.0  # consumed: ready for the next spring pass
+            f[q, 1] = 0.0
+            f[q, 2] = 0.0
+            v0 = v[q, 0] + f0 * hm
+            v1 = v[q, 1] + f1 * hm
+            v2 = v[q, 2] + f2 * hm
+            px = x[q, 0] + v0 * h
+            py = x[q, 1] + v1 * h
+            x[q, 2] += v2 * h
+            v[q, 2] = v2
             if not ux:
                 r = r_x[step, q]
                 inv_r2 = 1.0 / (r * r)
-            px, py = x[q, 0], x[q, 1]
             sc = r / math.sqrt(px * px + py * py)
             px *= sc
             py *= sc
             x[q, 0] = px
             x[q, 1] = py
-            vr = (v[q, 0] * px + v[q, 1] * py) * inv_r2
-            v[q, 0] -= vr * px
-            v[q, 1] -= vr * py
-            ra = r_a[step, 0] if ua else r_a[step, q]
-            anchor[q, 0] = ra * u_a[q, 0]
-            anchor[q, 1] = ra * u_a[q, 1]
+            total += px + py + x[q, 2]  # NaN or inf anywhere, even on a base with no intact spring, shows here
+            vr = (v0 * px + v1 * py) * inv_r2
+            v[q, 0] = v0 - vr * px
+            v[q, 1] = v1 - vr * py
         top = -np.inf
-        finite = True
         for s in range(pairs.shape[0]):
+            if not intact[s]:
+                continue
             i, j = pairs[s, 0], pairs[s, 1]
             d0 = x[j, 0] - x[i, 0]
             d1 = x[j, 1] - x[i, 1]
             d2 = x[j, 2] - x[i, 2]
             length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             t = k * (length - rest[s])
-            tension[s] = t
-            if not math.isfinite(t):
-                finite = False
-            elif intact[s]:
-                load = t * inv_fmax[s]
-                if load > top:
-                    top = load
-                if length > 0.0:
-                    g = t / length
-                    f[i, 0] += g * d0
-                    f[i, 1] += g * d1
-                    f[i, 2] += g * d2
-                    f[j, 0] -= g * d0
-                    f[j, 1] -= g * d1
-                    f[j, 2] -= g * d2
-        if not finite:
-            return step + 1, np.nan
-        if top > 1.0:
-            return step + 1, top
-    return r_x.shape[0], top
+            total += t
+            load = t * inv_fmax[s]
+            if load > top:
+                top = load
+            if length > 0.0:
+                g = t / length
+                f[i, 0] += g * d0
+                f[i, 1] += g * d1
+                f[i, 2] += g * d2
+                f[j, 0] -= g * d0
+                f[j, 1] -= g * d1
+                f[j, 2] -= g * d2
+        done = step + 1
+        if not math.isfinite(total) or top > 1.0:
+            break
+    for q in range(n):  # the anchors at the last step's radius
+        rq = r_a[done - 1, 0] if ua else r_a[done - 1, q]
+        anchor[q, 0] = rq * u_a[q, 0]
+        anchor[q, 1] = rq * u_a[q, 1]
+    return done, (top if math.isfinite(total) else np.nan)
 
 
 def euler_cromer_quiet(
@@ -236,14 +255,17 @@ def euler_cromer_quiet(
     (nothing breaks inside a call, so the replay is exact), and it is not counted."""
     mech = state.mechanics
     sc = state.scratch
+    if sc.get("pairs_of") is not state.pairs:  # int32 spring ends: less memory traffic per step
+        sc["pairs_of"], sc["pairs32"] = state.pairs, state.pairs.astype(np.int32)
     if sc.get("anchor_dir") is None or sc["anchor_dir"].shape[0] != state.n_bases:
-        sc["anchor_dir"] = np.empty((state.n_bases, 2))
+        sc["anchor_dir"] = np.empty((state.n_bases, 3))
     start = (state.x.copy(), state.v.copy(), state.anchor.copy())
+    inv_fmax = 1.0 / state.fmax
 
     def call(rows_x, rows_a):
         return _euler_cromer_quiet(
-            state.x, state.v, state.anchor, state.pairs, state.rest, mech.k, mech.c, mech.b, mech.m, h,
-            state.intact, 1.0 / state.fmax, rows_x, rows_a, tension, _scratch(state), sc["anchor_dir"],
+            state.x, state.v, state.anchor, sc["pairs32"], state.rest, mech.k, mech.c, mech.b, mech.m, h,
+            state.intact, inv_fmax, rows_x, rows_a, _scratch(state), sc["anchor_dir"],
         )
 
     done, load = call(r_x, r_a)
@@ -253,4 +275,6 @@ def euler_cromer_quiet(
         if done > 1:
             call(r_x[: done - 1], r_a[: done - 1])
         done -= 1
+    # every spring's tension at the state the call leaves (the loop itself does not store them)
+    _measure(state.x, sc["pairs32"], state.rest, mech.k, state.fmax, state.intact, tension)
     return int(done), float(load)

@@ -1,0 +1,32 @@
+"""The compiled quiet path (Simulation.advance) must notice what step() notices."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bark import Stop
+from bark.errors import NonFiniteStateError
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_non_finite_base_without_springs_is_caught(make_sim, backend):
+    """A base whose springs are all broken is seen by no tension; a NaN on it must still stop the run."""
+    sim = make_sim(n_bases=300, G=0.0, backend=backend)
+    sim.run(Stop(until_time=0.5))
+    touching = np.flatnonzero((sim.state.pairs == 7).any(axis=1))
+    sim.break_springs(touching)
+    sim.state.anchor[7, 0] = np.nan  # its anchor pulls it to NaN on the next step
+    steps, t = sim.step_count, sim.state.t
+    with pytest.raises(NonFiniteStateError):
+        sim.run(Stop(until_time=2.0))
+    assert sim.step_count == steps and sim.state.t == pytest.approx(t)
+    assert np.isfinite(sim.state.x).all()
+
+
+def test_quiet_path_fills_every_tension_of_the_last_step(make_sim):
+    """The tensions the breakers see after a compiled call are those of the state it left."""
+    sim = make_sim(n_bases=300, backend="numba")
+    sim.run(Stop(until_time=3.0))
+    assert sim.n_broken > 0
+    np.testing.assert_allclose(sim._tension, sim.state.tension(), rtol=0, atol=1e-15)
