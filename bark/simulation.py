@@ -14,8 +14,6 @@ from typing import Callable, Iterator
 import attrs
 import networkx as nx
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from bark import kernels
 from bark._validate import in_range, one_of, optional, positive, positive_int
@@ -435,10 +433,7 @@ class Simulation:
     def patch_labels(self) -> np.ndarray:
         """Patch id of every base: connected components of the intact springs (cached until a break)."""
         if self._labels is None:
-            s = self.state
-            p = s.pairs[s.intact]
-            adj = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(s.n_bases, s.n_bases))
-            self._labels = connected_components(adj, directed=False)[1]
+            self._labels = self.state.kernels.patch_labels(self.state)
         return self._labels
 
     def patch_count(self, min_size: int = 7) -> int:

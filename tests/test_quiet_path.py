@@ -30,3 +30,14 @@ def test_quiet_path_fills_every_tension_of_the_last_step(make_sim):
     sim.run(Stop(until_time=3.0))
     assert sim.n_broken > 0
     np.testing.assert_allclose(sim._tension, sim.state.tension(), rtol=0, atol=1e-15)
+
+
+def test_patch_labels_agree_between_backends(make_sim):
+    """numba's union-find numbers components exactly as scipy's connected_components does."""
+    from bark.kernels import numba_backend, numpy_backend
+
+    sim = make_sim(n_bases=400, seed=2, fmax_spread=0.05)
+    sim.run(Stop(until_time=4.0))
+    a, b = numpy_backend.patch_labels(sim.state), numba_backend.patch_labels(sim.state)
+    assert a.max() > 5  # a real pattern with several components
+    np.testing.assert_array_equal(a, b)

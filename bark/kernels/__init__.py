@@ -11,6 +11,8 @@ function                                 does
                                          any tension is not finite)
 ``constrain_measure(state, r_x, r_a,     ``constrain`` then ``measure``, in one pass where compiled
 out) -> max_load``
+``patch_labels(state) -> labels``        connected components of the intact springs, numbered in
+                                         order of each component's smallest base (as scipy does)
 =======================================  ========================================================
 
 ``numpy`` is always there; ``numba`` is used when importable.  ``auto`` picks numba if it imports,

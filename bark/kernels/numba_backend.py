@@ -278,3 +278,42 @@ def euler_cromer_quiet(
     # every spring's tension at the state the call leaves (the loop itself does not store them)
     _measure(state.x, sc["pairs32"], state.rest, mech.k, state.fmax, state.intact, tension)
     return int(done), float(load)
+
+
+@_jit
+def _components(n, pairs, intact, labels):
+    """Connected components of the intact springs by union-find; labels numbered in order of each
+    component's smallest base, as scipy.sparse.csgraph.connected_components numbers them."""
+    parent = np.arange(n)
+    for s in range(pairs.shape[0]):
+        if not intact[s]:
+            continue
+        a, b = pairs[s, 0], pairs[s, 1]
+        while parent[a] != a:  # find, halving the path as we go
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            if a < b:
+                parent[b] = a
+            else:
+                parent[a] = b
+    count = 0
+    for q in range(n):  # roots are each component's smallest base, met in increasing order
+        r = q
+        while parent[r] != r:
+            r = parent[r]
+        if r == q:
+            labels[q] = count
+            count += 1
+        else:
+            labels[q] = labels[r]
+    return count
+
+
+def patch_labels(state) -> np.ndarray:
+    labels = np.empty(state.n_bases, dtype=np.int32)
+    _components(state.n_bases, state.pairs, state.intact, labels)
+    return labels

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from bark.forces import anchor_forces, spring_forces, tensions
 from bark.state import project_to_surface
@@ -40,3 +42,10 @@ def measure(state, out: np.ndarray) -> float:
 def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
     constrain(state, r_x, r_anchor)
     return measure(state, out)
+
+
+def patch_labels(state) -> np.ndarray:
+    """Connected components of the intact springs (scipy.sparse.csgraph)."""
+    p = state.pairs[state.intact]
+    adj = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(state.n_bases, state.n_bases))
+    return connected_components(adj, directed=False)[1].astype(np.int32)
