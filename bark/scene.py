@@ -31,7 +31,7 @@ from bark.errors import BarkError
 from bark.forces import Mechanics
 from bark.kernels import BACKENDS
 from bark.lattice import Lattice
-from bark.simulation import Simulation, Stop
+from bark.simulation import DEFAULT_DT, DEFAULT_OVERSHOOT_TOL, DEFAULT_STEPPING, Simulation, Stop
 
 __all__ = ["RunSettings", "Scene", "STRATEGY_SECTIONS", "DEFAULT_STRATEGIES"]
 
@@ -45,8 +45,9 @@ def _seed(instance, attribute, value) -> None:
 class RunSettings:
     """How a run is stepped and when it stops."""
 
-    dt: float = attrs.field(default=0.01, validator=positive)
-    """Time step (Table 2: 0.01 time units = 21 h)."""
+    dt: float = attrs.field(default=DEFAULT_DT, validator=positive)
+    """Time step, time units (1 = 88.5 days); with adaptive stepping the largest one.  The paper
+    used a fixed 0.01 (21 h): dt = 0.01 with stepping = "fixed" reproduces it."""
     seed: int = attrs.field(default=0, validator=_seed)
     """Seed of the one random generator: same seed → identical run."""
     until_time: float | None = attrs.field(default=1000.0, validator=optional(positive))
@@ -61,10 +62,10 @@ class RunSettings:
     """A step breaking more than this share of all springs is reported as degenerate."""
     on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
     """``warn``: record the event and go on; ``stop``: end the run there."""
-    stepping: str = attrs.field(default="fixed", validator=one_of("fixed", "auto", "adaptive"))
+    stepping: str = attrs.field(default=DEFAULT_STEPPING, validator=one_of("fixed", "auto", "adaptive"))
     """``fixed``: refuse a dt above the integrator's stability limit; ``auto``: split it into
     sub-steps; ``adaptive``: also halve steps around breaks to keep overshoot below overshoot_tol."""
-    overshoot_tol: float = attrs.field(default=0.05, validator=positive)
+    overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
     """Adaptive stepping: largest relative overshoot tension/fmax − 1 allowed at a break."""
     max_halvings: int = attrs.field(default=10, validator=positive_int)
     """Adaptive stepping: the smallest step is the full step / 2**max_halvings."""

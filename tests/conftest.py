@@ -48,7 +48,7 @@ def build_sim(
         breakers=[ThresholdBreaker()],
         dt=dt,
         seed=seed,
-        **kwargs,
+        **{"stepping": "fixed", **kwargs},
     )
 
 

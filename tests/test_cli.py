@@ -180,7 +180,7 @@ BAD_INPUTS = {
     "negative-k": (lambda p: ["--k", "-1"], "k"),
     "dt-zero": (lambda p: ["--dt", "0"], "dt"),
     "dt-negative": (lambda p: ["--dt", "-1"], "dt"),
-    "dt-above-stability-limit": (lambda p: ["--dt", "1"], "dt"),
+    "dt-above-stability-limit": (lambda p: ["--dt", "1", "--stepping", "fixed"], "dt"),
     "unknown-growth": (lambda p: ["--growth", "nope"], "nope"),
     "unknown-breaker": (lambda p: ["--breaker", "nope"], "nope"),
     "unknown-scene-key": (lambda p: ["--scene", _write(p, "k.toml", "[lattice]\nfoo = 1\n")], "foo"),
