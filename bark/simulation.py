@@ -306,21 +306,20 @@ class Simulation:
             s.t = (self._ticks + size) * self._h_min  # from integer ticks: no drift over 10^5 steps
             # surface constraint (eq. 9), then every spring's tension and the largest tension/fmax of intact ones
             load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)
-            overshoot = math.isnan(load) or (self._levels > 0 and load > 1.0 + self.overshoot_tol)
-            if not overshoot:
+            non_finite = math.isnan(load)
+            if not non_finite and not (self._levels and load > 1.0 + self.overshoot_tol):
                 break
-            bad_t = s.t
-            self._restore_last_finite()
-            if self._halvings == self._levels:  # cannot halve any more
-                if math.isnan(load):
-                    self._non_finite(bad_t)
-                self._keep_last_finite()
-                self.integrator.step(s, size * self._h_min)  # accept the overshoot at the smallest step
-                s.t = bad_t
-                load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)
-                self.events.append({"kind": "overshoot", "t": s.t, "step": self.step_count + 1, "load": load})
-                break
-            self._halvings += 1
+            if self._halvings < self._levels:  # undo the step and try again at half the size
+                self._restore_last_finite()
+                self._halvings += 1
+                continue
+            if non_finite:  # at the smallest step: stop at the last finite state
+                bad_t = s.t
+                self._restore_last_finite()
+                self._non_finite(bad_t)
+            # an overshoot at the smallest step is accepted, and recorded
+            self.events.append({"kind": "overshoot", "t": s.t, "step": self.step_count + 1, "load": load})
+            break
         self._ticks += size
         self.step_count += 1
         self._break_selected(load)
@@ -335,22 +334,19 @@ class Simulation:
             self.break_springs(ids, self._tension)
 
     def _non_finite(self, bad_t: float) -> None:
-        """Raise after a non-finite step, the simulation left at the last finite state (x, v restored
-        by the caller; t and the anchors follow from the tick count)."""
+        """Raise after a non-finite step; the caller has put the state back to the last finite one."""
         self.state.t = self._ticks * self._h_min
-        self.constrain()
         raise NonFiniteStateError(
             f"the state became NaN or infinite at t = {bad_t:.6g} (step {self.step_count + 1}); "
             f"the simulation holds the last finite state, t = {self.state.t:.6g}"
         )
 
     def _restore_last_finite(self) -> None:
-        """Undo the step just taken: x and v from the copy kept before it; t and anchors from the ticks."""
+        """Undo the step just taken: x, v and anchors from the copy kept before it; t from the ticks."""
         s = self.state
-        np.copyto(s.x, self._last_finite[0])
-        np.copyto(s.v, self._last_finite[1])
+        for keep, a in zip(self._last_finite, (s.x, s.v, s.anchor)):
+            np.copyto(a, keep)
         s.t = self._ticks * self._h_min
-        self.constrain()
 
     def _quiet_kernel(self):
         name = self.integrator.quiet_kernel
@@ -377,12 +373,14 @@ class Simulation:
         return r[:n, None] if n >= 2 else None
 
     def _keep_last_finite(self) -> None:
+        """Copy what a step changes (x, v, and the anchors, which a non-finite radius would spoil)."""
         s = self.state
+        now = (s.x, s.v, s.anchor)
         if self._last_finite is None or self._last_finite[0].shape != s.x.shape:
-            self._last_finite = (s.x.copy(), s.v.copy())
+            self._last_finite = tuple(a.copy() for a in now)
         else:
-            np.copyto(self._last_finite[0], s.x)
-            np.copyto(self._last_finite[1], s.v)
+            for keep, a in zip(self._last_finite, now):
+                np.copyto(keep, a)
 
     def constrain(self) -> None:
         """Surface constraint (eq. 9): bases (with their velocities) and anchors onto ``r(t, z)``."""
