@@ -358,13 +358,12 @@ class Simulation:
         """Radius of each of the next steps, one row per step — or ``None`` where the quiet path does
         not apply (height-dependent growth, or fewer than two steps before a stop condition)."""
         ts = (self._ticks + (np.arange(self._quiet_n) + 1.0) * (1 << self._levels)) * self._h_min
-        radii = []
-        for t in ts:
-            r = self.growth.radius(float(t), self.state.x[:, 2])
-            if np.ndim(r) != 0:
-                return None
-            radii.append(float(r))
-        r = np.array(radii)
+        z = self.state.x[:, 2]
+        first = self.growth.radius(float(ts[0]), z)
+        if np.ndim(first) != 0:
+            return None
+        radius = self.growth.radius
+        r = np.array([float(first), *(float(radius(t, z)) for t in ts[1:].tolist())])
         n = len(r)
         if stop is not None and stop.until_time is not None:
             n = min(n, _first(ts >= stop.until_time - 1e-9 * self.h) + 1)

@@ -28,15 +28,19 @@ def _phase_sim(n: int, backend: str, start_t: float):
     return sim
 
 
-def _steps_per_second(n: int, backend: str, start_t: float, steps: int, repeats: int) -> float:
-    """Median steps/s over ``repeats`` stretches of ``steps`` steps from ``start_t``."""
-    sim = _phase_sim(n, backend, start_t)
-    rates = []
+def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int) -> dict[str, float]:
+    """Median steps/s of each backend over ``repeats`` stretches of ``steps`` steps from ``start_t``.
+
+    The backends' stretches are interleaved (numpy, numba, numpy, numba, ...), so that a change in
+    the machine's load falls on all of them alike and the ratios stay honest."""
+    sims = {b: _phase_sim(n, b, start_t) for b in backends}
+    rates = {b: [] for b in backends}
     for _ in range(repeats):
-        s0, t0 = sim.step_count, time.perf_counter()
-        sim.run(Stop(until_time=sim.state.t + steps * sim.h))
-        rates.append((sim.step_count - s0) / (time.perf_counter() - t0))
-    return float(np.median(rates))
+        for b, sim in sims.items():
+            s0, t0 = sim.step_count, time.perf_counter()
+            sim.run(Stop(until_time=sim.state.t + steps * sim.h))
+            rates[b].append((sim.step_count - s0) / (time.perf_counter() - t0))
+    return {b: float(np.median(r)) for b, r in rates.items()}
 
 
 def _peak_memory(n: int, backend: str, start_t: float, steps: int) -> float:
@@ -64,7 +68,7 @@ PHASES = {
 @click.option("--phase", "phases", type=click.Choice(list(PHASES)), multiple=True, default=("quiet", "cracking"),
               show_default=True, help="cracking is measured only up to 10000 bases (reaching it takes long).")
 @click.option("--steps", type=int, default=None, help="Steps per timed stretch (default: about 0.3 s of numpy work).")
-@click.option("--repeats", type=int, default=3, show_default=True)
+@click.option("--repeats", type=int, default=5, show_default=True, help="Timed stretches per backend, interleaved.")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None, help="Also write the table as CSV.")
 def speed(sizes, backends, phases, steps, repeats, csv_path):
     """Steps per second of the full step (integrate, constrain, tensions, breaking, stop checks) on
@@ -81,9 +85,10 @@ def speed(sizes, backends, phases, steps, repeats, csv_path):
                 continue
             k = steps or max(10, int(0.3 / (1.3e-7 * n)))  # numpy takes ~0.13 µs per base per step
             k = min(k, int((end_t - start_t) / 0.01 / repeats))  # stay inside the phase
+            rates = _steps_per_second(n, backends, start_t, k, repeats)
             base = None
             for backend in backends:
-                rate = _steps_per_second(n, backend, start_t, k, repeats)
+                rate = rates[backend]
                 peak = _peak_memory(n, backend, start_t, k)
                 base = base or (rate, peak)
                 rows.append({

@@ -45,7 +45,7 @@ def build_sim(
         mechanics=Mechanics(f_max=f_max, fmax_spread=fmax_spread),
         growth=SqrtGrowth(G=G),
         integrator=kwargs.pop("integrator", None) or EulerCromer(),
-        breakers=[ThresholdBreaker()],
+        breakers=kwargs.pop("breakers", None) or [ThresholdBreaker()],
         dt=dt,
         seed=seed,
         **{"stepping": "fixed", **kwargs},

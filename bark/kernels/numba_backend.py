@@ -252,14 +252,15 @@ def euler_cromer_quiet(
 
     If the last step tried went non-finite, or its load exceeds ``accept_load``, it is undone: the
     state is put back to the one before it by replaying the call's steps up to there from its start
-    (nothing breaks inside a call, so the replay is exact), and it is not counted."""
+    (nothing breaks inside a call, so the replay is exact), and it is not counted.  ``tension`` is
+    filled only when the returned step overloads a spring (load > 1): only then is it read."""
     mech = state.mechanics
     sc = state.scratch
     if sc.get("pairs_of") is not state.pairs:  # int32 spring ends: less memory traffic per step
         sc["pairs_of"], sc["pairs32"] = state.pairs, state.pairs.astype(np.int32)
     if sc.get("anchor_dir") is None or sc["anchor_dir"].shape[0] != state.n_bases:
         sc["anchor_dir"] = np.empty((state.n_bases, 3))
-    start = (state.x.copy(), state.v.copy(), state.anchor.copy())
+    start = (state.x.copy(), state.v.copy())  # the anchors at the start are u_a's direction × radius
     inv_fmax = 1.0 / state.fmax
 
     def call(rows_x, rows_a):
@@ -270,13 +271,15 @@ def euler_cromer_quiet(
 
     done, load = call(r_x, r_a)
     if math.isnan(load) or load > accept_load:
-        for keep, now in zip(start, (state.x, state.v, state.anchor)):
-            np.copyto(now, keep)
+        np.copyto(state.x, start[0])
+        np.copyto(state.v, start[1])
+        u_a = sc["anchor_dir"]
+        state.anchor[:, :2] = u_a[:, :2] * u_a[:, 2:3]
         if done > 1:
             call(r_x[: done - 1], r_a[: done - 1])
-        done -= 1
-    # every spring's tension at the state the call leaves (the loop itself does not store them)
-    _measure(state.x, sc["pairs32"], state.rest, mech.k, state.fmax, state.intact, tension)
+        return done - 1, float(load)
+    if load > 1.0:  # springs to break: the breakers need every tension of this state
+        _measure(state.x, sc["pairs32"], state.rest, mech.k, state.fmax, state.intact, tension)
     return int(done), float(load)
 
 
