@@ -50,6 +50,8 @@ def _first(flags: np.ndarray) -> int:
 
 def _round_down(x: float) -> str:
     """``x`` rounded down to two significant digits, as text (for suggestions)."""
+    if not x > 0:
+        return f"{x:g}"
     exp = math.floor(math.log10(x)) - 1
     return f"{math.floor(x / 10**exp) * 10**exp:.{max(0, -exp)}f}"
 
@@ -285,6 +287,7 @@ class Simulation:
         self._ticks += done << self._levels
         self.step_count += done
         s.t = self._ticks * self._h_min
+        s.h = self.h
         # quiet steps come in runs: grow the next call while they last, start small after a break
         self._quiet_n = min(2 * self._quiet_n, QUIET_CHUNK) if load <= 1.0 else QUIET_START
         if adaptive and (math.isnan(load) or load > 1.0 + self.overshoot_tol):
@@ -302,7 +305,8 @@ class Simulation:
         while True:
             self._keep_last_finite()
             size = 1 << (self._levels - self._halvings)  # this step, in ticks
-            self.integrator.step(s, size * self._h_min)
+            s.h = size * self._h_min
+            self.integrator.step(s, s.h)
             s.t = (self._ticks + size) * self._h_min  # from integer ticks: no drift over 10^5 steps
             # surface constraint (eq. 9), then every spring's tension and the largest tension/fmax of intact ones
             load = s.kernels.constrain_measure(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]), self._tension)

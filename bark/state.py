@@ -76,6 +76,8 @@ class State:
     """Material constants (k, c, b, m)."""
     t: float = 0.0
     """Simulated time."""
+    h: float = 0.0
+    """Length of the step that led to this state (set by the simulation; rate-based breakers use it)."""
     kernels: ModuleType = attrs.field(factory=lambda: _default_kernels(), repr=False)
     """The compute backend (a module of ``bark.kernels``); the simulation sets it."""
     scratch: dict = attrs.field(factory=dict, init=False, repr=False)

@@ -44,13 +44,17 @@ class EulerCromer(Integrator):
 
 @attrs.frozen(kw_only=True)
 class ImplicitOverdamped(Integrator):
-    """The massless (overdamped) limit ``b·dx/dt = F(x)``, by linearised backward Euler::
+    """The massless (overdamped) limit ``b·dx/dt = F(x)``, by linearised backward Euler on the
+    trunk surface::
 
-        (b·I + dt·K) Δx = dt·F(x),    x ← x + Δx,    v ← Δx/dt
+        P (b·I + dt·K) P Δx = P dt·F(x),    x ← x + Δx,    v ← Δx/dt
 
     with ``K = −∂F/∂x`` the stiffness of springs and anchors at the current state (its transverse
-    term clamped at zero for compressed springs, so ``K`` is positive semi-definite).  Stable for any
-    ``dt``; first order.  The mass ``m`` plays no part (the limit m → 0).
+    term clamped at zero for compressed springs, so ``K`` is positive semi-definite) and ``P`` the
+    projection of each base's displacement onto the plane tangent to the trunk there: the step is
+    solved where the bases can move.  (Solved in 3-D, the system is nearly singular along the radius
+    when dt·k/b is large, and the radial part the surface constraint then discards can drag the
+    bases along.)  Stable for any ``dt``; first order.  The mass ``m`` plays no part (m → 0).
 
     The linear system is solved by conjugate gradients (``scipy.sparse.linalg.cg``), matrix-free,
     with a Jacobi preconditioner.  Why CG and not a sparse direct solve: the matrix is symmetric
@@ -71,11 +75,24 @@ class ImplicitOverdamped(Integrator):
             raise BarkError("integrator 'implicit-overdamped' needs damping: mechanics.b must be > 0")
         matvec, diag = stiffness_matvec(state.x, state.pairs, state.rest, mech.k, state.intact, mech.c, state.incidence)
         size = diag.size
-        a = LinearOperator((size, size), matvec=lambda p: mech.b * p + dt * matvec(p), dtype=float)
+        e_r = state.x[:, :2] / np.hypot(state.x[:, 0], state.x[:, 1])[:, None]
+
+        def tangential(p: np.ndarray) -> np.ndarray:
+            p = p.reshape(-1, 3).copy()
+            p[:, :2] -= np.einsum("ij,ij->i", p[:, :2], e_r)[:, None] * e_r
+            return p.ravel()
+
+        def apply(p: np.ndarray) -> np.ndarray:
+            # P (bI + dt K) P on the tangent planes, b·I along the radii: SPD, and it keeps a
+            # tangential right-hand side's solution tangential
+            pt = tangential(p)
+            return tangential(mech.b * pt + dt * matvec(pt)) + mech.b * (p - pt)
+
+        a = LinearOperator((size, size), matvec=apply, dtype=float)
         precond = 1.0 / (mech.b + dt * diag)
         m = LinearOperator((size, size), matvec=lambda r: precond * r, dtype=float)
-        rhs = dt * state.elastic_forces().ravel()
+        rhs = tangential(dt * state.elastic_forces().ravel())
         dx, _ = cg(a, rhs, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)
-        dx = dx.reshape(state.x.shape)
+        dx = tangential(dx).reshape(state.x.shape)
         state.x += dx
         np.divide(dx, dt, out=state.v)

@@ -1,0 +1,618 @@
+"""Integrators: accuracy against a reference solution, stability (the guard and the implicit method),
+the stiffness operator, backend agreement, and the last-finite-state contract."""
+
+from __future__ import annotations
+
+import json
+import math
+from functools import lru_cache
+
+import attrs
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import example, given
+from hypothesis import strategies as st
+
+from bark import Lattice, Mechanics, Simulation, Stop
+from bark.errors import BarkError, NonFiniteStateError
+from bark.forces import anchor_forces, spring_forces, stiffness_matvec
+from bark.reference import solve_reference
+from bark.scene import Scene
+from bark.simulation import SAFETY
+from bark.stability import explicit_h_max, lambda_max
+from bark.strategies import Growth, Integrator
+from bark_cli.main import cli
+from bark_plugins.breakers import ThresholdBreaker
+from bark_plugins.growth import SqrtGrowth
+from bark_plugins.integrators import EulerCromer, ImplicitOverdamped
+
+from conftest import build_sim
+
+R0 = 0.2
+"""Trunk radius of SqrtGrowth's default r0 (the cylinder the reference solutions live on)."""
+SPACING = Lattice().spacing(R0)
+"""Base spacing of the default lattice at r0 (≈ 0.025)."""
+NO_BREAKS = 1e9
+"""An f_max no tension reaches."""
+
+
+def _sim(integrator, dt, *, n_bases=120, mechanics=None, G=0.0, backend="numpy", seed=3, stepping="fixed", **kwargs) -> Simulation:
+    return Simulation(
+        lattice=Lattice(n_bases=n_bases, jitter=0.05),
+        mechanics=mechanics or Mechanics(f_max=NO_BREAKS),
+        growth=SqrtGrowth(G=G),
+        integrator=integrator,
+        breakers=[ThresholdBreaker()],
+        dt=dt,
+        seed=seed,
+        backend=backend,
+        stepping=stepping,
+        **kwargs,
+    )
+
+
+def _displace(sim: Simulation, amplitude: float, seed: int = 0) -> None:
+    """Move every base along the trunk surface (angle and height) by Gaussian noise of
+    ``amplitude`` × the base spacing, so that the springs are out of equilibrium."""
+    s = sim.state
+    rng = np.random.default_rng(seed)
+    r = np.hypot(s.x[:, 0], s.x[:, 1])
+    theta = np.arctan2(s.x[:, 1], s.x[:, 0]) + rng.normal(scale=amplitude * SPACING / r)
+    z = s.x[:, 2] + rng.normal(scale=amplitude * SPACING, size=s.n_bases)
+    s.x[:] = np.column_stack([r * np.cos(theta), r * np.sin(theta), z])
+
+
+def _dense(matvec, size: int) -> np.ndarray:
+    return np.column_stack([matvec(e) for e in np.eye(size)])
+
+
+def _energy(state) -> float:
+    """Elastic energy ``½k Σ(|d| − l)²`` over intact springs + ``½c Σ|x − anchor|²``, from the formula."""
+    mech = state.mechanics
+    d = state.x[state.pairs[:, 1]] - state.x[state.pairs[:, 0]]
+    stretch = np.linalg.norm(d, axis=1) - state.rest
+    return 0.5 * mech.k * float(np.sum(stretch[state.intact] ** 2)) + 0.5 * mech.c * float(np.sum((state.x - state.anchor) ** 2))
+
+
+# -- accuracy: observed order of convergence against a Radau reference ---------------------------
+
+T_END = 2.0
+DTS = (0.08, 0.04, 0.02, 0.01, 0.005)
+
+
+def _convergence_sim(integrator, dt, backend="numpy") -> Simulation:
+    """No growth, nothing breaks, bases displaced along the surface (about 12–16 % of a spacing)."""
+    sim = _sim(integrator, dt, backend=backend)
+    s = sim.state
+    rng = np.random.default_rng(0)
+    theta = np.arctan2(s.x[:, 1], s.x[:, 0]) + rng.normal(scale=0.02, size=s.n_bases)
+    z = s.x[:, 2] + rng.normal(scale=0.003, size=s.n_bases)
+    s.x[:] = np.column_stack([R0 * np.cos(theta), R0 * np.sin(theta), z])
+    return sim
+
+
+@lru_cache(maxsize=None)
+def _reference(overdamped: bool) -> np.ndarray:
+    return solve_reference(_convergence_sim(EulerCromer(), 0.01).state, R0, T_END, overdamped=overdamped)
+
+
+@pytest.mark.parametrize(
+    "integrator, overdamped, backend",
+    [
+        (EulerCromer(), False, "numpy"),
+        (EulerCromer(), False, "numba"),
+        (ImplicitOverdamped(), True, "numpy"),
+        (ImplicitOverdamped(), True, "numba"),
+    ],
+    ids=["euler-cromer-numpy", "euler-cromer-numba", "implicit-numpy", "implicit-numba"],
+)
+def test_observed_order_of_convergence_is_one(integrator, overdamped, backend):
+    """Euler–Cromer (massive model) and linearised backward Euler (overdamped model) are first
+    order: the position error at T = 2 halves with dt."""
+    ref = _reference(overdamped)
+    start = _convergence_sim(integrator, 0.01).state.x
+    moved = float(np.abs(ref - start).max())
+    assert moved > 1e-3, "test set-up: the reference solution should move the bases"
+    errors = []
+    for dt in DTS:
+        sim = _convergence_sim(integrator, dt, backend)
+        assert sim.h == dt
+        sim.run(Stop(until_time=T_END))
+        assert sim.step_count == round(T_END / dt) and sim.n_broken == 0
+        errors.append(float(np.abs(sim.state.x - ref).max()))
+    slope = np.polyfit(np.log(DTS), np.log(errors), 1)[0]
+    assert 0.85 <= slope <= 1.15, (slope, errors)
+    assert errors[-1] < 0.01 * moved, errors  # converging to the reference, not to something else
+
+
+# -- the implicit method is unconditionally stable ---------------------------------------------
+
+
+implicit_mechanics = st.builds(
+    Mechanics,
+    k=st.floats(0.01, 100.0),
+    c=st.floats(0.0, 10.0),
+    b=st.floats(0.1, 50.0),
+    m=st.floats(0.01, 10.0),
+    f_max=st.just(NO_BREAKS),
+)
+
+
+@given(
+    mechanics=implicit_mechanics,
+    stiffness_steps=st.floats(1e-3, 1e3),
+    amplitude=st.floats(0.005, 0.08),
+    seed=st.integers(0, 2**31 - 1),
+)
+@example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), stiffness_steps=0.2, amplitude=0.08, seed=0)  # dt = 0.01
+@example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), stiffness_steps=20.0, amplitude=0.08, seed=1)  # dt = 1
+@example(mechanics=Mechanics(k=100.0, c=0.0, b=0.1, m=0.01, f_max=NO_BREAKS), stiffness_steps=1e3, amplitude=0.08, seed=2)
+def test_implicit_step_dissipates_energy_without_growth(mechanics, stiffness_steps, amplitude, seed):
+    """With G = 0 the overdamped dynamics is a gradient flow, and the implicit step never raises the
+    elastic energy — for dt up to 1000 × b/k, i.e. up to ~300 000 × the Euler–Cromer limit of the
+    stiff scene (k = 100, m = 0.01: h_max ≈ 0.0034), and displacements up to 8 % of a spacing.
+
+    Beyond that (dt·k/b ≳ 10⁴, displacements ≳ 15 % of a spacing) one *linearised* step can raise the
+    energy slightly before it decays (measured: at most ×1.002 with the tangent-plane solve; it was
+    ×3.6 when the step was solved in 3-D and then projected): the next test bounds that regime."""
+    dt = min(50.0, max(1e-3, stiffness_steps * mechanics.b / mechanics.k))
+    sim = _sim(ImplicitOverdamped(), dt, n_bases=100, mechanics=mechanics, seed=seed % 1000)
+    assert sim.stability_limit == math.inf and sim.h == dt  # never refused, never sub-stepped
+    _displace(sim, amplitude, seed)
+    energies = [_energy(sim.state)]
+    assert energies[0] > 0
+    for _ in range(8):
+        sim.step()
+        assert sim.state.is_finite()
+        energies.append(_energy(sim.state))
+    e = np.array(energies)
+    slack = 1e-6 * e[:-1] + 1e-9 * e[0]  # CG stops at rtol 1e-8; round-off once E is near zero
+    assert np.all(e[1:] <= e[:-1] + slack), e / e[0]
+    assert e[-1] < e[0]  # it really relaxes
+
+
+@given(
+    mechanics=implicit_mechanics,
+    dt=st.floats(1e-3, 50.0),
+    amplitude=st.floats(0.005, 0.4),
+    G=st.floats(0.0, 0.2),
+    breaking=st.booleans(),
+    seed=st.integers(0, 2**31 - 1),
+)
+@example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), dt=0.01, amplitude=0.3, G=0.1, breaking=False, seed=0)
+@example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), dt=5.0, amplitude=0.3, G=0.1, breaking=True, seed=0)
+def test_implicit_step_stays_bounded_with_growth_and_large_displacements(mechanics, dt, amplitude, G, breaking, seed):
+    """Any dt up to 50 (over 10⁴ × the stiff scene's explicit limit), large displacements, growth,
+    breaking: the state stays finite and the elastic energy stays below a generous multiple of what
+    was there plus what growth injects (an unstable method grows it geometrically)."""
+    if breaking:
+        mechanics = attrs.evolve(mechanics, f_max=0.0028)
+    sim = _sim(ImplicitOverdamped(), dt, n_bases=100, mechanics=mechanics, G=G, seed=seed % 1000)
+    _displace(sim, amplitude, seed)
+    e0 = _energy(sim.state)
+    steps = 12
+    r_end = sim.growth.radius(steps * dt, np.zeros(1))
+    # energy of the springs if every base just followed the surface out to r_end (|d| scales by ≤ r/r0)
+    injected = 0.5 * mechanics.k * float(np.sum(((r_end / R0 - 1.0) * sim.state.rest) ** 2))
+    bound = 100.0 * (e0 + injected) + 1e-300
+    for _ in range(steps):
+        sim.step()
+        assert sim.state.is_finite() and np.all(np.isfinite(sim.state.anchor))
+        assert _energy(sim.state) <= bound, (_energy(sim.state), e0, injected)
+    assert sim.state.t == pytest.approx(steps * dt)
+
+
+# -- the explicit stability guard --------------------------------------------------------------
+
+
+guard_mechanics = st.builds(
+    Mechanics,
+    k=st.floats(0.05, 20.0),
+    c=st.floats(0.0, 1.0),
+    b=st.floats(0.0, 10.0),
+    m=st.floats(0.05, 5.0),
+)
+
+
+def _guarded(mechanics, bound, dt, stepping) -> Simulation:
+    return _sim(EulerCromer(bound=bound), dt, n_bases=150, mechanics=mechanics, G=0.014, seed=5, stepping=stepping)
+
+
+@given(
+    mechanics=guard_mechanics,
+    bound=st.sampled_from(["gershgorin", "lanczos"]),
+    factor=st.one_of(st.just(1.0 + 1e-6), st.floats(1.0 + 1e-6, 50.0)),
+)
+def test_guard_refuses_or_substeps_exactly_above_h_max(mechanics, bound, factor):
+    if bound == "lanczos":
+        # Lanczos breaks down without anchors, and varies from call to call (by ~1e-7, and now and
+        # then by ~1e-3 when it lands on the second eigenvalue: see the xfail tests below): keep
+        # c > 0, and a margin above that noise
+        mechanics = attrs.evolve(mechanics, c=max(mechanics.c, 0.01))
+        eps = 1e-2
+    else:
+        eps = 1e-6
+    factor = max(factor, 1.0 + eps)
+    probe = _guarded(mechanics, bound, 1e-9, "fixed")
+    h_max = EulerCromer(bound=bound).stability_limit(probe.state)
+    assert 0.0 < h_max < math.inf
+    assert probe.stability_limit == pytest.approx(h_max, rel=eps)
+
+    below = _guarded(mechanics, bound, h_max * (1.0 - eps), "fixed")  # just below: accepted as is
+    assert below.h == below.dt
+    with pytest.raises(BarkError) as err:
+        _guarded(mechanics, bound, h_max * factor, "fixed")
+    message = str(err.value)
+    assert "h_max" in message and "\n" not in message
+
+    dt = h_max * factor
+    for stepping in ("auto", "adaptive"):
+        auto = _guarded(mechanics, bound, dt, stepping)
+        n = dt / auto.h
+        assert n == pytest.approx(round(n), abs=1e-9) and round(n) >= 2
+        n = round(n)
+        assert auto.h <= SAFETY * h_max * (1 + eps)
+        assert dt / (n - 1) > SAFETY * h_max * (1 - eps)  # the fewest sub-steps that do it
+        assert _guarded(mechanics, bound, h_max * (1.0 - eps), stepping).h == h_max * (1.0 - eps)
+
+    auto = _guarded(mechanics, bound, dt, "auto")
+    auto.run(Stop(until_time=dt))  # one dt = n sub-steps of size h
+    assert auto.step_count == n and auto.state.t == pytest.approx(dt, rel=1e-12)
+
+
+@given(
+    beta=st.floats(0.0, 1e3),
+    omega2=st.floats(1e-3, 1e6),
+    eps=st.sampled_from([1e-3, -1e-3]),
+)
+def test_explicit_h_max_is_the_edge_of_euler_cromer_stability(beta, omega2, eps):
+    """One mode ``x'' = −ω²x − βx'`` under Euler–Cromer: the amplification matrix has spectral radius
+    ≤ 1 just below h_max and > 1 just above it."""
+    h = explicit_h_max(beta, omega2) * (1.0 + eps)
+    # v' = v + h(−ω²x − βv),  x' = x + h v'
+    step = np.array([[1.0 - omega2 * h * h, h * (1.0 - beta * h)], [-omega2 * h, 1.0 - beta * h]])
+    radius = float(np.max(np.abs(np.linalg.eigvals(step))))
+    if eps < 0:
+        assert radius <= 1.0 + 1e-9
+    else:
+        assert radius > 1.0 + 1e-6
+
+
+def test_explicit_h_max_limits():
+    assert explicit_h_max(0.0, 4.0) == pytest.approx(1.0)  # 2/ω without damping
+    assert explicit_h_max(5.0, 0.0) == pytest.approx(0.4)  # 2/β without stiffness
+    assert explicit_h_max(5.0, 2.31) == pytest.approx(0.369, abs=0.001)  # Table 2 (m = 1)
+
+
+def test_explicit_h_max_without_cancellation():
+    assert explicit_h_max(1.0, 1e-17) == pytest.approx(2.0, rel=1e-9)
+
+
+def test_lanczos_bound_without_anchors():
+    sim = _sim(EulerCromer(bound="lanczos"), 0.01, n_bases=150, mechanics=Mechanics(c=0.0))
+    gershgorin = lambda_max(sim.state, "gershgorin")
+    assert 0.0 < sim.stability_limit < math.inf
+    assert 0.0 < lambda_max(sim.state, "lanczos") <= gershgorin
+
+
+def test_lanczos_bound_is_deterministic():
+    state = _sim(EulerCromer(), 0.01, n_bases=150, mechanics=Mechanics(c=0.1)).state
+    values = {lambda_max(state, "lanczos") for _ in range(3)}
+    assert len(values) == 1, values
+
+
+def test_stability_numbers_of_notes_section_3():
+    """NOTES.md §3: Table 2 values give λ_max ≈ 2.31, h_max ≈ 0.369; k = 100, m = 0.01 gives
+    h_max ≈ 0.0034."""
+    state = Scene.from_dict({"run": {"dt": 0.01}}).simulation().state  # Table 2 values
+    assert lambda_max(state, "lanczos") == pytest.approx(2.31, abs=0.02)
+    assert EulerCromer(bound="lanczos").stability_limit(state) == pytest.approx(0.369, abs=0.003)
+    # Gershgorin, the default: c + 2k·(most springs on one base) = 0.1 + 2·0.4·4
+    assert lambda_max(state, "gershgorin") == pytest.approx(3.3, rel=1e-12)
+    assert EulerCromer().stability_limit(state) < EulerCromer(bound="lanczos").stability_limit(state)
+    stiff = Scene.from_dict({"mechanics": {"k": 100.0, "m": 0.01}, "run": {"dt": 1e-3}}).simulation().state
+    assert EulerCromer(bound="lanczos").stability_limit(stiff) == pytest.approx(0.0034, abs=0.0002)
+
+
+@given(
+    scale=st.floats(1.0, 1.3),
+    jitter=st.floats(0.0, 0.3),
+    k=st.floats(0.05, 50.0),
+    c=st.floats(0.01, 5.0),  # c = 0: see test_lanczos_bound_without_anchors
+    broken=st.floats(0.0, 0.5),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_gershgorin_bounds_lanczos_on_stretched_states(scale, jitter, k, c, broken, seed):
+    sim = _sim(EulerCromer(), 1e-3, n_bases=150, mechanics=Mechanics(k=k, c=c), seed=seed % 1000)
+    s = sim.state
+    rng = np.random.default_rng(seed)
+    s.x[:, :2] *= scale
+    s.x += rng.normal(scale=jitter * SPACING, size=s.x.shape)
+    s.intact &= rng.random(s.n_springs) >= broken
+    gershgorin = lambda_max(s, "gershgorin")
+    lanczos = lambda_max(s, "lanczos")
+    assert 0.0 < lanczos <= gershgorin
+    # lanczos is the top eigenvalue, to its tolerance: check against a dense solve.  (It should never
+    # be below it, but about one call in 200 lands up to ~0.15 % low: the random restarts of
+    # test_lanczos_bound_is_deterministic sometimes converge to the second eigenvalue of a cluster.)
+    matvec, _ = stiffness_matvec(s.x, s.pairs, s.rest, k, s.intact, c, s.incidence)
+    top = np.linalg.eigvalsh(_dense(matvec, 3 * s.n_bases))[-1]
+    assert top * (1 - 3e-3) <= lanczos <= top * (1 + 2e-4)
+
+
+class _Unguarded(EulerCromer):
+    """Euler–Cromer with the guard switched off, to probe the bound itself."""
+
+    def stability_limit(self, state) -> float:
+        return math.inf
+
+
+@pytest.mark.parametrize("k, m", [(0.4, 1.0), (100.0, 0.01)], ids=["table2", "stiff"])
+def test_h_max_is_where_euler_cromer_really_becomes_unstable(k, m):
+    """Just below the Lanczos h_max a velocity kick dies away; 10 % above it, it explodes."""
+    mechanics = Mechanics(k=k, m=m, f_max=NO_BREAKS)
+    h_max = _sim(EulerCromer(bound="lanczos"), 1e-9, n_bases=150, mechanics=mechanics).stability_limit
+    peaks = {}
+    for factor in (0.97, 1.1):
+        sim = _sim(_Unguarded(), factor * h_max, n_bases=150, mechanics=mechanics)
+        sim.state.v[:] = np.random.default_rng(0).normal(scale=1e-4, size=sim.state.v.shape)
+        amplitude = []
+        try:
+            sim.run(Stop(until_time=600 * sim.h * (1 - 1e-9)),
+                    lambda s: amplitude.append(float(np.abs(s.state.x - s.state.anchor).max())))
+        except NonFiniteStateError:
+            amplitude.append(math.inf)
+        peaks[factor] = max(amplitude) / amplitude[0]
+    assert peaks[0.97] < 10.0, peaks
+    assert peaks[1.1] > 1e3, peaks
+
+
+# -- the stiffness operator --------------------------------------------------------------------
+
+
+@given(
+    scale=st.floats(1.01, 1.3),
+    k=st.floats(0.01, 100.0),
+    c=st.floats(0.0, 10.0),
+    broken=st.floats(0.0, 0.5),
+    seed=st.integers(0, 2**31 - 1),
+)
+@example(scale=1.05, k=0.4, c=0.1, broken=0.0, seed=0)
+def test_stiffness_matvec_is_the_force_jacobian_when_nothing_is_compressed(scale, k, c, broken, seed):
+    sim = _sim(EulerCromer(), 1e-3, n_bases=60, mechanics=Mechanics(k=k, c=c), seed=seed % 1000)
+    s = sim.state
+    rng = np.random.default_rng(seed)
+    s.intact &= rng.random(s.n_springs) >= broken
+    x = s.x * scale  # every spring stretched by `scale`: no transverse clamping
+    s.anchor[:] += rng.normal(scale=SPACING, size=s.anchor.shape)  # anchors off the bases
+    matvec, diag = stiffness_matvec(x, s.pairs, s.rest, k, s.intact, c, s.incidence)
+    size = x.size
+    K = _dense(matvec, size)
+
+    def force(flat):
+        y = flat.reshape(x.shape)
+        return (spring_forces(y, s.pairs, s.rest, k, s.intact) + anchor_forces(y, s.anchor, c)).ravel()
+
+    eps = 1e-6 * SPACING
+    jac = np.empty((size, size))
+    for col in range(size):
+        e = np.zeros(size)
+        e[col] = eps
+        jac[:, col] = -(force(x.ravel() + e) - force(x.ravel() - e)) / (2 * eps)
+    np.testing.assert_allclose(K, jac, rtol=0, atol=1e-6 * (k + c))
+    np.testing.assert_allclose(K, K.T, rtol=0, atol=1e-12 * (k + c))
+    np.testing.assert_allclose(diag, np.diag(K), rtol=1e-12, atol=1e-15)
+
+
+@given(
+    squeeze=st.floats(0.7, 1.3),
+    jitter=st.floats(0.0, 0.5),
+    k=st.floats(0.01, 100.0),
+    c=st.floats(0.0, 10.0),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_stiffness_is_symmetric_positive_semidefinite_with_compressed_springs(squeeze, jitter, k, c, seed):
+    """Compressed springs have their transverse term clamped at zero: K stays symmetric PSD, and the
+    returned diagonal is still K's diagonal."""
+    sim = _sim(EulerCromer(), 1e-3, n_bases=60, mechanics=Mechanics(k=k, c=c), seed=seed % 1000)
+    s = sim.state
+    x = s.x * squeeze + np.random.default_rng(seed).normal(scale=jitter * SPACING, size=s.x.shape)
+    matvec, diag = stiffness_matvec(x, s.pairs, s.rest, k, s.intact, c, s.incidence)
+    K = _dense(matvec, x.size)
+    np.testing.assert_allclose(K, K.T, rtol=0, atol=1e-12 * (k + c))
+    assert np.linalg.eigvalsh(0.5 * (K + K.T))[0] >= c - 1e-9 * (k + c)
+    np.testing.assert_allclose(diag, np.diag(K), rtol=1e-12, atol=1e-15)
+
+
+# -- backends agree ----------------------------------------------------------------------------
+
+
+def _assert_same_run(a: Simulation, b: Simulation) -> None:
+    la, lb = a.breaks.arrays(), b.breaks.arrays()
+    assert la["spring"].size > 0, "test set-up: springs should break"
+    np.testing.assert_array_equal(la["spring"], lb["spring"])
+    np.testing.assert_array_equal(la["step"], lb["step"])
+    np.testing.assert_array_equal(la["t"], lb["t"])
+    np.testing.assert_allclose(la["tension"], lb["tension"], rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(a.state.intact, b.state.intact)
+    assert a.step_count == b.step_count and a.state.t == b.state.t
+    np.testing.assert_allclose(a.state.x, b.state.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.state.v, b.state.v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.state.anchor, b.state.anchor, rtol=0, atol=1e-12)
+
+
+def test_numpy_and_numba_backends_give_the_same_run():
+    a = build_sim(n_bases=400, seed=1, backend="numpy", stepping="fixed")
+    b = build_sim(n_bases=400, seed=1, backend="numba", stepping="fixed")
+    a.run(Stop(until_time=6.0))
+    b.run(Stop(until_time=6.0))
+    _assert_same_run(a, b)
+
+
+def test_numba_step_by_step_equals_advance_chunks():
+    a = build_sim(n_bases=400, seed=1, backend="numba", stepping="fixed")
+    b = build_sim(n_bases=400, seed=1, backend="numba", stepping="fixed")
+    stop = Stop(until_time=6.0)
+    calls = 0
+    while stop.reason(a) is None:
+        a.step()
+    while stop.reason(b) is None:
+        b.advance(stop)
+        calls += 1
+    assert calls < b.step_count  # some advances really took several steps
+    _assert_same_run(a, b)
+
+
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    G=st.floats(0.02, 0.1),
+    dt=st.floats(0.01, 0.1),
+    fmax_spread=st.floats(0.0, 0.1),
+)
+def test_backends_agree_on_random_scenes(seed, G, dt, fmax_spread):
+    runs = []
+    for backend in ("numpy", "numba"):
+        sim = build_sim(n_bases=200, seed=seed, G=G, dt=dt, fmax_spread=fmax_spread, backend=backend, stepping="fixed")
+        sim.run(Stop(until_time=4.0))
+        runs.append(sim)
+    if len(runs[0].breaks) == 0:
+        assert len(runs[1].breaks) == 0
+        np.testing.assert_allclose(runs[0].state.x, runs[1].state.x, rtol=0, atol=1e-12)
+    else:
+        _assert_same_run(*runs)
+
+
+# -- non-finite states: the run stops at the last finite state -----------------------------------
+
+
+@attrs.frozen(kw_only=True)
+class _NaNAtCall(Integrator):
+    """Euler–Cromer that poisons a position on its ``nan_at``-th call (``None``: never)."""
+
+    nan_at: int | None = None
+    calls: list = attrs.field(factory=list, eq=False)
+
+    def step(self, state, dt: float) -> None:
+        state.kernels.euler_cromer_step(state, dt)
+        self.calls.append(dt)
+        if len(self.calls) == self.nan_at:
+            state.x[0, 0] = np.nan
+
+
+def _assert_same_state(a: Simulation, b: Simulation) -> None:
+    assert a.step_count == b.step_count and a.state.t == b.state.t
+    np.testing.assert_allclose(a.state.x, b.state.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.state.v, b.state.v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(a.state.anchor, b.state.anchor, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(a.state.intact, b.state.intact)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_nan_from_integrator_leaves_last_finite_state(backend):
+    def make(nan_at):
+        return Simulation(
+            lattice=Lattice(n_bases=200), mechanics=Mechanics(), growth=SqrtGrowth(G=0.05),
+            integrator=_NaNAtCall(nan_at=nan_at), breakers=[ThresholdBreaker()], dt=0.05, seed=4, backend=backend,
+            stepping="fixed",
+        )
+
+    sim = make(5)
+    with pytest.raises(NonFiniteStateError, match="NaN or infinite"):
+        sim.run(Stop(until_time=1.0))
+    assert sim.step_count == 4 and sim.state.t == 4 * sim.h
+    assert sim.state.is_finite() and np.all(np.isfinite(sim.state.anchor))
+    ref = make(None)
+    for _ in range(4):
+        ref.step()
+    _assert_same_state(sim, ref)
+    # the restored state is a working one: carrying on gives the run that never saw a NaN
+    assert sim.run(Stop(until_time=1.0)) == "time"
+    ref.run(Stop(until_time=1.0))
+    _assert_same_state(sim, ref)
+    assert sim.breaks.arrays()["step"].tolist() == ref.breaks.arrays()["step"].tolist()
+
+
+@attrs.frozen(kw_only=True)
+class _NaNRadiusAfter(Growth):
+    """``r0 + G√t`` (uniform), NaN once ``t > t_bad``."""
+
+    r0: float = 0.2
+    G: float = 0.05
+    t_bad: float = 1.0
+
+    def radius(self, t: float, z: np.ndarray) -> float:
+        return math.nan if t > self.t_bad else self.r0 + self.G * math.sqrt(t)
+
+
+def _growth_sim(growth, backend, dt=0.05) -> Simulation:
+    return Simulation(
+        lattice=Lattice(n_bases=200), mechanics=Mechanics(f_max=NO_BREAKS), growth=growth, integrator=EulerCromer(),
+        breakers=[ThresholdBreaker()], dt=dt, seed=4, backend=backend, stepping="fixed",
+    )
+
+
+@pytest.mark.parametrize("bad_step", [41, 30, 2])
+def test_nan_inside_a_quiet_chunk_leaves_last_finite_state(bad_step):
+    """The compiled quiet kernel (numba) meets a NaN radius in the middle of a chunk (chunks take
+    8, 16, 32, ... steps: step 41 is inside the third): the simulation is put back to the step before."""
+    dt = 0.05
+    sim = _growth_sim(_NaNRadiusAfter(t_bad=(bad_step - 0.5) * dt), "numba", dt)
+    advances = []
+    with pytest.raises(NonFiniteStateError):
+        sim.run(Stop(until_time=100.0), lambda s: advances.append(s.step_count))
+    good = bad_step - 1
+    assert sim.step_count == good and sim.state.t == good * sim.h
+    assert sim.state.is_finite() and np.all(np.isfinite(sim.state.anchor))
+    assert len(advances) < good or good < 8  # it was the quiet path, in chunks
+    for backend in ("numba", "numpy"):  # one step at a time, with the growth law that never fails
+        ref = _growth_sim(SqrtGrowth(G=0.05), backend, dt)
+        for _ in range(good):
+            ref.step()
+        _assert_same_state(sim, ref)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_nan_radius_on_the_step_path_leaves_last_finite_state(backend):
+    """A non-finite radius also projects the anchors to NaN: they must come back too (found by this test)."""
+    sim = _growth_sim(_NaNRadiusAfter(t_bad=9.5 * 0.05), backend)
+    with pytest.raises(NonFiniteStateError):
+        for _ in range(20):
+            sim.step()  # the step path (run() on numba would take the quiet kernel)
+    assert sim.step_count == 9 and sim.state.t == 9 * sim.h
+    assert sim.state.is_finite() and np.all(np.isfinite(sim.state.anchor))
+    ref = _growth_sim(SqrtGrowth(G=0.05), backend)
+    for _ in range(9):
+        ref.step()
+    _assert_same_state(sim, ref)
+
+
+# -- the stiff scene through the command line ----------------------------------------------------
+
+STIFF = ["simulate", "--k", "100", "--m", "0.01", "--dt", "0.01", "--n-bases", "300", "--until-time", "0.2", "--quiet"]
+
+
+def test_cli_refuses_stiff_scene_with_fixed_steps(tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, [*STIFF, "--stepping", "fixed", "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    text = result.output.strip()
+    assert "\n" not in text and "Traceback" not in text
+    assert "h_max" in text
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--stepping", "auto"], ["--stepping", "adaptive"], ["--stepping", "fixed", "--integrator", "implicit-overdamped"]],
+    ids=["auto", "adaptive", "implicit"],
+)
+def test_cli_runs_stiff_scene_with_substeps_or_implicit(tmp_path, extra):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, [*STIFF, *extra, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stop_reason"] == "time"
+    assert summary["t"] == pytest.approx(0.2, abs=1e-9)
+    with np.load(out / "state.npz", allow_pickle=False) as data:
+        assert np.all(np.isfinite(data["x"]))
