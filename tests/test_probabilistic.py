@@ -1,0 +1,71 @@
+"""The probabilistic breaker: its law, its reproducibility, and breaking that only ever grows."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bark import Stop
+from bark_cli.main import cli
+from bark_plugins.breakers import ProbabilisticBreaker
+from conftest import build_sim
+
+
+@given(
+    load=st.floats(0.5, 1.5),
+    h=st.floats(0.001, 0.5),
+    nu=st.floats(0.1, 20.0),
+    eta=st.floats(0.0, 30.0),
+    seed=st.integers(0, 2**31 - 1),
+)
+@settings(max_examples=30)
+def test_breaking_probability_matches_its_law(load, h, nu, eta, seed):
+    """Over 200 000 springs at one load, the share broken in one check is 1 − exp(−h ν L^η),
+    within 5 binomial standard deviations."""
+    n = 200_000
+    fmax = np.full(n, 0.004)
+    state = SimpleNamespace(intact=np.ones(n, bool), fmax=fmax, h=h)
+    ids = ProbabilisticBreaker(nu=nu, eta=eta).select(state, fmax * load, np.random.default_rng(seed))
+    p = -math.expm1(-h * nu * load**eta)
+    sd = math.sqrt(n * p * (1 - p))
+    assert abs(ids.size - n * p) <= 5 * sd + 1
+
+
+def test_compressed_and_broken_springs_never_break():
+    state = SimpleNamespace(intact=np.array([True, True, False, True]), fmax=np.full(4, 1e-3), h=10.0)
+    tension = np.array([-5.0, 0.0, 50.0, 50.0])  # compressed, slack, broken, stretched
+    ids = ProbabilisticBreaker(nu=100.0, eta=1.0).select(state, tension, np.random.default_rng(0))
+    assert ids.tolist() == [3]
+
+
+def test_same_seed_same_breaks_different_seed_different(tmp_path):
+    runs = {}
+    for name, seed in [("a", 7), ("b", 7), ("c", 8)]:
+        out = tmp_path / name
+        result = CliRunner().invoke(cli, ["simulate", "--growth", "sqrt", "--breaker", "probabilistic", "--seed", str(seed),
+                                          "--n-bases", "600", "--until-time", "40", "-G", "0.03", "--out", str(out), "--quiet"])
+        assert result.exit_code == 0, result.output
+        runs[name] = (out / "breaks.csv").read_bytes()
+    assert runs["a"] == runs["b"]
+    assert runs["a"] != runs["c"]
+    assert runs["a"].count(b"\n") > 50  # it really broke springs
+
+
+@pytest.mark.parametrize("stepping", ["fixed", "adaptive"])
+def test_probabilistic_breaking_only_grows(stepping):
+    sim = build_sim(n_bases=400, G=0.05, dt=0.05, seed=3, stepping=stepping, breakers=[ProbabilisticBreaker()])
+    intact = sim.state.intact.copy()
+    stop = Stop(until_time=6.0)
+    while stop.reason(sim) is None:
+        sim.advance(stop)
+        assert not np.any(sim.state.intact & ~intact)  # nothing comes back
+        intact = sim.state.intact.copy()
+    assert sim.n_broken > 20
+    log = sim.breaks.arrays()
+    assert len(np.unique(log["spring"])) == len(log["spring"])  # each spring breaks once
