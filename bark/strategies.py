@@ -56,6 +56,12 @@ class Growth(Strategy):
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
         """Trunk radius at time ``t`` at heights ``z``."""
 
+    def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+        """Breaking thresholds of springs whose midpoints are at heights ``z`` (called once, when the
+        simulation is built).  The default leaves them as they are; a law with regions of their own
+        material (bulges) overrides it."""
+        return fmax
+
 
 @attrs.frozen(kw_only=True)
 class Integrator(Strategy):

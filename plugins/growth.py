@@ -10,7 +10,7 @@ import numpy as np
 from bark._validate import non_negative, positive
 from bark.strategies import Growth
 
-__all__ = ["SqrtGrowth", "LinearGrowth"]
+__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth"]
 
 
 @attrs.frozen(kw_only=True)
@@ -37,3 +37,79 @@ class LinearGrowth(Growth):
 
     def radius(self, t: float, z: np.ndarray) -> float:
         return self.r0 + self.G * t
+
+
+def _bulges(value):
+    return tuple(v if isinstance(v, Bulge) else Bulge(**v) for v in value)
+
+
+def _base(value):
+    if isinstance(value, Growth):
+        return value
+    if isinstance(value, dict):
+        from bark import registry
+
+        params = dict(value)
+        return registry.create("growth", params.pop("name", "sqrt"), **params)
+    raise ValueError(f"base = {value!r}: must be a growth strategy or a table like {{name = 'sqrt', G = 0.014}}")
+
+
+@attrs.frozen(kw_only=True)
+class Bulge:
+    """One bulge: where it is, how far it reaches, how high it rises, and its own material."""
+
+    z: float = attrs.field(validator=non_negative)
+    """Height of the bulge's peak (length units)."""
+    half_width: float = attrs.field(validator=positive)
+    """Half the height range it covers; outside ``|z − peak| < half_width`` it has no effect."""
+    magnitude: float = attrs.field(default=0.0, validator=non_negative)
+    """Extra radius at the peak at t = 0 (length units)."""
+    decay: float = attrs.field(default=0.0, validator=non_negative)
+    """The magnitude falls as ``exp(−decay·t)`` (paper, "Integrative model": the bulge fades)."""
+    G: float | None = attrs.field(default=None)
+    """Growth constant at the peak (paper, Table 1: 0.02 at the peak, 0.04 at the ends); ``None``
+    keeps the base law's."""
+    f_max: float | None = attrs.field(default=None)
+    """Breaking threshold at the peak (paper, Table 1: 0.006 in bulges); ``None`` keeps the scene's."""
+
+    def profile(self, z: np.ndarray) -> np.ndarray:
+        """``sin²`` bump: 1 at the peak, 0 with zero slope at ``peak ± half_width``, 0 outside."""
+        u = (np.asarray(z, dtype=float) - self.z) / self.half_width
+        return np.where(np.abs(u) < 1.0, np.sin(0.5 * np.pi * (u + 1.0)) ** 2, 0.0)
+
+
+@attrs.frozen(kw_only=True)
+class BulgeGrowth(Growth):
+    """Another growth law plus bulges (paper, "Growth simulation" and "Integrative model")::
+
+        r(t, z) = r_base(t, z) + Σ_b s_b(z) · [ r_base,G_b(t, z) − r_base(t, z) + A_b · exp(−λ_b t) ]
+
+    with ``s_b`` each bulge's ``sin²`` profile, ``r_base,G_b`` the base law with the bulge's own
+    growth constant, ``A_b`` its magnitude and ``λ_b`` its decay.  Inside a bulge the breaking
+    threshold moves towards the bulge's ``f_max`` by the same profile (``adjust_thresholds``).
+    """
+
+    base: Growth = attrs.field(factory=SqrtGrowth, converter=_base)
+    """The law the bulges sit on (any growth strategy; a scene gives it as a table)."""
+    bulges: tuple[Bulge, ...] = attrs.field(default=(), converter=_bulges)
+    """The bulges (a scene gives them as an array of tables)."""
+
+    def radius(self, t: float, z: np.ndarray) -> np.ndarray:
+        z = np.asarray(z, dtype=float)
+        base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
+        r = base.copy()
+        for b in self.bulges:
+            s = b.profile(z)
+            extra = b.magnitude * np.exp(-b.decay * t)
+            if b.G is not None:
+                extra = extra + np.broadcast_to(attrs.evolve(self.base, G=b.G).radius(t, z), z.shape) - base
+            r += s * extra
+        return r
+
+    def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+        out = np.asarray(fmax, dtype=float).copy()
+        for b in self.bulges:
+            if b.f_max is not None:
+                s = b.profile(z)
+                out += s * (b.f_max - out)
+        return out

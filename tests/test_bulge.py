@@ -1,0 +1,88 @@
+"""Bulge growth: the sin² profile, several bulges, decay, own G and f_max inside."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from bark.errors import BarkError
+from bark.scene import Scene
+from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
+
+bulges = st.builds(
+    Bulge,
+    z=st.floats(0.0, 1.5),
+    half_width=st.floats(0.01, 1.0),
+    magnitude=st.floats(0.0, 0.1),
+    decay=st.floats(0.0, 1.0),
+)
+
+
+@given(bulges)
+def test_profile_is_one_at_the_site_zero_outside_and_smooth_at_the_edges(b):
+    assert b.profile(np.array([b.z]))[0] == pytest.approx(1.0)
+    z = b.z + b.half_width * np.array([-3.0, -1.5, -1.01, 1.01, 1.5, 3.0])
+    assert np.all(b.profile(z) == 0.0)
+    edges = b.z + b.half_width * np.array([-1.0, 1.0])
+    assert np.all(b.profile(edges) < 1e-20)  # 0, up to the rounding of where the edge falls
+    inside = b.z + b.half_width * np.linspace(-0.999, 0.999, 201)
+    p = b.profile(inside)
+    assert np.all((p >= 0.0) & (p <= 1.0 + 1e-12))
+    assert np.argmax(p) == 100  # the one maximum is at the site
+    # smooth zero edges: value and slope vanish as the edge is approached (sin² ~ (π/2 · dist)²)
+    eps = 1e-4
+    edge = b.profile(np.array([b.z - b.half_width + eps * b.half_width]))[0]
+    assert edge == pytest.approx((0.5 * np.pi * eps) ** 2, rel=1e-3)
+
+
+@given(bulges, st.floats(0.0, 500.0))
+def test_radius_is_the_base_law_outside_and_raised_at_the_peak(b, t):
+    base = SqrtGrowth()
+    g = BulgeGrowth(base=base, bulges=[b])
+    far = np.array([b.z + 2 * b.half_width, b.z - 2 * b.half_width])
+    np.testing.assert_allclose(g.radius(t, far), base.radius(t, far), rtol=0, atol=1e-15)
+    peak = g.radius(t, np.array([b.z]))[0]
+    assert peak == pytest.approx(base.radius(t, 0.0) + b.magnitude * np.exp(-b.decay * t), rel=1e-12)
+
+
+def test_several_bulges_add_and_decay():
+    a = Bulge(z=0.3, half_width=0.1, magnitude=0.02, decay=0.1)
+    b = Bulge(z=1.1, half_width=0.2, magnitude=0.01)
+    g = BulgeGrowth(bulges=[a, b])
+    z = np.array([0.3, 1.1, 0.7])
+    r0 = SqrtGrowth().radius(10.0, 0.0)
+    np.testing.assert_allclose(g.radius(10.0, z), [r0 + 0.02 * np.exp(-1.0), r0 + 0.01, r0])
+
+
+def test_own_growth_constant_and_threshold_inside():
+    b = Bulge(z=0.75, half_width=0.3, G=0.007, f_max=0.005)
+    g = BulgeGrowth(base=SqrtGrowth(G=0.014), bulges=[b])
+    assert g.radius(4.0, np.array([0.75]))[0] == pytest.approx(0.2 + 0.007 * 2.0)
+    f = g.adjust_thresholds(np.array([0.75, 0.0, 0.75 + 0.15]), np.full(3, 0.0028))
+    assert f[0] == pytest.approx(0.005) and f[1] == 0.0028 and 0.0028 < f[2] < 0.005
+
+
+def test_scene_builds_bulges_and_the_simulation_uses_their_thresholds():
+    sc = Scene.from_dict({
+        "lattice": {"n_bases": 600},
+        "growth": {"name": "bulge", "base": {"name": "linear", "G": 0.001},
+                   "bulges": [{"z": 0.15, "half_width": 0.05, "magnitude": 0.01, "f_max": 0.01}]},
+    })
+    assert isinstance(sc.strategies["growth"].base, type(Scene.from_dict({"growth": {"name": "linear"}}).strategies["growth"]))
+    sim = sc.simulation()
+    z = sim.state.x[:, 2]
+    mid = 0.5 * (z[sim.state.pairs[:, 0]] + z[sim.state.pairs[:, 1]])
+    assert sim.state.fmax[np.argmin(np.abs(mid - 0.15))] == pytest.approx(0.01, rel=0.01)
+    assert np.all(sim.state.fmax[np.abs(mid - 0.15) > 0.06] == pytest.approx(0.0028))
+    r = np.hypot(sim.state.x[:, 0], sim.state.x[:, 1])
+    assert r[np.argmin(np.abs(z - 0.15))] > r[np.argmin(np.abs(z - 0.05))]  # the bulge is there at t = 0
+
+
+@pytest.mark.parametrize("bulge, key", [({"z": 0.5, "half_width": 0.0}, "half_width"), ({"z": 0.5}, "half_width"),
+                                        ({"z": 0.5, "half_width": 0.1, "magnitude": -1}, "magnitude")])
+def test_bad_bulge_is_one_line(bulge, key):
+    with pytest.raises(BarkError) as err:
+        Scene.from_dict({"growth": {"name": "bulge", "bulges": [bulge]}})
+    assert "\n" not in str(err.value) and key in str(err.value)
