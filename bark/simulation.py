@@ -181,6 +181,7 @@ class Simulation:
             x=x,
             v=np.zeros_like(x),
             anchor=x.copy(),
+            anchor_dir=np.column_stack([np.cos(theta), np.sin(theta)]),
             pairs=pairs,
             rest=rest,
             fmax=self.growth.adjust_thresholds(0.5 * (z[pairs[:, 0]] + z[pairs[:, 1]]),

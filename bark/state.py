@@ -44,6 +44,12 @@ def project_to_surface(points: np.ndarray, radius, velocities: np.ndarray | None
         vxy -= (np.einsum("ij,ij->i", vxy, xy) / (radius * radius))[:, None] * xy
 
 
+def _unit_xy(points: np.ndarray) -> np.ndarray:
+    rho = np.hypot(points[:, 0], points[:, 1])
+    safe = np.where(rho > 0.0, rho, 1.0)
+    return np.where((rho > 0.0)[:, None], points[:, :2] / safe[:, None], [1.0, 0.0])
+
+
 def _default_kernels() -> ModuleType:
     from bark.kernels import load
 
@@ -63,7 +69,13 @@ class State:
     v: np.ndarray
     """Velocities of the bases, shape ``(n, 3)``."""
     anchor: np.ndarray
-    """Anchor points (each base's original site, moved with the trunk surface), ``(n, 3)``."""
+    """Anchor points (each base's original site, moved with the trunk surface), ``(n, 3)``.
+    Anchors move only radially: ``anchor = (r(t, z0)·anchor_dir, z0)``, a function of t alone."""
+    anchor_dir: np.ndarray = attrs.field(
+        default=attrs.Factory(lambda self: _unit_xy(self.anchor), takes_self=True)
+    )
+    """Unit horizontal direction of each anchor, ``(n, 2)``: fixed for the whole run (default: the
+    directions of ``anchor``)."""
     pairs: np.ndarray
     """Spring end points ``(i, j)``, shape ``(m, 2)``; row number = spring id."""
     rest: np.ndarray

@@ -92,7 +92,11 @@ class ImplicitOverdamped(Integrator):
         precond = 1.0 / (mech.b + dt * diag)
         m = LinearOperator((size, size), matvec=lambda r: precond * r, dtype=float)
         rhs = tangential(dt * state.elastic_forces().ravel())
-        dx, _ = cg(a, rhs, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)
-        dx = tangential(dx).reshape(state.x.shape)
+        scale = float(np.max(np.abs(rhs)))  # solve for rhs/scale: tiny forces must not underflow in CG
+        if scale > 0.0:
+            dx, _ = cg(a, rhs / scale, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)
+            dx = tangential(dx * scale).reshape(state.x.shape)
+        else:
+            dx = np.zeros_like(state.x)
         state.x += dx
         np.divide(dx, dt, out=state.v)

@@ -13,11 +13,11 @@ import numpy as np
 
 NAME = "numba"
 
-# error_model="numpy": no Python-style zero-division branches (they block SIMD).  The fastmath
-# flags allow reassociation and fused multiply-add, but deliberately not 'nnan'/'ninf': the NaN
-# check in _measure must never be optimised away.
-_FASTMATH = {"nsz", "arcp", "contract", "reassoc", "afn"}
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FASTMATH)
+# error_model="numpy": no Python-style zero-division branches.  No fastmath: each expression is
+# evaluated exactly as written, so the same expression in the per-step and the quiet kernels gives
+# the same bits, and a run's result does not depend on where its compiled calls begin and end
+# (what makes a resumed run end bit-identical to an uninterrupted one).
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 @_jit
@@ -64,7 +64,8 @@ def _euler_cromer(x, v, anchor, pairs, rest, k, c, b, m, h, intact, f):
 
 
 @_jit
-def _project(points, radius, velocities, with_velocity):
+def _project(points, radius, velocities):
+    """Eq. 9 on the bases: radially onto the surface, radial velocity removed (as the quiet kernel)."""
     uniform = radius.shape[0] == 1
     for q in range(points.shape[0]):
         r = radius[0] if uniform else radius[q]
@@ -74,10 +75,18 @@ def _project(points, radius, velocities, with_velocity):
         py *= scale
         points[q, 0] = px
         points[q, 1] = py
-        if with_velocity:
-            vr = (velocities[q, 0] * px + velocities[q, 1] * py) / (r * r)
-            velocities[q, 0] -= vr * px
-            velocities[q, 1] -= vr * py
+        vr = (velocities[q, 0] * px + velocities[q, 1] * py) * (1.0 / (r * r))
+        velocities[q, 0] -= vr * px
+        velocities[q, 1] -= vr * py
+
+
+@_jit
+def _place_anchors(anchor, anchor_dir, radius):
+    uniform = radius.shape[0] == 1
+    for q in range(anchor.shape[0]):
+        r = radius[0] if uniform else radius[q]
+        anchor[q, 0] = r * anchor_dir[q, 0]
+        anchor[q, 1] = r * anchor_dir[q, 1]
 
 
 @_jit
@@ -121,9 +130,9 @@ def euler_cromer_step(state, h: float) -> None:
 
 
 @_jit
-def _constrain_measure(x, v, anchor, r_x, r_anchor, pairs, rest, k, fmax, intact, out):
-    _project(x, r_x, v, True)
-    _project(anchor, r_anchor, v, False)
+def _constrain_measure(x, v, anchor, anchor_dir, r_x, r_anchor, pairs, rest, k, fmax, intact, out):
+    _project(x, r_x, v)
+    _place_anchors(anchor, anchor_dir, r_anchor)
     return _measure(x, pairs, rest, k, fmax, intact, out)
 
 
@@ -136,8 +145,8 @@ def _radii(r) -> np.ndarray:
 
 
 def constrain(state, r_x, r_anchor) -> None:
-    _project(state.x, _radii(r_x), state.v, True)
-    _project(state.anchor, _radii(r_anchor), state.v, False)
+    _project(state.x, _radii(r_x), state.v)
+    _place_anchors(state.anchor, state.anchor_dir, _radii(r_anchor))
 
 
 def measure(state, out: np.ndarray) -> float:
@@ -145,31 +154,27 @@ def measure(state, out: np.ndarray) -> float:
 
 
 def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
-    return float(_constrain_measure(state.x, state.v, state.anchor, _radii(r_x), _radii(r_anchor), state.pairs,
-                                    state.rest, state.mechanics.k, state.fmax, state.intact, out))
+    return float(_constrain_measure(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor),
+                                    state.pairs, state.rest, state.mechanics.k, state.fmax, state.intact, out))
 
 
 @_jit
-def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fmax, r_x, r_a, f, u_a):
+def _euler_cromer_quiet(x, v, anchor, anchor_dir, pairs, rest, k, c, b, m, h, intact, inv_fmax, r_x, r_a, f):
     """Up to ``r_x.shape[0]`` whole steps (integrate, constrain, measure) in one call.
 
     Stops after the first step whose max load exceeds 1 (a spring to break) or whose tensions are
     not finite.  Returns ``(steps taken, max load of the last step)``, the load NaN if that step
     went non-finite.  The spring pass that finds the load also accumulates the next step's spring
-    forces into ``f`` (first same as last).  The loop is memory-bound, so it touches as little as it
-    can: anchors move only radially and are computed from their unit directions and radius ``u_a``
-    (written back once at the end); the caller fills the tensions once, for the last step.  A step
-    is non-finite if any coordinate of any base is (summed into ``total``) or any intact tension is.
+    forces into ``f`` (first same as last), by the very expressions the per-step kernels use, so the
+    result does not depend on where calls begin and end.  The loop is memory-bound, so it touches
+    as little as it can: anchors (radius × fixed direction) are written back once at the end; the
+    caller fills the tensions once, for the last step.  A step is non-finite if any coordinate of
+    any base is (summed into ``total``) or any intact tension is.
     """
     n = x.shape[0]
     hm = h / m
     f[:] = 0.0
     _spring_forces(x, pairs, rest, k, intact, f)
-    for q in range(n):  # u_a[q] = (unit direction of the anchor, its radius now)
-        ra0 = math.sqrt(anchor[q, 0] * anchor[q, 0] + anchor[q, 1] * anchor[q, 1])
-        u_a[q, 0] = anchor[q, 0] / ra0
-        u_a[q, 1] = anchor[q, 1] / ra0
-        u_a[q, 2] = ra0
     top = -np.inf
     total = 0.0
     ux = r_x.shape[1] == 1
@@ -177,16 +182,17 @@ def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fm
     done = 0
     for step in range(r_x.shape[0]):
         r = r_x[step, 0]
-        inv_r2 = 1.0 / (r * r)
         total = 0.0
         for q in range(n):
-            # the anchor before this step: at the previous step's radius (or where it is now)
+            # the anchor before this step: as stored, then at the previous step's radius (the
+            # very expression _place_anchors writes, so the bits do not depend on where calls end)
             if step == 0:
-                ra = u_a[q, 2]
+                ax = anchor[q, 0]
+                ay = anchor[q, 1]
             else:
                 ra = r_a[step - 1, 0] if ua else r_a[step - 1, q]
-            ax = ra * u_a[q, 0]
-            ay = ra * u_a[q, 1]
+                ax = ra * anchor_dir[q, 0]
+                ay = ra * anchor_dir[q, 1]
             f0 = f[q, 0] - c * (x[q, 0] - ax) - b * v[q, 0]
             f1 = f[q, 1] - c * (x[q, 1] - ay) - b * v[q, 1]
             f2 = f[q, 2] - c * (x[q, 2] - anchor[q, 2]) - b * v[q, 2]
@@ -202,14 +208,13 @@ def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fm
             v[q, 2] = v2
             if not ux:
                 r = r_x[step, q]
-                inv_r2 = 1.0 / (r * r)
             sc = r / math.sqrt(px * px + py * py)
             px *= sc
             py *= sc
             x[q, 0] = px
             x[q, 1] = py
             total += px + py + x[q, 2]  # NaN or inf anywhere, even on a base with no intact spring, shows here
-            vr = (v0 * px + v1 * py) * inv_r2
+            vr = (v0 * px + v1 * py) * (1.0 / (r * r))
             v[q, 0] = v0 - vr * px
             v[q, 1] = v1 - vr * py
         top = -np.inf
@@ -227,7 +232,7 @@ def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fm
             if load > top:
                 top = load
             if length > 0.0:
-                g = t / length
+                g = k * (length - rest[s]) / length  # as _spring_forces writes it: the same bits
                 f[i, 0] += g * d0
                 f[i, 1] += g * d1
                 f[i, 2] += g * d2
@@ -237,10 +242,7 @@ def _euler_cromer_quiet(x, v, anchor, pairs, rest, k, c, b, m, h, intact, inv_fm
         done = step + 1
         if not math.isfinite(total) or top > 1.0:
             break
-    for q in range(n):  # the anchors at the last step's radius
-        rq = r_a[done - 1, 0] if ua else r_a[done - 1, q]
-        anchor[q, 0] = rq * u_a[q, 0]
-        anchor[q, 1] = rq * u_a[q, 1]
+    _place_anchors(anchor, anchor_dir, r_a[done - 1])  # the anchors at the last step's radius
     return done, (top if math.isfinite(total) else np.nan)
 
 
@@ -258,23 +260,19 @@ def euler_cromer_quiet(
     sc = state.scratch
     if sc.get("pairs_of") is not state.pairs:  # int32 spring ends: less memory traffic per step
         sc["pairs_of"], sc["pairs32"] = state.pairs, state.pairs.astype(np.int32)
-    if sc.get("anchor_dir") is None or sc["anchor_dir"].shape[0] != state.n_bases:
-        sc["anchor_dir"] = np.empty((state.n_bases, 3))
-    start = (state.x.copy(), state.v.copy())  # the anchors at the start are u_a's direction × radius
+    start = (state.x.copy(), state.v.copy(), state.anchor.copy())
     inv_fmax = 1.0 / state.fmax
 
     def call(rows_x, rows_a):
         return _euler_cromer_quiet(
-            state.x, state.v, state.anchor, sc["pairs32"], state.rest, mech.k, mech.c, mech.b, mech.m, h,
-            state.intact, inv_fmax, rows_x, rows_a, _scratch(state), sc["anchor_dir"],
+            state.x, state.v, state.anchor, state.anchor_dir, sc["pairs32"], state.rest, mech.k, mech.c, mech.b,
+            mech.m, h, state.intact, inv_fmax, rows_x, rows_a, _scratch(state),
         )
 
     done, load = call(r_x, r_a)
     if math.isnan(load) or load > accept_load:
-        np.copyto(state.x, start[0])
-        np.copyto(state.v, start[1])
-        u_a = sc["anchor_dir"]
-        state.anchor[:, :2] = u_a[:, :2] * u_a[:, 2:3]
+        for keep, now in zip(start, (state.x, state.v, state.anchor)):
+            np.copyto(now, keep)
         if done > 1:
             call(r_x[: done - 1], r_a[: done - 1])
         return done - 1, float(load)

@@ -27,7 +27,7 @@ def euler_cromer_step(state, h: float) -> None:
 
 def constrain(state, r_x, r_anchor) -> None:
     project_to_surface(state.x, r_x, state.v)
-    project_to_surface(state.anchor, r_anchor)
+    state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
 
 
 def measure(state, out: np.ndarray) -> float:
