@@ -19,6 +19,7 @@ import json
 import math
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
@@ -83,7 +84,18 @@ def write_json(path: str | Path, obj: Any) -> Path:
 
 
 def write_npz(path: str | Path, **arrays: np.ndarray) -> Path:
-    return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
+    """``np.savez_compressed`` layout, but byte-for-byte reproducible: every member carries the same
+    fixed timestamp, so two identical states give identical files (``cmp`` can compare runs)."""
+
+    def write(fh):
+        with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            for name, value in arrays.items():
+                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED
+                with zf.open(info, "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+
+    return atomic_write(path, write)
 
 
 PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]

@@ -419,6 +419,43 @@ class Simulation:
         if self.on_degenerate == "stop":
             self.stop_reason = "degenerate"
 
+    # -- checkpoints ------------------------------------------------------------------------------
+
+    def snapshot(self) -> tuple[dict[str, np.ndarray], dict]:
+        """Everything needed to go on from here exactly: the arrays of the state and the break log,
+        and (JSON-able) the clock, the step control and the random generator's state.  The graph is
+        not stored: it is rebuilt from the scene and the intact mask."""
+        s = self.state
+        arrays = {"x": s.x, "v": s.v, "anchor": s.anchor, "intact": s.intact, "fmax": s.fmax, "pairs": s.pairs}
+        arrays.update({f"breaks_{k}": v for k, v in self.breaks.arrays().items()})
+        meta = {
+            "t": s.t, "h_last": s.h, "h": self.h, "step_count": self.step_count, "ticks": self._ticks,
+            "halvings": self._halvings, "quiet_n": self._quiet_n, "events": self.events,
+            "rng": self.rng.bit_generator.state,
+        }
+        return arrays, meta
+
+    def restore(self, arrays: dict[str, np.ndarray], meta: dict) -> None:
+        """Put this (freshly built, same scene) simulation in the state ``snapshot`` recorded."""
+        s = self.state
+        if not np.array_equal(arrays["pairs"], s.pairs):
+            raise BarkError("the checkpoint's springs do not match its scene's lattice: it was written by another scene")
+        for name in ("x", "v", "anchor", "intact", "fmax"):
+            np.copyto(getattr(s, name), arrays[name])
+        broken = s.pairs[~s.intact]
+        self.graph.remove_edges_from(broken.tolist())
+        names = ("spring", "i", "j", "step", "t", "tension")
+        log = tuple(np.asarray(arrays[f"breaks_{k}"]) for k in names)
+        self.breaks = BreakLog([log] if log[0].size else [])
+        s.t, s.h = float(meta["t"]), float(meta["h_last"])
+        self.h = float(meta["h"])
+        self._set_grid()
+        self.step_count, self._ticks = int(meta["step_count"]), int(meta["ticks"])
+        self._halvings, self._quiet_n = int(meta["halvings"]), int(meta["quiet_n"])
+        self.events = list(meta["events"])
+        self.rng.bit_generator.state = meta["rng"]
+        self._labels = None
+
     # -- the one place springs break ------------------------------------------------------------
 
     def break_springs(self, ids, tension: np.ndarray | None = None) -> np.ndarray:

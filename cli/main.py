@@ -102,47 +102,106 @@ def _check_out_dir(out: Path) -> None:
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Set any scene key, e.g. a plugin's parameter.")
 @parameter_options
 @click.option("--out", "out", type=click.Path(file_okay=False), default="bark-out", show_default=True, help="Output folder.")
+@click.option("--resume", "resume", type=click.Path(file_okay=False), default=None,
+              help="Go on with the interrupted run in this folder (its checkpoint has every setting).")
+@click.option("--checkpoint-every", type=float, default=60.0, show_default=True,
+              help="Write a checkpoint every this many seconds of wall time (0: only at the end and on Ctrl-C).")
 @click.option("--quiet", is_flag=True, help="No progress bar and no summary table.")
-def simulate(scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, quiet, **kwargs):
+@click.pass_context
+def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, resume,
+             checkpoint_every, quiet, **kwargs):
     """Grow the trunk and let the bark crack; write pattern.png, patches.csv, breaks.csv,
-    summary.json and state.npz to --out.  Any --until-* option replaces the scene's stop conditions."""
-    strategies = {"growth": growth_name, "integrator": integrator_name, "breaker": breaker_name, "analyzer": analyzer_name}
-    scene = resolve_scene(scene_file, strategies, {"r0": r0, "G": G}, sets, kwargs)
-    out = Path(out)
-    _check_out_dir(out)
+    summary.json, state.npz and checkpoint.npz to --out.  Any --until-* option replaces the scene's
+    stop conditions.  Ctrl-C stops between steps, writes a checkpoint, and says how to resume."""
+    from bark import checkpoint
 
+    if checkpoint_every < 0:
+        raise BarkError(f"--checkpoint-every = {checkpoint_every:g}: must be >= 0")
+    if resume is not None:
+        given = [p for p, v in ctx.params.items()
+                 if ctx.get_parameter_source(p) == click.core.ParameterSource.COMMANDLINE
+                 and p not in ("resume", "quiet", "checkpoint_every")]
+        if given:
+            name = given[0].split("__")[-1].replace("_", "-")
+            raise BarkError(f"--resume goes on with the settings in its checkpoint: --{name} cannot be given with it")
+        out = Path(resume)
+        scene, sim, stop, meta = checkpoint.load(out / checkpoint.CHECKPOINT_NAME)
+        if meta["reason"] not in ("periodic", "interrupted"):
+            raise BarkError(f"the run in {str(out)!r} has ended ({meta.get('stop_reason')}): nothing to resume")
+        wall_before = float(meta.get("wall_time_s", 0.0))
+    else:
+        strategies = {"growth": growth_name, "integrator": integrator_name, "breaker": breaker_name, "analyzer": analyzer_name}
+        scene = resolve_scene(scene_file, strategies, {"r0": r0, "G": G}, sets, kwargs)
+        out = Path(out)
+        _check_out_dir(out)
+        sim, stop, wall_before = scene.simulation(), scene.stop(), 0.0
+    return _run(sim, scene, stop, out, quiet, checkpoint_every, wall_before, resumed=resume is not None)
+
+
+def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall_before: float, resumed: bool) -> int:
+    import signal
+
+    from bark import checkpoint
     from bark.output import write_run
     from bark_cli.plot import plot_pattern
     from bark_cli.progress import progress_observer
 
-    sim = scene.simulation()
-    stop = scene.stop()
+    out.mkdir(parents=True, exist_ok=True)
+    ckpt = out / checkpoint.CHECKPOINT_NAME
     show = not quiet and sys.stdout.isatty()
-    reason, code = None, 0
+    interrupted = []
     t0 = time.perf_counter()
+    last_save = [t0]
+
+    def on_sigint(signum, frame):  # stop between steps, never inside one
+        interrupted.append(True)
+
+    def save(reason: str, stop_reason=None):
+        wall = wall_before + time.perf_counter() - t0
+        checkpoint.save(ckpt, sim, scene, stop, reason, {"stop_reason": stop_reason, "wall_time_s": wall})
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    reason, code = None, 0
     try:
-        with progress_observer(sim, stop, enabled=show) as observe:
+        with progress_observer(sim, stop, enabled=show) as show_progress:
+
+            def observe(s):
+                if show_progress is not None:
+                    show_progress(s)
+                if interrupted:
+                    s.stop_reason = "interrupted"
+                elif checkpoint_every and time.perf_counter() - last_save[0] >= checkpoint_every:
+                    save("periodic")
+                    last_save[0] = time.perf_counter()
+
             reason = sim.run(stop, observe)
-    except KeyboardInterrupt:
-        reason, code = "interrupted", 130
     except NonFiniteStateError as err:
         click.echo(f"bark: error: {err}; writing that state to {out}", err=True)
         reason, code = "non-finite", 1
-    wall = time.perf_counter() - t0
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if reason == "interrupted":
+        code = 130
+    wall = wall_before + time.perf_counter() - t0
     summary = write_run(sim, scene, out, reason, wall)
     plot_pattern(sim, out / "pattern.png", scene.run.min_patch_size)
+    save("interrupted" if code == 130 else "end", reason)
     for event in summary["degenerate_events"]:
         click.echo(
             f"bark: warning: degenerate event at t = {event['t']:.4g}: one step broke {event['n_springs']} springs "
-            f"({100 * event['fraction']:.0f}% of all); the lattice is too regular (raise --jitter or --fmax-spread)",
+            f"({100 * event['fraction']:.0f}% of all): the lattice is too regular (raise --jitter or --fmax-spread) "
+            f"or the thresholds are far below the loads",
             err=True,
         )
     if not quiet:
         from bark_cli.progress import print_summary
 
         print_summary(summary, out)
-    if code:
-        click.echo(f"bark: interrupted at t = {sim.state.t:.4g}; outputs of that state are in {out}", err=True)
+    if code == 130:
+        click.echo(f"bark: interrupted at t = {sim.state.t:.6g}; outputs of that state and a checkpoint are in {out}; "
+                   f"go on with: bark simulate --resume {out}", err=True)
+    elif resumed and not quiet:
+        click.echo(f"bark: resumed run ended ({reason}) at t = {sim.state.t:.6g}", err=True)
     return code
 
 
