@@ -106,10 +106,12 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
     from bark import __version__
 
     stats = next((a.summary for a in analyses.values() if "n_patches" in a.summary), {})
+    effects = scene.effects
     return {
         "bark_version": __version__,
         "seed": sim.seed,
         "settings": scene.to_dict(),
+        "effects": effects,
         "stop": {k: getattr(scene.run, k) for k in ("until_time", "until_radius", "until_patches", "min_patch_size")},
         "stop_reason": stop_reason,
         "final_state": (
@@ -125,7 +127,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "n_bases": sim.state.n_bases,
         "n_springs": sim.state.n_springs,
         "n_broken": sim.n_broken,
-        "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size)),
+        "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size) if "fracture" in effects else None),
         "mean_orientation_deg": stats.get("mean_orientation_deg"),
         "circular_sd_deg": stats.get("circular_sd_deg"),
         "mean_anisotropy": stats.get("mean_anisotropy"),
@@ -138,24 +140,49 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
 
 
 def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None) -> dict:
-    """Write patches.csv, breaks.csv, summary.json and state.npz of ``sim`` into ``out_dir``."""
+    """Write what the scene's effects ask for into ``out_dir``: summary.json always; patches.csv
+    (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     analyses = sim.analyze()
-    rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), [])
-    write_csv(out / "patches.csv", rows, PATCH_COLUMNS)
-    log = sim.breaks.arrays()
-    write_csv(
-        out / "breaks.csv",
-        [dict(zip(log, vals)) for vals in zip(*(v.tolist() for v in log.values()))],
-        list(log),
-    )
+    if scene.has("patch-statistics"):
+        rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), [])
+        write_csv(out / "patches.csv", rows, PATCH_COLUMNS)
+    if scene.has("break-log"):
+        log = sim.breaks.arrays()
+        write_csv(
+            out / "breaks.csv",
+            [dict(zip(log, vals)) for vals in zip(*(v.tolist() for v in log.values()))],
+            list(log),
+        )
     s = sim.state
-    write_npz(
-        out / "state.npz",
-        x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs, rest=s.rest, fmax=s.fmax, intact=s.intact,
-        labels=sim.patch_labels(), t=np.float64(s.t),
-    )
+    if scene.has("state-snapshot"):
+        write_npz(
+            out / "state.npz",
+            x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs, rest=s.rest, fmax=s.fmax, intact=s.intact,
+            labels=sim.patch_labels(), t=np.float64(s.t),
+        )
+    if scene.has("graphml"):
+        write_graphml(out / "graph.graphml", sim)
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s)
     write_json(out / "summary.json", summary)
     return summary
+
+
+def write_graphml(path: str | Path, sim) -> Path:
+    """The leaf-base graph of record (intact springs) as GraphML, for networkx, Gephi, ParaView …:
+    nodes carry their initial site (theta0, z0), position now (x, y, z) and patch id; edges their
+    spring id, rest length and threshold."""
+    import networkx as nx
+
+    g = sim.graph.copy()
+    s, labels = sim.state, sim.patch_labels()
+    for node, data in g.nodes(data=True):
+        data.update(x=float(s.x[node, 0]), y=float(s.x[node, 1]), z=float(s.x[node, 2]), patch=int(labels[node]))
+    for _, _, data in g.edges(data=True):
+        data.update(rest=float(s.rest[data["spring"]]), fmax=float(s.fmax[data["spring"]]))
+
+    def write(fh):
+        nx.write_graphml(g, fh)
+
+    return atomic_write(path, write)

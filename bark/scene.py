@@ -11,6 +11,7 @@ vertical regime of Table 2)::
     [breaker]     name = "threshold" + its fields
     [analyzer]    name = "patches" + its fields          (min_size)
     [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
+    [effects]     want = [...] (bark.effects), frame_every  (what is simulated and written)
 
 Unknown tables or keys, bad values and unknown strategy names raise :class:`~bark.errors.BarkError`
 with one line naming the key and what is allowed.  Nothing here writes files or imports plotting.
@@ -25,7 +26,7 @@ from typing import Any
 
 import attrs
 
-from bark import registry
+from bark import effects, registry
 from bark._validate import in_range, one_of, optional, positive, positive_int
 from bark.errors import BarkError
 from bark.forces import Mechanics
@@ -85,7 +86,7 @@ STOP_KEYS = ("until_time", "until_radius", "until_patches")
 STRATEGY_SECTIONS: dict[str, str] = {"growth": "growth", "integrator": "integrator", "breaker": "breaker", "analyzer": "analyzer"}
 DEFAULT_STRATEGIES: dict[str, str] = {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
 PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings}
-SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS)
+SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS, "effects")
 
 
 def _fields(cls) -> list[str]:
@@ -138,6 +139,18 @@ class Scene:
     """The strategy instances, by section: growth, integrator, breaker, analyzer."""
     names: dict[str, str]
     """The registered name of each strategy, by section."""
+    wanted: tuple[str, ...] = effects.DEFAULT
+    """The effects the scene asked for (``[effects] want``)."""
+    frame_every: float = 10.0
+    """With the ``animation`` effect: simulated time between frames."""
+
+    @property
+    def effects(self) -> dict[str, str]:
+        """Every effect the run has, with why (``bark.effects.resolve``)."""
+        return effects.resolve(self.wanted)
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Scene":
@@ -159,6 +172,22 @@ class Scene:
         parts = {s: _build(s, c, tables[s]) for s, c in PARAM_SECTIONS.items()}
         if parts["run"].until_time is None and parts["run"].until_radius is None and parts["run"].until_patches is None:
             raise BarkError("[run] no stop condition: give until_time, until_radius or until_patches")
+        eff = dict(data.get("effects", {}))
+        bad = sorted(set(eff) - {"want", "frame_every"})
+        if bad:
+            raise BarkError(f"unknown key {bad[0]!r} in [effects]: allowed are want, frame_every")
+        wanted = eff.get("want")
+        if wanted is None:  # no list: the default outputs, and the model the scene configures
+            growth_name = dict(data.get("growth", {})).get("name", DEFAULT_STRATEGIES["growth"])
+            wanted = effects.DEFAULT + (("bulges",) if growth_name == "bulge" else ())
+        if isinstance(wanted, str) or not isinstance(wanted, (list, tuple)):
+            raise BarkError(f"[effects] want = {wanted!r}: must be a list of effect names, e.g. ['fracture', 'pattern-image']")
+        resolved = effects.resolve(wanted)
+        frame_every = eff.get("frame_every", 10.0)
+        if isinstance(frame_every, bool) or not isinstance(frame_every, (int, float)) or not frame_every > 0:
+            raise BarkError(f"[effects] frame_every = {frame_every!r}: must be a number > 0")
+        if parts["run"].until_patches is not None and "fracture" not in resolved:
+            raise BarkError("[run] until_patches needs the effect 'fracture' (no fracture, no patches)")
         strategies, names = {}, {}
         for section, kind in STRATEGY_SECTIONS.items():
             params = dict(data.get(section, {}))
@@ -167,11 +196,15 @@ class Scene:
                 raise BarkError(f"[{section}] name = {name!r}: must be a string naming a {kind} strategy")
             strategies[section] = registry.create(kind, name, **params)
             names[section] = name
+        if "bulges" in resolved and names["growth"] != "bulge":
+            raise BarkError("the effect 'bulges' needs [growth] name = 'bulge' with its bulges")
         return cls(
             name=str(meta.get("name", "")),
             description=str(meta.get("description", "")),
             strategies=strategies,
             names=names,
+            wanted=tuple(wanted),
+            frame_every=float(frame_every),
             **parts,
         )
 
@@ -181,14 +214,24 @@ class Scene:
         return cls.from_dict(merge(read_toml(path), overrides or {}))
 
     def simulation(self) -> Simulation:
-        """A fresh simulation composed of exactly this scene's parts."""
+        """A fresh simulation composed of exactly this scene's effects: what is not asked for is not
+        built (no bulge wrapper, no breaker, no analyzer, no anchor or damping terms, no break log)."""
+        has = self.effects
+        growth = self.strategies["growth"]
+        if self.names["growth"] == "bulge" and "bulges" not in has:
+            growth = growth.base  # bulges configured but not asked for: the bulge code is never built
+        mechanics = self.mechanics
+        if "anchors" not in has or "damping" not in has:
+            mechanics = attrs.evolve(mechanics, c=mechanics.c if "anchors" in has else 0.0,
+                                     b=mechanics.b if "damping" in has else 0.0)
         return Simulation(
             lattice=self.lattice,
-            mechanics=self.mechanics,
-            growth=self.strategies["growth"],
+            mechanics=mechanics,
+            growth=growth,
             integrator=self.strategies["integrator"],
-            breakers=[self.strategies["breaker"]],
-            analyzers=[self.strategies["analyzer"]],
+            breakers=[self.strategies["breaker"]] if "fracture" in has else [],
+            analyzers=[self.strategies["analyzer"]] if "patch-statistics" in has else [],
+            record_breaks="break-log" in has,
             dt=self.run.dt,
             seed=self.run.seed,
             degenerate_fraction=self.run.degenerate_fraction,
@@ -208,8 +251,29 @@ class Scene:
         for section in PARAM_SECTIONS:
             out[section] = attrs.asdict(getattr(self, section))
         for section, strategy in self.strategies.items():
-            out[section] = {"name": self.names[section], **strategy.params()}
+            out[section] = {"name": self.names[section], **_plain(strategy.params())}
+        out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every}
         return out
+
+
+def _plain(value):
+    """Strategy parameters as TOML/JSON-shaped data (nested attrs objects become tables)."""
+    if attrs.has(type(value)):
+        params = {a.name: _plain(getattr(value, a.name)) for a in attrs.fields(type(value)) if a.init}
+        from bark.strategies import Strategy
+
+        if isinstance(value, Strategy):  # a nested strategy (a bulge law's base) is named as in a scene
+            from bark import effects, registry
+
+            name = next((n for n, ep in registry.available(value.kind).items()
+                         if ep.value.endswith(":" + type(value).__name__)), type(value).__name__)
+            params = {"name": name, **params}
+        return params
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:

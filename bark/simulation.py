@@ -144,11 +144,17 @@ class Simulation:
     """Adaptive stepping's smallest step is the full step / 2**max_halvings."""
     backend: str = attrs.field(default="auto", validator=one_of(*kernels.BACKENDS))
     """Compute backend of the hot loop: ``numpy``, ``numba``, or ``auto`` (numba if installed)."""
+    record_breaks: bool = attrs.field(default=True)
+    """Keep the break log (spring, step, time, tension of every break).  Off when a scene does not
+    ask for the ``break-log`` effect: nothing is recorded along the way."""
 
     rng: np.random.Generator = attrs.field(init=False)
     graph: nx.Graph = attrs.field(init=False)
     state: State = attrs.field(init=False)
     breaks: BreakLog = attrs.field(init=False, factory=BreakLog)
+    actions: list = attrs.field(init=False, factory=list)
+    """``(trigger, action)`` pairs: after each step (or run of quiet steps) every action whose trigger
+    fires is called with the simulation (see :meth:`add_action` and ``bark.triggers``)."""
     events: list[dict] = attrs.field(init=False, factory=list)
     """Degenerate events and other notable happenings, as dicts with at least ``kind``, ``t``, ``step``."""
     h: float = attrs.field(init=False)
@@ -257,13 +263,21 @@ class Simulation:
         return self.stop_reason
 
     def irun(self, stop: Stop) -> Iterator["Simulation"]:
-        """The loop of :meth:`run` as a generator that yields after every :meth:`advance`."""
+        """The loop of :meth:`run` as a generator that yields after every :meth:`advance` (and its actions)."""
         self.stop_reason = None
         self._fit_step_to(stop)
         while (reason := stop.reason(self)) is None and self.stop_reason is None:
             self.advance(stop)
+            for trigger, action in self.actions:
+                if trigger.fires(self):
+                    action(self)
             yield self
         self.stop_reason = self.stop_reason or reason
+
+    def add_action(self, trigger, action: Callable[["Simulation"], None]) -> None:
+        """Call ``action(sim)`` after every step at which ``trigger`` fires (``bark.triggers``).  A
+        compiled run of quiet steps ends where a trigger is next due, so actions see the exact step."""
+        self.actions.append((trigger, action))
 
     def advance(self, stop: Stop | None = None) -> int:
         """One :meth:`step`; or, where a compiled quiet-step kernel applies, up to ``QUIET_CHUNK``
@@ -371,6 +385,12 @@ class Simulation:
         radius = self.growth.radius
         r = np.array([float(first), *(float(radius(t, z)) for t in ts[1:].tolist())])
         n = len(r)
+        for trigger, _ in self.actions:  # end where an action is next due
+            step, due = trigger.next_step(self), trigger.next_time(self)
+            if step is not None:
+                n = min(n, max(1, step - self.step_count))
+            if due is not None:
+                n = min(n, _first(ts >= due - 1e-9 * self.h) + 1)
         if stop is not None and stop.until_time is not None:
             n = min(n, _first(ts >= stop.until_time - 1e-9 * self.h) + 1)
         if stop is not None and stop.until_radius is not None:
@@ -474,7 +494,8 @@ class Simulation:
             tension = s.tension()
         s.intact[ids] = False
         self.graph.remove_edges_from(s.pairs[ids].tolist())
-        self.breaks.record(ids, s.pairs, self.step_count, s.t, tension)
+        if self.record_breaks:
+            self.breaks.record(ids, s.pairs, self.step_count, s.t, tension)
         self._labels = None
         return ids
 

@@ -204,3 +204,38 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
     plot_work_precision(pos_rows, orders, pat_rows, spread, out / "accuracy.png",
                         highlight=(default_label, default_param), title=f"t = {until_time:g}, {seeds} seeds")
     console.print(f"wrote {out}/accuracy.png, accuracy_position.csv, accuracy_pattern.csv, accuracy_summary.json")
+
+
+@bench.command()
+@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False), required=True)
+@click.option("--repeats", type=int, default=3, show_default=True, help="Runs per scene, interleaved; medians.")
+def scenes(scenes, repeats):
+    """Wall time and peak memory of `bark simulate --scene S` for each scene, as the command runs it
+    (a fresh process each time, outputs to a temporary folder), with ratios against the first."""
+    import resource
+    import subprocess
+    import sys
+    import tempfile
+
+    from rich.console import Console
+    from rich.table import Table
+
+    times = {s: [] for s in scenes}
+    peaks = {s: [] for s in scenes}
+    for _ in range(repeats):
+        for scene in scenes:  # interleaved, so that a change in the machine's load falls on all alike
+            with tempfile.TemporaryDirectory() as out:
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                t0 = time.perf_counter()
+                subprocess.run([sys.executable, "-m", "bark_cli.main", "simulate", "--scene", scene, "--out", out,
+                                "--quiet"], check=True)
+                times[scene].append(time.perf_counter() - t0)
+                peaks[scene].append(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
+                del before
+    base = scenes[0]
+    t_base = float(np.median(times[base]))
+    table = Table("scene", "wall s (median)", "vs first", "peak RSS MiB", title="bark bench scenes")
+    for scene in scenes:
+        t = float(np.median(times[scene]))
+        table.add_row(scene, f"{t:.3g}", f"{t / t_base:.3g}", f"{max(peaks[scene]) / 1024:.0f}")
+    Console(width=140).print(table)

@@ -143,12 +143,20 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
 
     from bark import checkpoint
     from bark.output import write_run
-    from bark_cli.plot import plot_pattern
     from bark_cli.progress import progress_observer
 
     out.mkdir(parents=True, exist_ok=True)
     ckpt = out / checkpoint.CHECKPOINT_NAME
+    if not scene.has("checkpoints"):
+        checkpoint_every = 0.0
     show = not quiet and sys.stdout.isatty()
+    frames = None
+    if scene.has("animation"):  # frames along the way: only when asked for
+        from bark.triggers import Every
+        from bark_cli.animation import Frames
+
+        frames = Frames()
+        sim.add_action(Every(scene.frame_every), frames.record)
     interrupted = []
     t0 = time.perf_counter()
     last_save = [t0]
@@ -157,6 +165,8 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
         interrupted.append(True)
 
     def save(reason: str, stop_reason=None):
+        if not scene.has("checkpoints"):
+            return
         wall = wall_before + time.perf_counter() - t0
         checkpoint.save(ckpt, sim, scene, stop, reason, {"stop_reason": stop_reason, "wall_time_s": wall})
 
@@ -184,7 +194,13 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
         code = 130
     wall = wall_before + time.perf_counter() - t0
     summary = write_run(sim, scene, out, reason, wall)
-    plot_pattern(sim, out / "pattern.png", scene.run.min_patch_size)
+    if scene.has("pattern-image"):
+        from bark_cli.plot import plot_pattern  # matplotlib is imported only when an image is asked for
+
+        plot_pattern(sim, out / "pattern.png", scene.run.min_patch_size)
+    if frames is not None:
+        frames.record(sim)
+        frames.write(out / "development.gif", scene.run.min_patch_size)
     save("interrupted" if code == 130 else "end", reason)
     for event in summary["degenerate_events"]:
         click.echo(
@@ -203,6 +219,35 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
     elif resumed and not quiet:
         click.echo(f"bark: resumed run ended ({reason}) at t = {sim.state.t:.6g}", err=True)
     return code
+
+
+@cli.command()
+@click.argument("scene_file", type=click.Path(dir_okay=False), required=False)
+def plan(scene_file):
+    """Show what SCENE (default: the default scene) will simulate and write, and why each effect is
+    there: asked for by the scene, or needed by another effect.  Nothing is run."""
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    from bark.effects import EFFECTS
+
+    scene = Scene.from_dict(read_toml(scene_file) if scene_file else {})
+    resolved = scene.effects
+    sim = scene.simulation()  # composed, not run: shows what is built
+    table = Table("effect", "in the run", "why", "what it does", title=f"bark plan — {scene.name or scene_file or 'default scene'}")
+    for name, effect in EFFECTS.items():
+        on = name in resolved
+        table.add_row(name, "yes" if on else "no", resolved.get(name, "not asked for"), escape(effect.does),
+                      style=None if on else "dim")
+    console = Console(width=140)
+    console.print(table)
+    built = [f"growth: {type(sim.growth).__name__}", f"integrator: {type(sim.integrator).__name__}",
+             f"breakers: {[type(b).__name__ for b in sim.breakers] or 'none'}",
+             f"analyzers: {[type(a).__name__ for a in sim.analyzers] or 'none'}",
+             f"anchors c = {sim.mechanics.c:g}", f"damping b = {sim.mechanics.b:g}",
+             f"break log: {'kept' if sim.record_breaks else 'not kept'}"]
+    console.print("built: " + "; ".join(built))
 
 
 @cli.command()

@@ -29,11 +29,7 @@ def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = N
     r = sim.radius
     uv = unwrap(s.x, r)
     labels = sim.patch_labels()
-    sizes = np.bincount(labels)
-    big = sizes[labels] >= min_size
-    # one colour per big patch, stable across runs: index patches by their label
-    palette = np.array([[*c, 1.0] for i, c in enumerate(_tab20()) if i not in (14, 15)])  # no greys
-    colours = np.where(big[:, None], palette[labels % len(palette)], [0.7, 0.7, 0.7, 1.0])
+    colours = patch_colours(labels, min_size)
 
     p = s.pairs[s.intact]
     seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
@@ -63,6 +59,15 @@ def _tab20():
     return colormaps["tab20"].colors
 
 
+def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
+    """RGBA per base: one colour per patch of at least ``min_size`` bases (by label, so stable across
+    frames and runs), light grey for smaller fragments."""
+    sizes = np.bincount(labels)
+    big = sizes[labels] >= min_size
+    palette = np.array([[*c, 1.0] for i, c in enumerate(_tab20()) if i not in (14, 15)])  # no greys
+    return np.where(big[:, None], palette[labels % len(palette)], [0.7, 0.7, 0.7, 1.0])
+
+
 def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None, title=""):
     """Work-precision diagram: log-log error against wall time, one line per method, one marker per
     dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""
@@ -78,6 +83,9 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
         "hellinger": "(b) Hellinger distance of orientations",
     }
 
+    methods = list(dict.fromkeys(r["method"] for r in [*pos_rows, *pat_rows]))
+    colour = {m: f"C{i % 10}" for i, m in enumerate(methods)}  # one colour per method, in every panel
+
     def lines(ax, rows, key, floor):
         for method in dict.fromkeys(r["method"] for r in rows):
             mine = [r for r in rows if r["method"] == method and np.isfinite(r[key])]
@@ -86,7 +94,7 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
             x = [r["wall_s"] for r in mine]
             y = [max(r[key], floor) for r in mine]
             label = method + (f" (order {orders[method]:.2f})" if key == "error" and method in orders else "")
-            (line,) = ax.plot(x, y, "o-", label=label, ms=5)
+            (line,) = ax.plot(x, y, "o-", label=label, ms=5, color=colour[method])
             for r, xi, yi in zip(mine, x, y):
                 ax.annotate(f"{r['param']:g}", (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=7,
                             color=line.get_color())

@@ -1,0 +1,67 @@
+"""Effects: what a scene asks to be simulated and written — and so, what is built and run at all.
+
+A scene's ``[effects]`` table names the effects it wants (``want = [...]``); the simulation is
+composed from exactly those plus what they need, and nothing else is built or run: no bulges asked,
+no bulge code runs; no image asked, matplotlib is never imported; only statistics at the end asked,
+nothing is recorded along the way.  ``bark plan SCENE`` prints the resolved set and why each effect
+is in it.  A scene without a ``want`` list gets ``DEFAULT`` (plus ``bulges`` if its growth law is
+``bulge``): the usual outputs of the model it configures.
+"""
+
+from __future__ import annotations
+
+import attrs
+
+from bark.errors import BarkError
+
+__all__ = ["Effect", "EFFECTS", "DEFAULT", "resolve"]
+
+
+@attrs.frozen
+class Effect:
+    name: str
+    does: str
+    needs: tuple[str, ...] = ()
+
+
+EFFECTS: dict[str, Effect] = {
+    e.name: e
+    for e in [
+        Effect("secondary-growth", "the trunk grows in girth ([growth] law; eq. 9)"),
+        Effect("bulges", "bulges raise the trunk locally ([growth] name = 'bulge')", ("secondary-growth",)),
+        Effect("anchors", "anchor springs tie each base to its site (eq. 2; without: c = 0)"),
+        Effect("damping", "damping of the bases' motion (eq. 3; without: b = 0)"),
+        Effect("fracture", "springs over their threshold break ([breaker])", ("secondary-growth",)),
+        Effect("patch-statistics", "patches, PCA orientation, anisotropy at the end: patches.csv, summary.json",
+               ("fracture",)),
+        Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",)),
+        Effect("break-log", "every break recorded as it happens: breaks.csv", ("fracture",)),
+        Effect("state-snapshot", "the mechanical state at the end: state.npz"),
+        Effect("checkpoints", "checkpoint.npz: periodic, on Ctrl-C and at the end (for --resume)"),
+        Effect("graphml", "the leaf-base graph of intact springs at the end: graph.graphml"),
+        Effect("animation", "frames of the pattern along the way: development.gif", ("fracture",)),
+    ]
+}
+
+DEFAULT: tuple[str, ...] = (
+    "secondary-growth", "anchors", "damping", "fracture", "patch-statistics", "pattern-image", "break-log",
+    "state-snapshot", "checkpoints",
+)
+
+
+def resolve(wanted) -> dict[str, str]:
+    """Every effect needed for ``wanted``, each with why it is there ("asked for" or "needed by X"),
+    in the order of ``EFFECTS``.  An unknown name is a one-line BarkError."""
+    wanted = list(wanted)
+    for name in wanted:
+        if not isinstance(name, str) or name not in EFFECTS:
+            raise BarkError(f"unknown effect {name!r} in [effects] want: allowed are {', '.join(EFFECTS)}")
+    why: dict[str, str] = {name: "asked for" for name in wanted}
+    todo = list(wanted)
+    while todo:
+        name = todo.pop()
+        for need in EFFECTS[name].needs:
+            if need not in why:
+                why[need] = f"needed by {name}"
+                todo.append(need)
+    return {name: why[name] for name in EFFECTS if name in why}

@@ -1,0 +1,162 @@
+"""Triggers: when an analyzer, a writer or a recorder acts (after HOOMD-blue's triggers).
+
+A trigger looks at the simulation after a step and says whether it fires now: ``fires(sim)``.  It
+also says when it will next be due, so that the simulation can end a compiled run of quiet steps
+exactly there (``next_step(sim)``, ``next_time(sim)``; ``None`` = no such bound).  Triggers compose:
+``a & b``, ``a | b``, ``~a``.
+
+===========================  ===============================================================
+``Periodic(steps, phase=0)``  every ``steps`` steps (step_count % steps == phase)
+``Every(time, start=0)``      each time simulated time reaches start + k·time (once per k)
+``At(times)``                 when simulated time first reaches each of ``times``
+``OnEvent("first-break")``    once, after the first step that breaks a spring; also
+                              ``"break"`` (every step that breaks springs) and
+                              ``"degenerate"`` (every degenerate event)
+===========================  ===============================================================
+
+Triggers with memory (``Every``, ``At``, ``OnEvent``) are small mutable objects: give each action
+its own.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+
+from bark._validate import non_negative, one_of, positive, positive_int
+
+__all__ = ["Trigger", "Periodic", "Every", "At", "OnEvent", "And", "Or", "Not"]
+
+
+class Trigger:
+    """Base: ``fires(sim) -> bool`` after each step; ``next_step``/``next_time`` bound the next call."""
+
+    def fires(self, sim) -> bool:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def next_step(self, sim) -> int | None:
+        return None
+
+    def next_time(self, sim) -> float | None:
+        return None
+
+    def __and__(self, other: "Trigger") -> "Trigger":
+        return And(self, other)
+
+    def __or__(self, other: "Trigger") -> "Trigger":
+        return Or(self, other)
+
+    def __invert__(self) -> "Trigger":
+        return Not(self)
+
+
+@attrs.define
+class Periodic(Trigger):
+    steps: int = attrs.field(validator=positive_int)
+    phase: int = attrs.field(default=0, validator=non_negative)
+
+    def fires(self, sim) -> bool:
+        return sim.step_count % self.steps == self.phase % self.steps
+
+    def next_step(self, sim) -> int:
+        n = sim.step_count + 1
+        return n + (self.phase - n) % self.steps
+
+
+@attrs.define
+class Every(Trigger):
+    time: float = attrs.field(validator=positive)
+    start: float = attrs.field(default=0.0, validator=non_negative)
+    _next_k: int = attrs.field(default=0, init=False)
+
+    def _due(self) -> float:
+        return self.start + self._next_k * self.time
+
+    def fires(self, sim) -> bool:
+        eps = 1e-9 * sim.h
+        if sim.state.t < self._due() - eps:
+            return False
+        # once per crossing, even if a step jumped over several due times
+        self._next_k = max(self._next_k + 1, math.floor((sim.state.t + eps - self.start) / self.time) + 1)
+        return True
+
+    def next_time(self, sim) -> float:
+        return self._due()
+
+
+@attrs.define
+class At(Trigger):
+    times: tuple[float, ...] = attrs.field(converter=lambda v: tuple(sorted(float(t) for t in v)))
+    _i: int = attrs.field(default=0, init=False)
+
+    def fires(self, sim) -> bool:
+        eps = 1e-9 * sim.h
+        fired = False
+        while self._i < len(self.times) and sim.state.t >= self.times[self._i] - eps:
+            self._i += 1
+            fired = True
+        return fired
+
+    def next_time(self, sim) -> float | None:
+        return self.times[self._i] if self._i < len(self.times) else None
+
+
+@attrs.define
+class OnEvent(Trigger):
+    event: str = attrs.field(validator=one_of("first-break", "break", "degenerate"))
+    _seen_breaks: int = attrs.field(default=0, init=False)
+    _seen_events: int = attrs.field(default=0, init=False)
+    _done: bool = attrs.field(default=False, init=False)
+
+    def fires(self, sim) -> bool:
+        if self.event == "degenerate":
+            n = sum(e["kind"] == "degenerate" for e in sim.events)
+            fired, self._seen_events = n > self._seen_events, n
+            return fired
+        broke = sim.n_broken > self._seen_breaks
+        self._seen_breaks = sim.n_broken
+        if self.event == "break":
+            return broke
+        if broke and not self._done:
+            self._done = True
+            return True
+        return False
+
+
+def _min(a, b):
+    return b if a is None else a if b is None else min(a, b)
+
+
+@attrs.define
+class And(Trigger):
+    a: Trigger
+    b: Trigger
+
+    def fires(self, sim) -> bool:
+        fa, fb = self.a.fires(sim), self.b.fires(sim)  # both asked: triggers with memory stay in step
+        return fa and fb
+
+    def next_step(self, sim):
+        return _min(self.a.next_step(sim), self.b.next_step(sim))
+
+    def next_time(self, sim):
+        return _min(self.a.next_time(sim), self.b.next_time(sim))
+
+
+@attrs.define
+class Or(And):
+    def fires(self, sim) -> bool:
+        fa, fb = self.a.fires(sim), self.b.fires(sim)
+        return fa or fb
+
+
+@attrs.define
+class Not(Trigger):
+    a: Trigger
+
+    def fires(self, sim) -> bool:
+        return not self.a.fires(sim)
+
+    def next_step(self, sim):
+        return sim.step_count + 1  # a negation may be due at any step

@@ -1,0 +1,126 @@
+"""Scenes simulate only the effects they ask for: checked by instrumentation, not by reading config."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bark import Stop
+from bark.effects import DEFAULT, EFFECTS, resolve
+from bark.errors import BarkError
+from bark.scene import Scene
+from bark_cli.main import cli
+from conftest import REPO_ROOT
+
+SCENES = REPO_ROOT / "examples" / "scenes"
+SMALL = {"lattice": {"n_bases": 400}, "growth": {"G": 0.05}, "run": {"until_time": 6.0, "until_patches": None}}
+
+
+def _scene(want, **extra):
+    data = {**SMALL, **extra, "effects": {"want": list(want)}}
+    return Scene.from_dict(data)
+
+
+def test_resolution_adds_what_is_needed_and_says_why():
+    got = resolve(["pattern-image"])
+    assert got == {"secondary-growth": "needed by fracture", "fracture": "needed by pattern-image",
+                   "pattern-image": "asked for"}
+    assert set(resolve(DEFAULT)) == set(DEFAULT)
+    with pytest.raises(BarkError) as err:
+        resolve(["pattern-image", "sparkles"])
+    assert "sparkles" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_image_not_asked_means_matplotlib_never_imported(tmp_path):
+    code = (
+        "import sys\n"
+        "from bark_cli.main import cli\n"
+        f"try:\n    cli.main(['simulate', '--scene', {str(SCENES / 'statistics-only.toml')!r}, '--n-bases', '400',"
+        f" '-G', '0.05', '--out', {str(tmp_path / 'out')!r}, '--quiet'])\n"
+        "except SystemExit as e:\n    assert e.code == 0, e.code\n"
+        "print('matplotlib' in sys.modules, sorted(p.name for p in __import__('pathlib').Path("
+        f"{str(tmp_path / 'out')!r}).iterdir()))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "False ['patches.csv', 'summary.json']"
+
+
+def test_image_asked_imports_matplotlib_and_draws(tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(SCENES / "pattern-image.toml"), "--n-bases", "400",
+                                      "-G", "0.05", "--until-time", "6", "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["pattern.png", "summary.json"]
+
+
+def test_bulges_configured_but_not_asked_never_run(monkeypatch):
+    from bark_plugins.growth import BulgeGrowth
+
+    def boom(*a, **k):
+        raise AssertionError("bulge code ran")
+
+    monkeypatch.setattr(BulgeGrowth, "radius", boom)
+    monkeypatch.setattr(BulgeGrowth, "adjust_thresholds", boom)
+    bulge = {"name": "bulge", "bulges": [{"z": 0.1, "half_width": 0.05, "magnitude": 0.01}]}
+    sim = _scene(["anchors", "damping", "fracture"], growth=bulge).simulation()
+    sim.run(Stop(until_time=2.0))
+    assert type(sim.growth).__name__ == "SqrtGrowth"
+    with pytest.raises(AssertionError, match="bulge code ran"):  # and asked for, it does run
+        _scene(["bulges", "fracture"], growth=bulge).simulation()
+
+
+def test_no_fracture_asked_means_no_breaker_is_called(monkeypatch):
+    from bark_plugins.breakers import ThresholdBreaker
+
+    monkeypatch.setattr(ThresholdBreaker, "select", lambda *a: (_ for _ in ()).throw(AssertionError("breaker ran")))
+    sim = _scene(["anchors", "damping", "state-snapshot"]).simulation()
+    sim.run(Stop(until_time=6.0))
+    assert sim.breakers == () and sim.analyzers == () and sim.n_broken == 0
+    assert np.max(sim.state.tension() / sim.state.fmax) > 1  # springs were over threshold: nothing broke them
+
+
+def test_statistics_only_records_nothing_along_the_way():
+    sim = _scene(["anchors", "damping", "patch-statistics"]).simulation()
+    sim.run(Stop(until_time=6.0))
+    assert sim.n_broken > 20  # it cracked ...
+    assert len(sim.breaks) == 0 and sim.actions == []  # ... and kept no log, no frames, no triggers
+    full = _scene(DEFAULT).simulation()
+    full.run(Stop(until_time=6.0))
+    assert len(full.breaks) == full.n_broken == sim.n_broken  # the same physics, with the log
+
+
+def test_anchors_and_damping_off_when_not_asked():
+    sim = _scene(["fracture"]).simulation()
+    assert sim.mechanics.c == 0.0 and sim.mechanics.b == 0.0
+    assert _scene(["fracture", "anchors", "damping"]).simulation().mechanics.b == 5.0
+
+
+@pytest.mark.parametrize("data, key", [
+    ({"effects": {"want": ["bulges", "fracture"]}}, "bulge"),
+    ({"effects": {"want": ["anchors"]}, "run": {"until_patches": 10}}, "until_patches"),
+    ({"effects": {"want": "fracture"}}, "want"),
+    ({"effects": {"wanted": ["fracture"]}}, "wanted"),
+    ({"effects": {"want": ["fracture"], "frame_every": 0}}, "frame_every"),
+])
+def test_bad_effects_are_one_line(data, key):
+    with pytest.raises(BarkError) as err:
+        Scene.from_dict(data)
+    assert "\n" not in str(err.value) and key in str(err.value)
+
+
+def test_plan_shows_different_effect_sets_for_the_three_scenes():
+    runner = CliRunner()
+    shown = {}
+    for name in ("statistics-only", "pattern-image", "everything"):
+        result = runner.invoke(cli, ["plan", str(SCENES / f"{name}.toml")])
+        assert result.exit_code == 0, result.output
+        shown[name] = {line.split("│")[1].strip() for line in result.output.splitlines()
+                       if line.count("│") >= 4 and "│ yes" in line}
+    assert shown["statistics-only"] == {"secondary-growth", "anchors", "damping", "fracture", "patch-statistics"}
+    assert shown["pattern-image"] == {"secondary-growth", "anchors", "damping", "fracture", "pattern-image"}
+    assert shown["everything"] == set(EFFECTS)
