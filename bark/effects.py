@@ -34,6 +34,8 @@ EFFECTS: dict[str, Effect] = {
         Effect("fracture", "springs over their threshold break ([breaker])", ("secondary-growth",)),
         Effect("patch-statistics", "patches, PCA orientation, anisotropy at the end: patches.csv, summary.json",
                ("fracture",)),
+        Effect("statistics-series", "the patch statistics along the way, every series_every: statistics.csv",
+               ("patch-statistics",)),
         Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",)),
         Effect("break-log", "every break recorded as it happens: breaks.csv", ("fracture",)),
         Effect("state-snapshot", "the mechanical state at the end: state.npz"),

@@ -14,11 +14,13 @@ bases or springs), so property tests can hit them directly.
 
 from __future__ import annotations
 
+import math
+
 import attrs
 import numpy as np
 import scipy.sparse as sp
 
-from bark._validate import non_negative, positive
+from bark._validate import non_negative, optional, positive
 
 __all__ = [
     "Mechanics",
@@ -50,11 +52,23 @@ class Mechanics:
     fmax_spread: float = attrs.field(default=0.0, validator=non_negative)
     """Relative spread of the per-spring thresholds: each spring's f_max is drawn log-normally
     with mean ``f_max`` and coefficient of variation ≈ ``fmax_spread``.  0 = all equal."""
+    fmax_weibull_shape: float | None = attrs.field(default=None, validator=optional(positive))
+    """Instead: draw each spring's threshold from a Weibull distribution of this shape (modulus) k,
+    scaled to mean ``f_max`` — the weakest-link law of brittle strength (small k: very unequal
+    springs; k ≈ 10: a few percent).  ``None``: log-normal with ``fmax_spread``."""
+
+    def __attrs_post_init__(self) -> None:
+        if self.fmax_weibull_shape is not None and self.fmax_spread > 0:
+            raise ValueError("fmax_spread and fmax_weibull_shape are two ways to spread thresholds: give one")
 
     def thresholds(self, n_springs: int, rng: np.random.Generator) -> np.ndarray:
-        """Per-spring breaking thresholds, drawn from ``rng`` (always drawn, for a stable stream)."""
+        """Per-spring breaking thresholds, drawn from ``rng`` (the normal draw is always made, for a
+        stable stream whatever the spread)."""
         s = self.fmax_spread
         noise = rng.standard_normal(n_springs)
+        if self.fmax_weibull_shape is not None:
+            k = self.fmax_weibull_shape
+            return self.f_max * rng.weibull(k, n_springs) / math.gamma(1.0 + 1.0 / k)
         return self.f_max * np.exp(s * noise - 0.5 * s * s)
 
 

@@ -186,3 +186,25 @@ def write_graphml(path: str | Path, sim) -> Path:
         nx.write_graphml(g, fh)
 
     return atomic_write(path, write)
+
+
+SERIES_COLUMNS = ["t", "radius", "step", "n_broken", "n_patches", "mean_orientation_deg", "circular_sd_deg",
+                  "mean_anisotropy", "fraction_within_45_deg"]
+
+
+class StatisticsSeries:
+    """The patch statistics along a run: an action for ``Simulation.add_action`` (on a trigger, e.g.
+    ``Every(series_every)``) that runs the simulation's analyzers and keeps one row per call."""
+
+    def __init__(self) -> None:
+        self.rows: list[dict[str, Any]] = []
+
+    def record(self, sim) -> None:
+        if self.rows and self.rows[-1]["step"] == sim.step_count:
+            return
+        stats = next((a.summary for a in sim.analyze().values() if "n_patches" in a.summary), {})
+        self.rows.append({"t": sim.state.t, "radius": sim.radius, "step": sim.step_count, "n_broken": sim.n_broken,
+                          **{k: stats.get(k) for k in SERIES_COLUMNS[4:]}})
+
+    def write(self, path: str | Path) -> Path:
+        return write_csv(path, self.rows, SERIES_COLUMNS)

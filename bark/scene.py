@@ -143,6 +143,8 @@ class Scene:
     """The effects the scene asked for (``[effects] want``)."""
     frame_every: float = 10.0
     """With the ``animation`` effect: simulated time between frames."""
+    series_every: float = 10.0
+    """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
 
     @property
     def effects(self) -> dict[str, str]:
@@ -173,9 +175,9 @@ class Scene:
         if parts["run"].until_time is None and parts["run"].until_radius is None and parts["run"].until_patches is None:
             raise BarkError("[run] no stop condition: give until_time, until_radius or until_patches")
         eff = dict(data.get("effects", {}))
-        bad = sorted(set(eff) - {"want", "frame_every"})
+        bad = sorted(set(eff) - {"want", "frame_every", "series_every"})
         if bad:
-            raise BarkError(f"unknown key {bad[0]!r} in [effects]: allowed are want, frame_every")
+            raise BarkError(f"unknown key {bad[0]!r} in [effects]: allowed are want, frame_every, series_every")
         wanted = eff.get("want")
         if wanted is None:  # no list: the default outputs, and the model the scene configures
             growth_name = dict(data.get("growth", {})).get("name", DEFAULT_STRATEGIES["growth"])
@@ -183,9 +185,10 @@ class Scene:
         if isinstance(wanted, str) or not isinstance(wanted, (list, tuple)):
             raise BarkError(f"[effects] want = {wanted!r}: must be a list of effect names, e.g. ['fracture', 'pattern-image']")
         resolved = effects.resolve(wanted)
-        frame_every = eff.get("frame_every", 10.0)
-        if isinstance(frame_every, bool) or not isinstance(frame_every, (int, float)) or not frame_every > 0:
-            raise BarkError(f"[effects] frame_every = {frame_every!r}: must be a number > 0")
+        every = {key: eff.get(key, 10.0) for key in ("frame_every", "series_every")}
+        for key, value in every.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+                raise BarkError(f"[effects] {key} = {value!r}: must be a number > 0")
         if parts["run"].until_patches is not None and "fracture" not in resolved:
             raise BarkError("[run] until_patches needs the effect 'fracture' (no fracture, no patches)")
         strategies, names = {}, {}
@@ -204,7 +207,8 @@ class Scene:
             strategies=strategies,
             names=names,
             wanted=tuple(wanted),
-            frame_every=float(frame_every),
+            frame_every=float(every["frame_every"]),
+            series_every=float(every["series_every"]),
             **parts,
         )
 
@@ -252,7 +256,7 @@ class Scene:
             out[section] = attrs.asdict(getattr(self, section))
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **_plain(strategy.params())}
-        out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every}
+        out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every}
         return out
 
 

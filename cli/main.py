@@ -150,6 +150,13 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
     if not scene.has("checkpoints"):
         checkpoint_every = 0.0
     show = not quiet and sys.stdout.isatty()
+    series = None
+    if scene.has("statistics-series"):  # the analyzers along the way, on their trigger
+        from bark.output import StatisticsSeries
+        from bark.triggers import Every
+
+        series = StatisticsSeries()
+        sim.add_action(Every(scene.series_every), series.record)
     frames = None
     if scene.has("animation"):  # frames along the way: only when asked for
         from bark.triggers import Every
@@ -198,6 +205,9 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
         from bark_cli.plot import plot_pattern  # matplotlib is imported only when an image is asked for
 
         plot_pattern(sim, out / "pattern.png", scene.run.min_patch_size)
+    if series is not None:
+        series.record(sim)
+        series.write(out / "statistics.csv")
     if frames is not None:
         frames.record(sim)
         frames.write(out / "development.gif", scene.run.min_patch_size)

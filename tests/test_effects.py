@@ -124,3 +124,21 @@ def test_plan_shows_different_effect_sets_for_the_three_scenes():
     assert shown["statistics-only"] == {"secondary-growth", "anchors", "damping", "fracture", "patch-statistics"}
     assert shown["pattern-image"] == {"secondary-growth", "anchors", "damping", "fracture", "pattern-image"}
     assert shown["everything"] == set(EFFECTS)
+
+
+def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
+    out = tmp_path / "out"
+    scene = tmp_path / "series.toml"
+    scene.write_text('[effects]\nwant = ["anchors", "damping", "statistics-series"]\nseries_every = 2.0\n'
+                     '[lattice]\nn_bases = 400\n[growth]\nG = 0.05\n[run]\nuntil_time = 8.0\n')
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(scene), "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    import csv
+
+    rows = list(csv.DictReader((out / "statistics.csv").open()))
+    # each row at the first step at or past its due time (0, 2, 4, 6, 8; steps are at most 0.3 long)
+    t = np.array([float(r["t"]) for r in rows])
+    due = np.array([0.0, 2.0, 4.0, 6.0, 8.0])
+    assert len(t) == len(due) and np.all((t >= due - 1e-9) & (t - due < 0.3))
+    assert [int(r["n_broken"]) for r in rows] == sorted(int(r["n_broken"]) for r in rows)
+    assert int(rows[-1]["n_broken"]) > 0 and rows[-1]["n_patches"] != ""

@@ -69,3 +69,25 @@ def test_probabilistic_breaking_only_grows(stepping):
     assert sim.n_broken > 20
     log = sim.breaks.arrays()
     assert len(np.unique(log["spring"])) == len(log["spring"])  # each spring breaks once
+
+
+@pytest.mark.parametrize("shape", [2.0, 8.0])
+def test_weibull_thresholds_have_their_law(shape):
+    """Mean f_max, and the Weibull shape recovered by scipy's fit of 100 000 drawn thresholds."""
+    from scipy import stats
+
+    from bark.forces import Mechanics
+
+    f = Mechanics(f_max=0.005, fmax_weibull_shape=shape).thresholds(100_000, np.random.default_rng(1))
+    assert f.mean() == pytest.approx(0.005, rel=0.01)
+    k, _, _ = stats.weibull_min.fit(f, floc=0)
+    assert k == pytest.approx(shape, rel=0.03)
+
+
+def test_weibull_and_lognormal_spreads_exclude_each_other():
+    from bark.errors import BarkError
+    from bark.scene import Scene
+
+    with pytest.raises(BarkError) as err:
+        Scene.from_dict({"mechanics": {"fmax_spread": 0.05, "fmax_weibull_shape": 5.0}})
+    assert "give one" in str(err.value)
