@@ -124,3 +124,42 @@ def test_editable_finder_maps_only_bark_names():
 def test_console_script_is_registered():
     scripts = {ep.name: ep.value for ep in metadata.entry_points(group="console_scripts") if ep.name == "bark"}
     assert scripts == {"bark": "bark_cli.main:main"}
+
+
+def test_a_built_wheel_has_every_module(tmp_path):
+    """An editable install maps folders, so it hides a package missing from the wheel's list: build
+    the real wheel, install it apart, and import every module of bark, bark_plugins and bark_cli."""
+    import os
+
+    from conftest import REPO_ROOT
+
+    import shutil
+
+    wheels, site, source = tmp_path / "wheels", tmp_path / "site", tmp_path / "source"
+    # build from a clean copy: a build/ folder left in the checkout would fill any gap with stale files
+    shutil.copytree(REPO_ROOT, source, ignore=shutil.ignore_patterns(
+        "build", "dist", "*.egg-info", ".venv", ".ci-venv", "__pycache__", ".hypothesis", ".git", "bark-out*"))
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
+                            "-w", str(wheels), str(source)], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    (wheel,) = wheels.glob("bark-*.whl")
+    install = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)],
+                             capture_output=True, text=True)
+    assert install.returncode == 0, install.stderr
+    modules = sorted(
+        ".".join([pkg, *py.relative_to(REPO_ROOT / folder).with_suffix("").parts]).removesuffix(".__init__")
+        for pkg, folder in [("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")]
+        for py in (REPO_ROOT / folder).rglob("*.py")
+    )
+    assert "bark.kernels.numba_backend" in modules
+    # drop the finders of an editable install, which would fill any gap from the source tree
+    code = ("import importlib, sys\n"
+            "sys.meta_path[:] = [f for f in sys.meta_path\n"
+            "                    if not (f if isinstance(f, type) else type(f)).__module__.startswith('__editable__')]\n"
+            "for m in sys.argv[1:]:\n    importlib.import_module(m)\n"
+            "import bark; print(bark.__file__)")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["PYTHONPATH"] = str(site)
+    result = subprocess.run([sys.executable, "-c", code, *modules], capture_output=True, text=True, cwd=tmp_path, env=env)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().startswith(str(site))  # imported from the wheel, not the source tree
