@@ -212,7 +212,6 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
 def scenes(scenes, repeats):
     """Wall time and peak memory of `bark simulate --scene S` for each scene, as the command runs it
     (a fresh process each time, outputs to a temporary folder), with ratios against the first."""
-    import resource
     import subprocess
     import sys
     import tempfile
@@ -220,22 +219,29 @@ def scenes(scenes, repeats):
     from rich.console import Console
     from rich.table import Table
 
+    # each run reports its own peak resident memory (RUSAGE_CHILDREN would give the largest so far)
+    child = ("import resource, sys\nfrom bark_cli.main import cli\ncode = 0\n"
+             "try:\n    cli.main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"
+             "print('PEAK_KIB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+             "sys.exit(code)")
     times = {s: [] for s in scenes}
     peaks = {s: [] for s in scenes}
     for _ in range(repeats):
         for scene in scenes:  # interleaved, so that a change in the machine's load falls on all alike
             with tempfile.TemporaryDirectory() as out:
-                before = resource.getrusage(resource.RUSAGE_CHILDREN)
                 t0 = time.perf_counter()
-                subprocess.run([sys.executable, "-m", "bark_cli.main", "simulate", "--scene", scene, "--out", out,
-                                "--quiet"], check=True)
+                done = subprocess.run([sys.executable, "-c", child, "simulate", "--scene", scene, "--out", out, "--quiet"],
+                                      capture_output=True, text=True)
                 times[scene].append(time.perf_counter() - t0)
-                peaks[scene].append(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
-                del before
+                if done.returncode != 0:
+                    raise click.ClickException(f"{scene}: {done.stderr.strip().splitlines()[-1]}")
+                peaks[scene].append(int(done.stderr.split("PEAK_KIB")[-1].split()[0]))
     base = scenes[0]
     t_base = float(np.median(times[base]))
-    table = Table("scene", "wall s (median)", "vs first", "peak RSS MiB", title="bark bench scenes")
+    p_base = max(peaks[base])
+    table = Table("scene", "wall s (median)", "time vs first", "peak RSS MiB", "memory vs first", title="bark bench scenes")
     for scene in scenes:
         t = float(np.median(times[scene]))
-        table.add_row(scene, f"{t:.3g}", f"{t / t_base:.3g}", f"{max(peaks[scene]) / 1024:.0f}")
+        table.add_row(scene, f"{t:.3g}", f"{t / t_base:.3g}", f"{max(peaks[scene]) / 1024:.0f}",
+                      f"{max(peaks[scene]) / p_base:.3g}")
     Console(width=140).print(table)
