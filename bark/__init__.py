@@ -6,7 +6,7 @@ patterning in grasstrees".  See ARCHITECTURE.md for the data model, the loop and
 
 from importlib.metadata import PackageNotFoundError, version
 
-from bark.errors import BarkError, DegenerateError, NonFiniteStateError
+from bark.errors import BarkError, NonFiniteStateError
 from bark.forces import Mechanics
 from bark.lattice import Lattice
 from bark.simulation import BreakLog, Simulation, Stop
@@ -24,7 +24,6 @@ __all__ = [
     "BarkError",
     "BreakLog",
     "Breaker",
-    "DegenerateError",
     "Growth",
     "Integrator",
     "Lattice",

@@ -12,9 +12,5 @@ class BarkError(ValueError):
     """Bad input: a parameter, a scene key, a strategy name or a file.  ``str(err)`` is one line."""
 
 
-class DegenerateError(RuntimeError):
-    """A run stopped because a single step broke a large share of all springs (NOTES.md §1)."""
-
-
 class NonFiniteStateError(FloatingPointError):
     """The mechanical state became NaN or infinite; the run stops rather than go on silently."""

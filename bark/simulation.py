@@ -407,11 +407,6 @@ class Simulation:
             for keep, a in zip(self._last_finite, now):
                 np.copyto(keep, a)
 
-    def constrain(self) -> None:
-        """Surface constraint (eq. 9): bases (with their velocities) and anchors onto ``r(t, z)``."""
-        s = self.state
-        s.kernels.constrain(s, self._radius_at(s.x[:, 2]), self._radius_at(s.anchor[:, 2]))
-
     def _radius_at(self, z: np.ndarray) -> np.ndarray:
         return np.broadcast_to(self.growth.radius(self.state.t, z), z.shape)
 
