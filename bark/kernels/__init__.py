@@ -1,19 +1,21 @@
-"""Compute backends for the hot loop: the same four functions, in numpy or compiled with numba.
+"""Compute backends for the hot loop: the same functions, in numpy or compiled with numba.
 
 =======================================  ========================================================
 function                                 does
 =======================================  ========================================================
 ``elastic_forces(state, x) -> f``        spring (eq. 1) + anchor (eq. 2) forces at ``x``
 ``euler_cromer_step(state, h)``          eqs. 4, 7, 8 in place: forces, then ``v``, then ``x``
-``constrain(state, r_x, r_anchor)``      eq. 9 in place on bases (radial velocity removed) and anchors
 ``measure(state, out) -> max_load``      tension ``k(|d| − l)`` of every spring into ``out``; returns
                                          the largest ``tension / fmax`` over intact springs (NaN if
                                          any tension is not finite)
-``constrain_measure(state, r_x, r_a,     ``constrain`` then ``measure``, in one pass where compiled
-out) -> max_load``
+``constrain_measure(state, r_x, r_a,     eq. 9 in place on the bases (radial velocity removed) and
+out) -> max_load``                       anchors (radius × fixed direction), then ``measure``
 ``patch_labels(state) -> labels``        connected components of the intact springs, numbered in
                                          order of each component's smallest base (as scipy does)
 =======================================  ========================================================
+
+numba also has ``euler_cromer_quiet``, many Euler–Cromer steps in one compiled call (the quiet path
+of ``Simulation.advance``, named by ``EulerCromer.quiet_kernel``); a backend without it steps one by one.
 
 ``numpy`` is always there; ``numba`` is used when importable.  ``auto`` picks numba if it imports,
 else numpy.  Both give the same results to round-off (summation order differs).

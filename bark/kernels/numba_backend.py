@@ -144,11 +144,6 @@ def _radii(r) -> np.ndarray:
     return np.ascontiguousarray(r)
 
 
-def constrain(state, r_x, r_anchor) -> None:
-    _project(state.x, _radii(r_x), state.v)
-    _place_anchors(state.anchor, state.anchor_dir, _radii(r_anchor))
-
-
 def measure(state, out: np.ndarray) -> float:
     return float(_measure(state.x, state.pairs, state.rest, state.mechanics.k, state.fmax, state.intact, out))
 

@@ -25,11 +25,6 @@ def euler_cromer_step(state, h: float) -> None:
     state.x += state.v * h
 
 
-def constrain(state, r_x, r_anchor) -> None:
-    project_to_surface(state.x, r_x, state.v)
-    state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
-
-
 def measure(state, out: np.ndarray) -> float:
     out[:] = tensions(state.x, state.pairs, state.rest, state.mechanics.k)
     if not np.isfinite(out).all():
@@ -40,7 +35,8 @@ def measure(state, out: np.ndarray) -> float:
 
 
 def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
-    constrain(state, r_x, r_anchor)
+    project_to_surface(state.x, r_x, state.v)
+    state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
     return measure(state, out)
 
 
