@@ -269,3 +269,39 @@ def test_analyze_a_simulated_pattern(broken_sim):
         assert 0.0 <= r["orientation_deg"] < 180.0
         assert 0.0 <= r["anisotropy"] <= 1.0
         assert 0.0 <= r["theta_deg"] < 360.0
+
+
+# -- pattern comparison (paper, eqs. 12–15) ---------------------------------------------------
+
+
+def test_hellinger_matches_the_paper_formula():
+    from bark.analysis import hellinger
+
+    assert hellinger(3.0, 2.0, 3.0, 2.0) == 0.0
+    # eqs. 12–14 by hand: β = √(2·1·2/(1+4)) = √0.8, γ = −¼·(0−1)²/5 = −0.05
+    assert hellinger(0.0, 1.0, 1.0, 2.0) == pytest.approx(np.sqrt(1 - np.sqrt(0.8) * np.exp(-0.05)))
+    assert hellinger(0.0, 1.0, 100.0, 1.0) == pytest.approx(1.0, abs=1e-12)  # far apart: 1
+    assert hellinger(0.0, 1.0, 1.0, 2.0) == hellinger(1.0, 2.0, 0.0, 1.0)  # symmetric
+
+
+def test_orientation_hellinger_treats_orientations_as_axes():
+    from bark.analysis import orientation_hellinger
+
+    from bark.analysis import axial_sd
+
+    near_horizontal = np.array([175.0, 178.0, 2.0, 5.0])  # around 0° ≡ 180°
+    sd = axial_sd(near_horizontal)
+    # the same set turned by 1° (across the wrap): equal SDs, means 1° apart as axes, so β = 1 and
+    # d = √(1 − exp(−¼ · 1 / (2 sd²)))
+    turned = (near_horizontal + 1.0) % 180.0
+    expected = np.sqrt(1.0 - np.exp(-0.25 / (2.0 * sd * sd)))
+    assert orientation_hellinger(near_horizontal, turned) == pytest.approx(expected, rel=1e-9)
+    assert orientation_hellinger(near_horizontal, (near_horizontal + 90.0) % 180.0) > 0.99
+
+
+def test_standard_error_difference_is_eq_15_and_asymmetric():
+    from bark.analysis import standard_error_difference
+
+    assert standard_error_difference(10.0, 2.0, 16.0) == pytest.approx(3.0)
+    assert standard_error_difference(16.0, 0.5, 10.0) == pytest.approx(12.0)
+    assert standard_error_difference(178.0, 2.0, 4.0, axial=True) == pytest.approx(3.0)  # 6° apart as axes

@@ -142,3 +142,35 @@ def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
     assert len(t) == len(due) and np.all((t >= due - 1e-9) & (t - due < 0.3))
     assert [int(r["n_broken"]) for r in rows] == sorted(int(r["n_broken"]) for r in rows)
     assert int(rows[-1]["n_broken"]) > 0 and rows[-1]["n_patches"] != ""
+
+
+def test_graphml_is_the_graph_of_record(tmp_path):
+    import networkx as nx
+
+    from bark.output import write_graphml
+
+    sim = _scene(DEFAULT).simulation()
+    sim.run(Stop(until_time=6.0))
+    write_graphml(tmp_path / "g.graphml", sim)
+    g = nx.read_graphml(tmp_path / "g.graphml", node_type=int)
+    assert sim.n_broken > 20
+    assert g.number_of_nodes() == sim.state.n_bases and g.number_of_edges() == int(sim.state.intact.sum())
+    labels = sim.patch_labels()
+    for node in (0, 137, 399):
+        assert g.nodes[node]["patch"] == labels[node] and g.nodes[node]["z"] == pytest.approx(sim.state.x[node, 2])
+    i, j, data = next(iter(g.edges(data=True)))
+    assert sim.state.intact[data["spring"]] and data["rest"] == pytest.approx(sim.state.rest[data["spring"]])
+
+
+def test_animation_writes_one_frame_per_trigger(tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "out"
+    scene = tmp_path / "anim.toml"
+    scene.write_text('[effects]\nwant = ["anchors", "damping", "animation"]\nframe_every = 2.0\n'
+                     '[lattice]\nn_bases = 400\n[growth]\nG = 0.05\n[run]\nuntil_time = 8.0\n')
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(scene), "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == ["development.gif", "summary.json"]
+    with Image.open(out / "development.gif") as gif:
+        assert gif.n_frames == 5  # due at t = 0, 2, 4, 6, 8
