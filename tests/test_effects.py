@@ -126,13 +126,17 @@ def test_plan_shows_different_effect_sets_for_the_three_scenes():
     assert shown["everything"] == set(EFFECTS)
 
 
-def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
-    out = tmp_path / "out"
-    scene = tmp_path / "series.toml"
-    scene.write_text('[effects]\nwant = ["anchors", "damping", "statistics-series"]\nseries_every = 2.0\n'
-                     '[lattice]\nn_bases = 400\n[growth]\nG = 0.05\n[run]\nuntil_time = 8.0\n')
+def _simulate_small(tmp_path, effects_table: str):
+    """Run a 400-base scene with this [effects] table to t = 8 through the CLI; its output folder."""
+    out, scene = tmp_path / "out", tmp_path / "scene.toml"
+    scene.write_text(f"[effects]\n{effects_table}\n[lattice]\nn_bases = 400\n[growth]\nG = 0.05\n[run]\nuntil_time = 8.0\n")
     result = CliRunner().invoke(cli, ["simulate", "--scene", str(scene), "--out", str(out), "--quiet"])
     assert result.exit_code == 0, result.output
+    return out
+
+
+def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
+    out = _simulate_small(tmp_path, 'want = ["anchors", "damping", "statistics-series"]\nseries_every = 2.0')
     import csv
 
     rows = list(csv.DictReader((out / "statistics.csv").open()))
@@ -165,12 +169,7 @@ def test_graphml_is_the_graph_of_record(tmp_path):
 def test_animation_writes_one_frame_per_trigger(tmp_path):
     from PIL import Image
 
-    out = tmp_path / "out"
-    scene = tmp_path / "anim.toml"
-    scene.write_text('[effects]\nwant = ["anchors", "damping", "animation"]\nframe_every = 2.0\n'
-                     '[lattice]\nn_bases = 400\n[growth]\nG = 0.05\n[run]\nuntil_time = 8.0\n')
-    result = CliRunner().invoke(cli, ["simulate", "--scene", str(scene), "--out", str(out), "--quiet"])
-    assert result.exit_code == 0, result.output
+    out = _simulate_small(tmp_path, 'want = ["anchors", "damping", "animation"]\nframe_every = 2.0')
     assert sorted(p.name for p in out.iterdir()) == ["development.gif", "summary.json"]
     with Image.open(out / "development.gif") as gif:
         assert gif.n_frames == 5  # due at t = 0, 2, 4, 6, 8
