@@ -90,10 +90,13 @@ def write_npz(path: str | Path, **arrays: np.ndarray) -> Path:
     def write(fh):
         with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_DEFLATED) as zf:
             for name, value in arrays.items():
+                value = np.asanyarray(value)
+                if not value.flags.c_contiguous:  # files are row-major whatever the layout in memory
+                    value = np.ascontiguousarray(value)
                 info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_DEFLATED
                 with zf.open(info, "w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+                    np.lib.format.write_array(member, value, allow_pickle=False)
 
     return atomic_write(path, write)
 

@@ -293,13 +293,13 @@ class Simulation:
         replays its call up to the step before, exactly) and is retried here at half the size.
         """
         kernel = self._quiet_kernel() if self._halvings == 0 else None
-        rows = self._quiet_radii(stop) if kernel is not None else None
-        if rows is None:
+        radii = self._quiet_radii(stop) if kernel is not None else None
+        if radii is None:
             self.step()
             return 1
         s = self.state
         adaptive = self._levels > 0
-        done, load = kernel(s, self.h, rows, rows, self._tension, 1.0 + self.overshoot_tol if adaptive else math.inf)
+        done, load = kernel(s, self.h, radii, self._tension, 1.0 + self.overshoot_tol if adaptive else math.inf)
         self._ticks += done << self._levels
         self.step_count += done
         s.t = self._ticks * self._h_min
@@ -375,7 +375,7 @@ class Simulation:
         return getattr(self.state.kernels, name, None)
 
     def _quiet_radii(self, stop: Stop | None) -> np.ndarray | None:
-        """Radius of each of the next steps, one row per step — or ``None`` where the quiet path does
+        """The uniform trunk radius at each of the next steps — or ``None`` where the quiet path does
         not apply (height-dependent growth, or fewer than two steps before a stop condition)."""
         ts = (self._ticks + (np.arange(self._quiet_n) + 1.0) * (1 << self._levels)) * self._h_min
         z = self.state.x[:, 2]
@@ -395,14 +395,14 @@ class Simulation:
             n = min(n, _first(ts >= stop.until_time - 1e-9 * self.h) + 1)
         if stop is not None and stop.until_radius is not None:
             n = min(n, _first(r >= stop.until_radius) + 1)
-        return r[:n, None] if n >= 2 else None
+        return r[:n] if n >= 2 else None
 
     def _keep_last_finite(self) -> None:
         """Copy what a step changes (x, v, and the anchors, which a non-finite radius would spoil)."""
         s = self.state
         now = (s.x, s.v, s.anchor)
         if self._last_finite is None or self._last_finite[0].shape != s.x.shape:
-            self._last_finite = tuple(a.copy() for a in now)
+            self._last_finite = tuple(a.copy(order="K") for a in now)
         else:
             for keep, a in zip(self._last_finite, now):
                 np.copyto(keep, a)

@@ -7,6 +7,12 @@ and it changes the graph in the same call, so the two never drift.
 
 Coordinates: Cartesian ``(x, y, z)`` with the trunk axis along ``z`` through the origin; a base at
 angle θ sits at ``(r cos θ, r sin θ, z)``.
+
+Layout: the per-base arrays (``x``, ``v``, ``anchor``, ``anchor_dir``) are ``(n, 3)`` (or ``(n, 2)``)
+arrays stored column by column (Fortran order), so that each coordinate is one contiguous vector:
+the compiled loops over the bases then run in SIMD lanes, and numpy's column operations are faster
+too (both measured with ``bark bench speed``).  Indexing is the same as for any ``(n, 3)`` array;
+assigning a C-ordered array to these fields converts it.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import scipy.sparse as sp
 
 from bark.forces import Mechanics, damping_forces, incidence
 
-__all__ = ["State", "project_to_surface", "cylinder_points"]
+__all__ = ["State", "project_to_surface", "cylinder_points", "columns"]
 
 
 def cylinder_points(theta: np.ndarray, z: np.ndarray, radius) -> np.ndarray:
@@ -50,6 +56,11 @@ def _unit_xy(points: np.ndarray) -> np.ndarray:
     return np.where((rho > 0.0)[:, None], points[:, :2] / safe[:, None], [1.0, 0.0])
 
 
+def columns(a) -> np.ndarray:
+    """``a`` as a float array stored column by column (a view when it already is one)."""
+    return np.asfortranarray(a, dtype=float)
+
+
 def _default_kernels() -> ModuleType:
     from bark.kernels import load
 
@@ -64,15 +75,15 @@ class State:
     the surface and breaks springs.
     """
 
-    x: np.ndarray
+    x: np.ndarray = attrs.field(converter=columns)
     """Positions of the bases, shape ``(n, 3)``."""
-    v: np.ndarray
+    v: np.ndarray = attrs.field(converter=columns)
     """Velocities of the bases, shape ``(n, 3)``."""
-    anchor: np.ndarray
+    anchor: np.ndarray = attrs.field(converter=columns)
     """Anchor points (each base's original site, moved with the trunk surface), ``(n, 3)``.
     Anchors move only radially: ``anchor = (r(t, z0)·anchor_dir, z0)``, a function of t alone."""
     anchor_dir: np.ndarray = attrs.field(
-        default=attrs.Factory(lambda self: _unit_xy(self.anchor), takes_self=True)
+        default=attrs.Factory(lambda self: _unit_xy(self.anchor), takes_self=True), converter=columns
     )
     """Unit horizontal direction of each anchor, ``(n, 2)``: fixed for the whole run (default: the
     directions of ``anchor``)."""

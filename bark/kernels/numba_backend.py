@@ -21,83 +21,109 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 @_jit
-def _spring_forces(x, pairs, rest, k, intact, f):
-    for s in range(pairs.shape[0]):
+def _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2):
+    """Add every intact spring's force (eq. 1) into ``f``; return the largest ``tension·inv_fmax``
+    over them (skipped when ``inv_fmax`` is empty) and whether all their tensions are finite.
+
+    The one place a spring's force is written in this backend: the per-step and the quiet kernels
+    both call it, so they give the same bits whatever the split of a run into calls.
+    """
+    loads = inv_fmax.shape[0] > 0
+    top = -np.inf
+    finite = True
+    for s in range(pi.shape[0]):
         if not intact[s]:
             continue
-        i, j = pairs[s, 0], pairs[s, 1]
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2 = x[j, 2] - x[i, 2]
+        i = pi[s]
+        j = pj[s]
+        d0 = x0[j] - x0[i]
+        d1 = x1[j] - x1[i]
+        d2 = x2[j] - x2[i]
         length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        if length <= 0.0:
-            continue
-        sc = k * (length - rest[s]) / length
-        f[i, 0] += sc * d0
-        f[i, 1] += sc * d1
-        f[i, 2] += sc * d2
-        f[j, 0] -= sc * d0
-        f[j, 1] -= sc * d1
-        f[j, 2] -= sc * d2
+        t = k * (length - rest[s])
+        if not abs(t) < np.inf:
+            finite = False
+        if loads:
+            load = t * inv_fmax[s]
+            if load > top:
+                top = load
+        if length > 0.0:
+            g = t / length
+            f0[i] += g * d0
+            f1[i] += g * d1
+            f2[i] += g * d2
+            f0[j] -= g * d0
+            f1[j] -= g * d1
+            f2[j] -= g * d2
+    return top, finite
+
+
+_NO_LOADS = np.empty(0)
 
 
 @_jit
-def _elastic(x, anchor, pairs, rest, k, c, intact, f):
+def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
     f[:] = 0.0
-    _spring_forces(x, pairs, rest, k, intact, f)
+    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, _NO_LOADS, f[:, 0], f[:, 1], f[:, 2])
     if c != 0.0:
-        for q in range(x.shape[0]):
-            for a in range(3):
-                f[q, a] -= c * (x[q, a] - anchor[q, a])
+        for a in range(3):
+            xa, aa, fa = x[:, a], anchor[:, a], f[:, a]
+            for q in range(xa.shape[0]):
+                fa[q] -= c * (xa[q] - aa[q])
 
 
 @_jit
-def _euler_cromer(x, v, anchor, pairs, rest, k, c, b, m, h, intact, f):
+def _euler_cromer(x, v, anchor, pi, pj, rest, k, c, b, m, h, intact, f):
     f[:] = 0.0
-    _spring_forces(x, pairs, rest, k, intact, f)
+    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, _NO_LOADS, f[:, 0], f[:, 1], f[:, 2])
     hm = h / m
-    for q in range(x.shape[0]):
-        for a in range(3):
-            force = f[q, a] - c * (x[q, a] - anchor[q, a]) - b * v[q, a]
-            v[q, a] += force * hm
-            x[q, a] += v[q, a] * h
+    for a in range(3):
+        xa, va, aa, fa = x[:, a], v[:, a], anchor[:, a], f[:, a]
+        for q in range(xa.shape[0]):
+            force = fa[q] - c * (xa[q] - aa[q]) - b * va[q]
+            va[q] += force * hm
+            xa[q] += va[q] * h
 
 
 @_jit
 def _project(points, radius, velocities):
     """Eq. 9 on the bases: radially onto the surface, radial velocity removed (as the quiet kernel)."""
     uniform = radius.shape[0] == 1
-    for q in range(points.shape[0]):
+    px_, py_, vx_, vy_ = points[:, 0], points[:, 1], velocities[:, 0], velocities[:, 1]
+    for q in range(px_.shape[0]):
         r = radius[0] if uniform else radius[q]
-        px, py = points[q, 0], points[q, 1]
+        px, py = px_[q], py_[q]
         scale = r / math.sqrt(px * px + py * py)
         px *= scale
         py *= scale
-        points[q, 0] = px
-        points[q, 1] = py
-        vr = (velocities[q, 0] * px + velocities[q, 1] * py) * (1.0 / (r * r))
-        velocities[q, 0] -= vr * px
-        velocities[q, 1] -= vr * py
+        px_[q] = px
+        py_[q] = py
+        vr = (vx_[q] * px + vy_[q] * py) * (1.0 / (r * r))
+        vx_[q] -= vr * px
+        vy_[q] -= vr * py
 
 
 @_jit
 def _place_anchors(anchor, anchor_dir, radius):
     uniform = radius.shape[0] == 1
-    for q in range(anchor.shape[0]):
+    ax, ay, dx, dy = anchor[:, 0], anchor[:, 1], anchor_dir[:, 0], anchor_dir[:, 1]
+    for q in range(ax.shape[0]):
         r = radius[0] if uniform else radius[q]
-        anchor[q, 0] = r * anchor_dir[q, 0]
-        anchor[q, 1] = r * anchor_dir[q, 1]
+        ax[q] = r * dx[q]
+        ay[q] = r * dy[q]
 
 
 @_jit
-def _measure(x, pairs, rest, k, fmax, intact, out):
+def _measure(x, pi, pj, rest, k, fmax, intact, out):
+    x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
     top = -np.inf
     finite = True
-    for s in range(pairs.shape[0]):
-        i, j = pairs[s, 0], pairs[s, 1]
-        d0 = x[j, 0] - x[i, 0]
-        d1 = x[j, 1] - x[i, 1]
-        d2 = x[j, 2] - x[i, 2]
+    for s in range(pi.shape[0]):
+        i = pi[s]
+        j = pj[s]
+        d0 = x0[j] - x0[i]
+        d1 = x1[j] - x1[i]
+        d2 = x2[j] - x2[i]
         t = k * (math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - rest[s])
         out[s] = t
         if not math.isfinite(t):
@@ -109,31 +135,42 @@ def _measure(x, pairs, rest, k, fmax, intact, out):
     return top if finite else np.nan
 
 
-def _scratch(state) -> np.ndarray:
-    buf = state.scratch.get("numba_f")
-    if buf is None or buf.shape != state.x.shape:
-        buf = state.scratch["numba_f"] = np.empty_like(state.x)
+def _ends(state) -> tuple[np.ndarray, np.ndarray]:
+    """Spring ends as two unsigned 32-bit vectors (cached while ``state.pairs`` is the same array):
+    unsigned indices spare numba's negative-index wrap-around, and half-width ones memory traffic."""
+    sc = state.scratch
+    if sc.get("ends_of") is not state.pairs:
+        p = state.pairs.astype(np.uint32)
+        sc["ends_of"], sc["ends"] = state.pairs, (np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]))
+    return sc["ends"]
+
+
+def _scratch(state, name: str, like: np.ndarray) -> np.ndarray:
+    """A work buffer shaped and laid out like ``like``, kept in ``state.scratch`` between calls."""
+    buf = state.scratch.get(name)
+    if buf is None or buf.shape != like.shape or buf.strides != like.strides:
+        buf = state.scratch[name] = np.empty_like(like)
     return buf
 
 
 def elastic_forces(state, x: np.ndarray) -> np.ndarray:
     mech = state.mechanics
-    f = np.empty_like(x)
-    _elastic(x, state.anchor, state.pairs, state.rest, mech.k, mech.c, state.intact, f)
+    f = np.empty_like(x, order="F")
+    _elastic(x, state.anchor, *_ends(state), state.rest, mech.k, mech.c, state.intact, f)
     return f
 
 
 def euler_cromer_step(state, h: float) -> None:
     mech = state.mechanics
-    _euler_cromer(state.x, state.v, state.anchor, state.pairs, state.rest, mech.k, mech.c, mech.b, mech.m, h,
-                  state.intact, _scratch(state))
+    _euler_cromer(state.x, state.v, state.anchor, *_ends(state), state.rest, mech.k, mech.c, mech.b, mech.m, h,
+                  state.intact, _scratch(state, "f", state.x))
 
 
 @_jit
-def _constrain_measure(x, v, anchor, anchor_dir, r_x, r_anchor, pairs, rest, k, fmax, intact, out):
+def _constrain_measure(x, v, anchor, anchor_dir, r_x, r_anchor, pi, pj, rest, k, fmax, intact, out):
     _project(x, r_x, v)
     _place_anchors(anchor, anchor_dir, r_anchor)
-    return _measure(x, pairs, rest, k, fmax, intact, out)
+    return _measure(x, pi, pj, rest, k, fmax, intact, out)
 
 
 def _radii(r) -> np.ndarray:
@@ -145,110 +182,95 @@ def _radii(r) -> np.ndarray:
 
 
 def measure(state, out: np.ndarray) -> float:
-    return float(_measure(state.x, state.pairs, state.rest, state.mechanics.k, state.fmax, state.intact, out))
+    return float(_measure(state.x, *_ends(state), state.rest, state.mechanics.k, state.fmax, state.intact, out))
 
 
 def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
     return float(_constrain_measure(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor),
-                                    state.pairs, state.rest, state.mechanics.k, state.fmax, state.intact, out))
+                                    *_ends(state), state.rest, state.mechanics.k, state.fmax, state.intact, out))
 
 
 @_jit
-def _euler_cromer_quiet(x, v, anchor, anchor_dir, pairs, rest, k, c, b, m, h, intact, inv_fmax, r_x, r_a, f):
-    """Up to ``r_x.shape[0]`` whole steps (integrate, constrain, measure) in one call.
+def _ec_bases(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, ra, from_dir, r, c, b, hm, h):
+    """One Euler–Cromer step of every base (eqs. 4, 7, 8) on the spring forces in ``f``, then the
+    surface constraint at uniform radius ``r`` (eq. 9, as :func:`_project`); ``f`` is zeroed as it is
+    consumed.  The anchors are ``(ra·d, az)`` if ``from_dir``, else as stored (the very expression
+    :func:`_place_anchors` writes, so the bits do not depend on where calls end).  Returns whether
+    every coordinate stayed finite.  One coordinate per vector: this loop runs in SIMD lanes."""
+    bad = 0
+    inv_r2 = 1.0 / (r * r)
+    for q in range(x0.shape[0]):
+        if from_dir:
+            anchor_x = ra * dx[q]
+            anchor_y = ra * dy[q]
+        else:
+            anchor_x = ax[q]
+            anchor_y = ay[q]
+        g0 = f0[q] - c * (x0[q] - anchor_x) - b * v0[q]
+        g1 = f1[q] - c * (x1[q] - anchor_y) - b * v1[q]
+        g2 = f2[q] - c * (x2[q] - az[q]) - b * v2[q]
+        f0[q] = 0.0
+        f1[q] = 0.0
+        f2[q] = 0.0
+        u0 = v0[q] + g0 * hm
+        u1 = v1[q] + g1 * hm
+        u2 = v2[q] + g2 * hm
+        px = x0[q] + u0 * h
+        py = x1[q] + u1 * h
+        pz = x2[q] + u2 * h
+        scale = r / math.sqrt(px * px + py * py)
+        px *= scale
+        py *= scale
+        x0[q] = px
+        x1[q] = py
+        x2[q] = pz
+        bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
+        vr = (u0 * px + u1 * py) * inv_r2
+        v0[q] = u0 - vr * px
+        v1[q] = u1 - vr * py
+        v2[q] = u2
+    return bad == 0
 
-    Stops after the first step whose max load exceeds 1 (a spring to break) or whose tensions are
-    not finite.  Returns ``(steps taken, max load of the last step)``, the load NaN if that step
-    went non-finite.  The spring pass that finds the load also accumulates the next step's spring
-    forces into ``f`` (first same as last), by the very expressions the per-step kernels use, so the
-    result does not depend on where calls begin and end.  The loop is memory-bound, so it touches
-    as little as it can: anchors (radius × fixed direction) are written back once at the end; the
-    caller fills the tensions once, for the last step.  A step is non-finite if any coordinate of
-    any base is (summed into ``total``) or any intact tension is.
+
+@_jit
+def _euler_cromer_quiet(x, v, anchor, anchor_dir, pi, pj, rest, k, c, b, m, h, intact, inv_fmax, radii, f):
+    """Up to ``len(radii)`` whole steps (integrate, constrain, measure) at uniform radii ``radii``, in
+    one call.
+
+    Stops after the first step whose max load exceeds 1 (a spring to break) or whose state is not
+    finite (any coordinate of any base, or any intact tension).  Returns ``(steps taken, max load of
+    the last step)``, the load NaN if that step went non-finite.  The spring pass that finds the
+    load also accumulates the next step's spring forces into ``f`` (first same as last), through
+    :func:`_spring_pass` as the per-step kernels do, so the result does not depend on where calls
+    begin and end.  Anchors (radius × fixed direction) are written back once, at the end; the
+    caller fills the tensions once, for the last step.
     """
-    n = x.shape[0]
     hm = h / m
+    x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
+    v0, v1, v2 = v[:, 0], v[:, 1], v[:, 2]
+    f0, f1, f2 = f[:, 0], f[:, 1], f[:, 2]
+    ax, ay, az = anchor[:, 0], anchor[:, 1], anchor[:, 2]
+    dx, dy = anchor_dir[:, 0], anchor_dir[:, 1]
     f[:] = 0.0
-    _spring_forces(x, pairs, rest, k, intact, f)
+    _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, _NO_LOADS, f0, f1, f2)
     top = -np.inf
-    total = 0.0
-    ux = r_x.shape[1] == 1
-    ua = r_a.shape[1] == 1
+    finite = True
     done = 0
-    for step in range(r_x.shape[0]):
-        r = r_x[step, 0]
-        total = 0.0
-        for q in range(n):
-            # the anchor before this step: as stored, then at the previous step's radius (the
-            # very expression _place_anchors writes, so the bits do not depend on where calls end)
-            if step == 0:
-                ax = anchor[q, 0]
-                ay = anchor[q, 1]
-            else:
-                ra = r_a[step - 1, 0] if ua else r_a[step - 1, q]
-                ax = ra * anchor_dir[q, 0]
-                ay = ra * anchor_dir[q, 1]
-            f0 = f[q, 0] - c * (x[q, 0] - ax) - b * v[q, 0]
-            f1 = f[q, 1] - c * (x[q, 1] - ay) - b * v[q, 1]
-            f2 = f[q, 2] - c * (x[q, 2] - anchor[q, 2]) - b * v[q, 2]
-            f[q, 0] = 0.0  # consumed: ready for the next spring pass
-            f[q, 1] = 0.0
-            f[q, 2] = 0.0
-            v0 = v[q, 0] + f0 * hm
-            v1 = v[q, 1] + f1 * hm
-            v2 = v[q, 2] + f2 * hm
-            px = x[q, 0] + v0 * h
-            py = x[q, 1] + v1 * h
-            x[q, 2] += v2 * h
-            v[q, 2] = v2
-            if not ux:
-                r = r_x[step, q]
-            sc = r / math.sqrt(px * px + py * py)
-            px *= sc
-            py *= sc
-            x[q, 0] = px
-            x[q, 1] = py
-            total += px + py + x[q, 2]  # NaN or inf anywhere, even on a base with no intact spring, shows here
-            vr = (v0 * px + v1 * py) * (1.0 / (r * r))
-            v[q, 0] = v0 - vr * px
-            v[q, 1] = v1 - vr * py
-        top = -np.inf
-        for s in range(pairs.shape[0]):
-            if not intact[s]:
-                continue
-            i, j = pairs[s, 0], pairs[s, 1]
-            d0 = x[j, 0] - x[i, 0]
-            d1 = x[j, 1] - x[i, 1]
-            d2 = x[j, 2] - x[i, 2]
-            length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            t = k * (length - rest[s])
-            total += t
-            load = t * inv_fmax[s]
-            if load > top:
-                top = load
-            # The spring's force, written exactly as in _spring_forces (same bits; enforced by the
-            # tests that a split run and step() equal advance() bit for bit).  Kept inline on
-            # purpose: a shared njit helper is not inlined across numba functions and made this
-            # loop 2.5x slower (measured with bark bench speed).
-            if length > 0.0:
-                g = k * (length - rest[s]) / length
-                f[i, 0] += g * d0
-                f[i, 1] += g * d1
-                f[i, 2] += g * d2
-                f[j, 0] -= g * d0
-                f[j, 1] -= g * d1
-                f[j, 2] -= g * d2
+    for step in range(radii.shape[0]):
+        ra = radii[step - 1] if step > 0 else 0.0
+        finite = _ec_bases(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, ra, step > 0, radii[step], c, b, hm, h)
+        top, springs_finite = _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2)
+        finite = finite and springs_finite
         done = step + 1
-        if not math.isfinite(total) or top > 1.0:
+        if not finite or top > 1.0:
             break
-    _place_anchors(anchor, anchor_dir, r_a[done - 1])  # the anchors at the last step's radius
-    return done, (top if math.isfinite(total) else np.nan)
+    _place_anchors(anchor, anchor_dir, radii[done - 1 : done])  # the anchors at the last step's radius
+    return done, (top if finite else np.nan)
 
 
-def euler_cromer_quiet(
-    state, h: float, r_x: np.ndarray, r_a: np.ndarray, tension: np.ndarray, accept_load: float = math.inf
-) -> tuple[int, float]:
-    """Euler–Cromer steps with radii ``r_x``/``r_a`` (one row per step, 1 or n columns); see
+def euler_cromer_quiet(state, h: float, radii: np.ndarray, tension: np.ndarray,
+                       accept_load: float = math.inf) -> tuple[int, float]:
+    """Euler–Cromer steps at the uniform trunk radii ``radii`` (one per step); see
     :func:`_euler_cromer_quiet`.  Returns ``(accepted steps, max load of the last step tried)``.
 
     If the last step tried went non-finite, or its load exceeds ``accept_load``, it is undone: the
@@ -256,27 +278,27 @@ def euler_cromer_quiet(
     (nothing breaks inside a call, so the replay is exact), and it is not counted.  ``tension`` is
     filled only when the returned step overloads a spring (load > 1): only then is it read."""
     mech = state.mechanics
-    sc = state.scratch
-    if sc.get("pairs_of") is not state.pairs:  # int32 spring ends: less memory traffic per step
-        sc["pairs_of"], sc["pairs32"] = state.pairs, state.pairs.astype(np.int32)
-    start = (state.x.copy(), state.v.copy(), state.anchor.copy())
-    inv_fmax = 1.0 / state.fmax
+    pi, pj = _ends(state)
+    now = (state.x, state.v, state.anchor)
+    start = [_scratch(state, f"start{i}", a) for i, a in enumerate(now)]
+    for keep, a in zip(start, now):
+        np.copyto(keep, a)
+    inv_fmax = np.divide(1.0, state.fmax, out=_scratch(state, "inv_fmax", state.fmax))
+    radii = np.ascontiguousarray(radii, dtype=float)
 
-    def call(rows_x, rows_a):
-        return _euler_cromer_quiet(
-            state.x, state.v, state.anchor, state.anchor_dir, sc["pairs32"], state.rest, mech.k, mech.c, mech.b,
-            mech.m, h, state.intact, inv_fmax, rows_x, rows_a, _scratch(state),
-        )
+    def call(r):
+        return _euler_cromer_quiet(state.x, state.v, state.anchor, state.anchor_dir, pi, pj, state.rest, mech.k,
+                                   mech.c, mech.b, mech.m, h, state.intact, inv_fmax, r, _scratch(state, "f", state.x))
 
-    done, load = call(r_x, r_a)
+    done, load = call(radii)
     if math.isnan(load) or load > accept_load:
-        for keep, now in zip(start, (state.x, state.v, state.anchor)):
-            np.copyto(now, keep)
+        for keep, a in zip(start, now):
+            np.copyto(a, keep)
         if done > 1:
-            call(r_x[: done - 1], r_a[: done - 1])
+            call(radii[: done - 1])
         return done - 1, float(load)
     if load > 1.0:  # springs to break: the breakers need every tension of this state
-        _measure(state.x, sc["pairs32"], state.rest, mech.k, state.fmax, state.intact, tension)
+        _measure(state.x, pi, pj, state.rest, mech.k, state.fmax, state.intact, tension)
     return int(done), float(load)
 
 
