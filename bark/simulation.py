@@ -48,6 +48,17 @@ def _first(flags: np.ndarray) -> int:
     return int(np.argmax(flags)) if flags.any() else len(flags)
 
 
+def _defined_in(cls: type, name: str) -> type | None:
+    return next((c for c in cls.__mro__ if name in vars(c)), None)
+
+
+def _trusted_rule(breaker: Breaker) -> str | None:
+    """``breaker.kernel_rule`` if the class that names it also defines ``select``, else ``None``."""
+    cls = type(breaker)
+    rule = getattr(breaker, "kernel_rule", None)
+    return rule if rule is not None and _defined_in(cls, "kernel_rule") is _defined_in(cls, "select") else None
+
+
 def _round_down(x: float) -> str:
     """``x`` rounded down to two significant digits, as text (for suggestions)."""
     if not x > 0:
@@ -91,9 +102,12 @@ class BreakLog:
 
     _chunks: list[tuple[np.ndarray, ...]] = attrs.field(factory=list)
 
-    def record(self, ids: np.ndarray, pairs: np.ndarray, step: int, t: float, tension: np.ndarray) -> None:
+    def record(self, ids: np.ndarray, pairs: np.ndarray, step, t, tension: np.ndarray) -> None:
+        """Log springs ``ids``, broken at ``step`` and time ``t`` (each one value, or one per id)."""
         n = ids.size
-        self._chunks.append((ids.copy(), pairs[ids, 0], pairs[ids, 1], np.full(n, step), np.full(n, t), tension[ids]))
+        steps = np.broadcast_to(np.asarray(step, dtype=np.int64), n).copy()
+        times = np.broadcast_to(np.asarray(t, dtype=float), n).copy()
+        self._chunks.append((ids.copy(), pairs[ids, 0], pairs[ids, 1], steps, times, tension[ids]))
 
     def __len__(self) -> int:
         return sum(c[0].size for c in self._chunks)
@@ -299,20 +313,36 @@ class Simulation:
             return 1
         s = self.state
         adaptive = self._levels > 0
-        done, load = kernel(s, self.h, radii, self._tension, 1.0 + self.overshoot_tol if adaptive else math.inf)
+        rule = None if adaptive else self._kernel_rule()  # adaptive stepping returns at each break: undoing a
+        must_see = rule is not None and self._must_see_breaks(stop)  # long call of breaks costs a replay
+        done, load, (ids, steps, tensions) = kernel(
+            s, self.h, radii, self._tension, 1.0 + self.overshoot_tol if adaptive else math.inf,
+            break_rule=rule, return_on_break=must_see, max_batch=self.degenerate_fraction * s.n_springs,
+        )
+        first_step, first_tick = self.step_count, self._ticks
         self._ticks += done << self._levels
         self.step_count += done
         s.t = self._ticks * self._h_min
         s.h = self.h
+        if ids.size:  # broken inside the call, by the breakers' own rule: the graph, the log, the events
+            self._tension[ids] = tensions
+            self.break_springs(ids, self._tension, step=first_step + steps,
+                               t=(first_tick + (steps << self._levels)) * self._h_min)
+            last = np.count_nonzero(steps == done)
+            if last > self.degenerate_fraction * s.n_springs:  # the kernel returns after such a step
+                self._degenerate(last)
         # quiet steps come in runs: grow the next call while they last, start small after a break
-        self._quiet_n = min(2 * self._quiet_n, QUIET_CHUNK) if load <= 1.0 else QUIET_START
+        # that Python had to see (with the kernel breaking springs itself, every step is quiet)
+        saw_break = load > 1.0 and (rule is None or must_see)
+        self._quiet_n = QUIET_START if saw_break else min(2 * self._quiet_n, QUIET_CHUNK)
         if adaptive and (math.isnan(load) or load > 1.0 + self.overshoot_tol):
             self._halvings = 1  # the kernel undid that step: take it again, smaller
             self.step()
             return done + 1
         if math.isnan(load):  # the kernel put x and v back to the state before the bad step
             self._non_finite(s.t + self.h)
-        self._break_selected(load)
+        if rule is None:
+            self._break_selected(load)
         return done
 
     def step(self) -> None:
@@ -373,6 +403,19 @@ class Simulation:
         if name is None or not all(b.overload_only for b in self.breakers):
             return None
         return getattr(self.state.kernels, name, None)
+
+    def _kernel_rule(self) -> str | None:
+        """The compiled rule by which the quiet kernel may break springs itself: the one every
+        breaker names (and defines ``select`` alongside; see ``Breaker.kernel_rule``), else ``None``."""
+        rules = {_trusted_rule(b) for b in self.breakers}
+        return rules.pop() if len(rules) == 1 else None
+
+    def _must_see_breaks(self, stop: Stop | None) -> bool:
+        """Whether Python must look at the state after each step that breaks springs: to count
+        patches for ``stop``, or for a trigger that watches breaks."""
+        if stop is not None and stop.until_patches is not None:
+            return True
+        return any(trigger.watches_breaks() for trigger, _ in self.actions)
 
     def _quiet_radii(self, stop: Stop | None) -> np.ndarray | None:
         """The uniform trunk radius at each of the next steps — or ``None`` where the quiet path does
@@ -473,24 +516,34 @@ class Simulation:
 
     # -- the one place springs break ------------------------------------------------------------
 
-    def break_springs(self, ids, tension: np.ndarray | None = None) -> np.ndarray:
+    def break_springs(self, ids, tension: np.ndarray | None = None, *, step=None, t=None) -> np.ndarray:
         """Break springs ``ids`` for good, in the graph and in the arrays, and log them.
 
-        Already-broken ids are ignored.  Returns the ids actually broken.
+        ``tension`` is every spring's tension (default: the current one); ``step`` and ``t`` say when
+        they broke, one value or one per id (default: now).  Breaks are logged in order of step,
+        then spring id.  Already-broken ids are ignored (and an id given twice breaks at its first
+        step).  Returns the ids actually broken.
         """
         s = self.state
-        ids = np.unique(np.asarray(ids, dtype=np.int64))
-        if ids.size and (ids[0] < 0 or ids[-1] >= s.n_springs):
-            raise IndexError(f"spring ids must be in [0, {s.n_springs}): got {ids[0] if ids[0] < 0 else ids[-1]}")
-        ids = ids[s.intact[ids]]
-        if ids.size == 0:
-            return ids
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if ids.size and (ids.min() < 0 or ids.max() >= s.n_springs):
+            bad = ids.min() if ids.min() < 0 else ids.max()
+            raise IndexError(f"spring ids must be in [0, {s.n_springs}): got {bad}")
+        steps = np.broadcast_to(np.asarray(self.step_count if step is None else step, dtype=np.int64), ids.shape)
+        times = np.broadcast_to(np.asarray(s.t if t is None else t, dtype=float), ids.shape)
+        order = np.lexsort((ids, steps))
+        first = np.sort(np.unique(ids[order], return_index=True)[1])  # each id once, at its first step
+        order = order[first]
+        order = order[s.intact[ids[order]]]
+        if order.size == 0:
+            return ids[:0]
+        ids, steps, times = ids[order], steps[order], times[order]
         if tension is None:
             tension = s.tension()
         s.intact[ids] = False
         self.graph.remove_edges_from(s.pairs[ids].tolist())
         if self.record_breaks:
-            self.breaks.record(ids, s.pairs, self.step_count, s.t, tension)
+            self.breaks.record(ids, s.pairs, steps, times, tension)
         self._labels = None
         return ids
 

@@ -91,6 +91,12 @@ class Breaker(Strategy):
     overload_only: ClassVar[bool] = False
     """Set ``True`` if ``select`` only ever picks springs whose tension exceeds their ``fmax``: the
     simulation then skips the call while no intact spring is over its threshold."""
+    kernel_rule: ClassVar[str | None] = None
+    """Name of a compiled rule that picks exactly what ``select`` picks, so that a compiled kernel
+    may break springs itself and keep stepping (``Simulation.advance``).  The one rule the kernels
+    know is ``"over-threshold"``: every intact spring whose tension exceeds its ``fmax``.  It is
+    trusted only when the class that names it also defines ``select``: a subclass that overrides
+    ``select`` without naming a rule again gets ``select`` called, as every other breaker does."""
 
     @abc.abstractmethod
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -2,8 +2,9 @@
 
 A trigger looks at the simulation after a step and says whether it fires now: ``fires(sim)``.  It
 also says when it will next be due, so that the simulation can end a compiled run of quiet steps
-exactly there (``next_step(sim)``, ``next_time(sim)``; ``None`` = no such bound).  Triggers compose:
-``a & b``, ``a | b``, ``~a``.
+exactly there (``next_step(sim)``, ``next_time(sim)``; ``None`` = no such bound), and whether it
+must see every step that breaks springs (``watches_breaks()``; among these, only ``OnEvent``).
+Triggers compose: ``a & b``, ``a | b``, ``~a``.
 
 ===========================  ===============================================================
 ``Periodic(steps, phase=0)``  every ``steps`` steps (step_count % steps == phase)
@@ -41,6 +42,13 @@ class Trigger:
     def next_time(self, sim) -> float | None:
         return None
 
+    def watches_breaks(self) -> bool:
+        """Whether this trigger must see every step that breaks springs (``OnEvent``).  If none does,
+        a compiled kernel may break springs and keep going without returning.  The base says
+        ``True``: a trigger of your own may look at anything, so it sees every break unless it says
+        otherwise."""
+        return True
+
     def __and__(self, other: "Trigger") -> "Trigger":
         return And(self, other)
 
@@ -55,6 +63,9 @@ class Trigger:
 class Periodic(Trigger):
     steps: int = attrs.field(validator=positive_int)
     phase: int = attrs.field(default=0, validator=non_negative)
+
+    def watches_breaks(self) -> bool:
+        return False
 
     def fires(self, sim) -> bool:
         return sim.step_count % self.steps == self.phase % self.steps
@@ -73,6 +84,9 @@ class Every(Trigger):
     def _due(self) -> float:
         return self.start + self._next_k * self.time
 
+    def watches_breaks(self) -> bool:
+        return False
+
     def fires(self, sim) -> bool:
         eps = 1e-9 * sim.h
         if sim.state.t < self._due() - eps:
@@ -89,6 +103,9 @@ class Every(Trigger):
 class At(Trigger):
     times: tuple[float, ...] = attrs.field(converter=lambda v: tuple(sorted(float(t) for t in v)))
     _i: int = attrs.field(default=0, init=False)
+
+    def watches_breaks(self) -> bool:
+        return False
 
     def fires(self, sim) -> bool:
         eps = 1e-9 * sim.h
@@ -143,6 +160,9 @@ class And(Trigger):
     def next_time(self, sim):
         return _min(self.a.next_time(sim), self.b.next_time(sim))
 
+    def watches_breaks(self) -> bool:
+        return self.a.watches_breaks() or self.b.watches_breaks()
+
 
 @attrs.define
 class Or(And):
@@ -157,6 +177,9 @@ class Not(Trigger):
 
     def fires(self, sim) -> bool:
         return not self.a.fires(sim)
+
+    def watches_breaks(self) -> bool:
+        return self.a.watches_breaks()
 
     def next_step(self, sim):
         return sim.step_count + 1  # a negation may be due at any step

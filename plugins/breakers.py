@@ -19,6 +19,7 @@ class ThresholdBreaker(Breaker):
     threshold ``state.fmax`` (per spring, never collapsed to per base).  Deterministic."""
 
     overload_only: ClassVar[bool] = True
+    kernel_rule: ClassVar[str | None] = "over-threshold"
 
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         return np.flatnonzero(state.intact & (tension > state.fmax))

@@ -21,14 +21,22 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
 
 @_jit
-def _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2):
+def _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2, fmax, log_id, log_step, log_t, n_log, step):
     """Add every intact spring's force (eq. 1) into ``f``; return the largest ``tension·inv_fmax``
-    over them (skipped when ``inv_fmax`` is empty) and whether all their tensions are finite.
+    over them (skipped when ``inv_fmax`` is empty), whether all their tensions are finite, and the
+    new length of the break log.
+
+    With a break log (``log_id`` not empty) this pass also applies the threshold rule, as
+    ``ThresholdBreaker.select`` does: an intact spring whose tension exceeds its ``fmax`` is marked
+    broken in ``intact`` (the kernel's working copy), its force is left out of ``f`` (so ``f`` is
+    what a fresh pass after the break would give, to the bit) and ``(spring, step, tension)`` is
+    appended to the log at row ``n_log``.
 
     The one place a spring's force is written in this backend: the per-step and the quiet kernels
     both call it, so they give the same bits whatever the split of a run into calls.
     """
     loads = inv_fmax.shape[0] > 0
+    breaking = log_id.shape[0] > 0
     top = -np.inf
     finite = True
     for s in range(pi.shape[0]):
@@ -47,6 +55,13 @@ def _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2):
             load = t * inv_fmax[s]
             if load > top:
                 top = load
+        if breaking and t > fmax[s]:
+            intact[s] = False
+            log_id[n_log] = s
+            log_step[n_log] = step
+            log_t[n_log] = t
+            n_log += 1
+            continue
         if length > 0.0:
             g = t / length
             f0[i] += g * d0
@@ -55,16 +70,22 @@ def _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2):
             f0[j] -= g * d0
             f1[j] -= g * d1
             f2[j] -= g * d2
-    return top, finite
+    return top, finite, n_log
 
 
-_NO_LOADS = np.empty(0)
+@_jit
+def _none():
+    """Empty (float, int) arrays for the optional arguments of :func:`_spring_pass` (made here: a
+    global array is read-only inside numba)."""
+    return np.empty(0), np.empty(0, dtype=np.int64)
 
 
 @_jit
 def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
     f[:] = 0.0
-    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, _NO_LOADS, f[:, 0], f[:, 1], f[:, 2])
+    no_f, no_i = _none()
+    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, no_f, f[:, 0], f[:, 1], f[:, 2],
+                 no_f, no_i, no_i, no_f, 0, 0)
     if c != 0.0:
         for a in range(3):
             xa, aa, fa = x[:, a], anchor[:, a], f[:, a]
@@ -75,7 +96,9 @@ def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
 @_jit
 def _euler_cromer(x, v, anchor, pi, pj, rest, k, c, b, m, h, intact, f):
     f[:] = 0.0
-    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, _NO_LOADS, f[:, 0], f[:, 1], f[:, 2])
+    no_f, no_i = _none()
+    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, no_f, f[:, 0], f[:, 1], f[:, 2],
+                 no_f, no_i, no_i, no_f, 0, 0)
     hm = h / m
     for a in range(3):
         xa, va, aa, fa = x[:, a], v[:, a], anchor[:, a], f[:, a]
@@ -233,17 +256,22 @@ def _ec_bases(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, ra, from_d
 
 
 @_jit
-def _euler_cromer_quiet(x, v, anchor, anchor_dir, pi, pj, rest, k, c, b, m, h, intact, inv_fmax, radii, f):
+def _euler_cromer_quiet(x, v, anchor, anchor_dir, pi, pj, rest, k, c, b, m, h, intact, inv_fmax, fmax, radii, f,
+                        accept_load, log_id, log_step, log_t, return_on_break, max_batch):
     """Up to ``len(radii)`` whole steps (integrate, constrain, measure) at uniform radii ``radii``, in
-    one call.
+    one call.  Returns ``(steps taken, max load of the last step, length of the break log)``, the load
+    NaN if that step went non-finite (any coordinate of any base, or any intact tension).
 
-    Stops after the first step whose max load exceeds 1 (a spring to break) or whose state is not
-    finite (any coordinate of any base, or any intact tension).  Returns ``(steps taken, max load of
-    the last step)``, the load NaN if that step went non-finite.  The spring pass that finds the
-    load also accumulates the next step's spring forces into ``f`` (first same as last), through
-    :func:`_spring_pass` as the per-step kernels do, so the result does not depend on where calls
-    begin and end.  Anchors (radius × fixed direction) are written back once, at the end; the
-    caller fills the tensions once, for the last step.
+    Without a break log it stops after the first step whose max load exceeds 1 (a spring for the
+    breakers to judge).  With one, springs over their threshold break inside the call (see
+    :func:`_spring_pass`; ``intact`` is then the caller's working copy) and it goes on, unless
+    ``return_on_break`` or a step breaks more than ``max_batch`` springs (a degenerate event).  It
+    also stops after a step whose load exceeds ``accept_load`` (the caller undoes that step).
+
+    The spring pass that finds the load also accumulates the next step's spring forces into ``f``
+    (first same as last), through :func:`_spring_pass` as the per-step kernels do, so the result
+    does not depend on where calls begin and end.  Anchors (radius × fixed direction) are written
+    back once, at the end; the caller fills the tensions, if it needs them, for the last step.
     """
     hm = h / m
     x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
@@ -251,32 +279,47 @@ def _euler_cromer_quiet(x, v, anchor, anchor_dir, pi, pj, rest, k, c, b, m, h, i
     f0, f1, f2 = f[:, 0], f[:, 1], f[:, 2]
     ax, ay, az = anchor[:, 0], anchor[:, 1], anchor[:, 2]
     dx, dy = anchor_dir[:, 0], anchor_dir[:, 1]
+    breaking = log_id.shape[0] > 0
     f[:] = 0.0
-    _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, _NO_LOADS, f0, f1, f2)
+    no_f, no_i = _none()
+    _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, no_f, f0, f1, f2, fmax, no_i, no_i, no_f, 0, 0)
     top = -np.inf
     finite = True
     done = 0
+    n_log = 0
     for step in range(radii.shape[0]):
         ra = radii[step - 1] if step > 0 else 0.0
         finite = _ec_bases(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, ra, step > 0, radii[step], c, b, hm, h)
-        top, springs_finite = _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2)
+        before = n_log
+        top, springs_finite, n_log = _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2,
+                                                  fmax, log_id, log_step, log_t, n_log, step)
         finite = finite and springs_finite
         done = step + 1
-        if not finite or top > 1.0:
+        if not finite or top > accept_load:
+            break
+        if not breaking:
+            if top > 1.0:
+                break
+        elif n_log > before and (return_on_break or n_log - before > max_batch):
             break
     _place_anchors(anchor, anchor_dir, radii[done - 1 : done])  # the anchors at the last step's radius
-    return done, (top if finite else np.nan)
+    return done, (top if finite else np.nan), n_log
 
 
-def euler_cromer_quiet(state, h: float, radii: np.ndarray, tension: np.ndarray,
-                       accept_load: float = math.inf) -> tuple[int, float]:
+def euler_cromer_quiet(state, h: float, radii: np.ndarray, tension: np.ndarray, accept_load: float = math.inf,
+                       break_rule: str | None = None, return_on_break: bool = True, max_batch: float = math.inf):
     """Euler–Cromer steps at the uniform trunk radii ``radii`` (one per step); see
-    :func:`_euler_cromer_quiet`.  Returns ``(accepted steps, max load of the last step tried)``.
+    :func:`_euler_cromer_quiet`.  Returns ``(accepted steps, max load of the last step tried,
+    breaks)``, ``breaks`` being ``(spring ids, step within the call counted from 1, tensions)`` of
+    the springs broken inside the call (empty unless ``break_rule`` is ``"over-threshold"``).  The
+    state's ``intact`` is not touched: the caller applies ``breaks`` (``Simulation.break_springs``).
 
     If the last step tried went non-finite, or its load exceeds ``accept_load``, it is undone: the
     state is put back to the one before it by replaying the call's steps up to there from its start
-    (nothing breaks inside a call, so the replay is exact), and it is not counted.  ``tension`` is
-    filled only when the returned step overloads a spring (load > 1): only then is it read."""
+    (breaks included: the replay is exact), and it is not counted.  Without a break rule,
+    ``tension`` is filled when the returned step overloads a spring (load > 1): only then is it read."""
+    if break_rule not in (None, "over-threshold"):
+        raise ValueError(f"break_rule = {break_rule!r}: this backend knows only 'over-threshold'")
     mech = state.mechanics
     pi, pj = _ends(state)
     now = (state.x, state.v, state.anchor)
@@ -285,21 +328,32 @@ def euler_cromer_quiet(state, h: float, radii: np.ndarray, tension: np.ndarray,
         np.copyto(keep, a)
     inv_fmax = np.divide(1.0, state.fmax, out=_scratch(state, "inv_fmax", state.fmax))
     radii = np.ascontiguousarray(radii, dtype=float)
+    if break_rule is None:
+        no_f, no_i = _none()
+        live, log = state.intact, (no_i, no_i, no_f)
+    else:
+        live = _scratch(state, "live", state.intact)
+        m = state.n_springs
+        log = (_scratch(state, "log_id", np.empty(m, np.int64)), _scratch(state, "log_step", np.empty(m, np.int64)),
+               _scratch(state, "log_t", np.empty(m)))
 
     def call(r):
+        if live is not state.intact:
+            np.copyto(live, state.intact)
         return _euler_cromer_quiet(state.x, state.v, state.anchor, state.anchor_dir, pi, pj, state.rest, mech.k,
-                                   mech.c, mech.b, mech.m, h, state.intact, inv_fmax, r, _scratch(state, "f", state.x))
+                                   mech.c, mech.b, mech.m, h, live, inv_fmax, state.fmax, r,
+                                   _scratch(state, "f", state.x), accept_load, *log, return_on_break, max_batch)
 
-    done, load = call(radii)
+    done, load, n_log = call(radii)
     if math.isnan(load) or load > accept_load:
         for keep, a in zip(start, now):
             np.copyto(a, keep)
-        if done > 1:
-            call(radii[: done - 1])
-        return done - 1, float(load)
-    if load > 1.0:  # springs to break: the breakers need every tension of this state
+        n_log = call(radii[: done - 1])[2] if done > 1 else 0
+        done -= 1
+    elif load > 1.0 and break_rule is None:  # springs to break: the breakers need every tension of this state
         _measure(state.x, pi, pj, state.rest, mech.k, state.fmax, state.intact, tension)
-    return int(done), float(load)
+    breaks = (log[0][:n_log].copy(), log[1][:n_log] + 1, log[2][:n_log].copy())
+    return int(done), float(load), breaks
 
 
 @_jit

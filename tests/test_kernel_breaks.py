@@ -1,0 +1,154 @@
+"""Springs broken inside the compiled quiet kernel (threshold rule, fixed or automatic steps) must
+give, bit for bit, what the step-by-step loop gives: the same states, the same break log, the same
+graph, the same events, the same stopping step — and Python must still see every break it asks to."""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+import pytest
+
+from bark import Stop
+from bark.errors import NonFiniteStateError
+from bark.simulation import _trusted_rule
+from bark.triggers import At, Every, OnEvent, Periodic
+from bark_plugins.breakers import ProbabilisticBreaker, ThresholdBreaker
+from bark_plugins.growth import SqrtGrowth
+from conftest import build_sim
+
+LOG = ("spring", "i", "j", "step", "t", "tension")
+
+
+def _stepped(sim, stop):
+    while stop.reason(sim) is None and sim.stop_reason is None:
+        sim.step()
+    return sim
+
+
+def _assert_same(a, b):
+    for name in ("x", "v", "anchor", "intact"):
+        assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name
+    la, lb = a.breaks.arrays(), b.breaks.arrays()
+    for k in LOG:
+        assert np.array_equal(la[k], lb[k]), k
+    assert a.step_count == b.step_count and a.state.t == b.state.t
+    assert [e["kind"] for e in a.events] == [e["kind"] for e in b.events]
+    assert [(e["step"], e["t"]) for e in a.events] == [(e["step"], e["t"]) for e in b.events]
+
+
+def _graph_matches_arrays(sim):
+    edges = {tuple(sorted(e)) for e in sim.graph.edges}
+    intact = {tuple(sorted(p)) for p in sim.state.pairs[sim.state.intact].tolist()}
+    return edges == intact
+
+
+@pytest.mark.parametrize("stepping", ["fixed", "auto"])
+def test_breaking_inside_the_kernel_equals_the_step_loop(make_sim, stepping):
+    kw = dict(n_bases=400, G=0.05, dt=0.05, seed=3, backend="numba", stepping=stepping, fmax_spread=0.05)
+    fast, slow = make_sim(**kw), make_sim(**kw)
+    stop = Stop(until_time=8.0)
+    advances = []
+    fast.run(stop, lambda s: advances.append(s.step_count))
+    _stepped(slow, stop)
+    _assert_same(fast, slow)
+    steps_with_breaks = np.unique(fast.breaks.arrays()["step"]).size
+    assert steps_with_breaks > 20
+    assert len(advances) < steps_with_breaks  # calls went on through breaks: the kernel broke springs
+    assert _graph_matches_arrays(fast)
+
+
+def test_patch_stop_sees_every_break_and_stops_at_the_same_step(make_sim):
+    kw = dict(n_bases=400, G=0.05, dt=0.05, seed=5, backend="numba")
+    fast, slow = make_sim(**kw), make_sim(**kw)
+    stop = Stop(until_patches=6, until_time=40.0)
+    assert fast.run(stop) == "patches"
+    _stepped(slow, stop)
+    _assert_same(fast, slow)
+
+
+def test_an_on_break_trigger_fires_at_every_breaking_step(make_sim):
+    sim = make_sim(n_bases=400, G=0.05, dt=0.05, seed=5, backend="numba")
+    fired = []
+    sim.add_action(OnEvent("break"), lambda s: fired.append(s.step_count))
+    sim.run(Stop(until_time=6.0))
+    assert fired == np.unique(sim.breaks.arrays()["step"]).tolist() and len(fired) > 10
+
+
+def test_degenerate_events_match_with_the_exact_lattice(make_sim):
+    """The exact lattice breaks a whole offset class in one step (NOTES §1): the kernel must hand
+    that step back so the event is recorded (and, with on_degenerate = stop, the run ends there)."""
+    for on in ("warn", "stop"):
+        kw = dict(n_bases=400, G=0.05, dt=0.05, seed=1, backend="numba", jitter=0.0, on_degenerate=on)
+        fast, slow = make_sim(**kw), make_sim(**kw)
+        stop = Stop(until_time=10.0)
+        fast.run(stop)
+        _stepped(slow, stop)
+        assert any(e["kind"] == "degenerate" for e in fast.events)
+        _assert_same(fast, slow)
+        if on == "stop":
+            assert fast.stop_reason == "degenerate"
+
+
+def test_a_subclass_that_changes_select_is_asked(make_sim):
+    """A breaker that inherits the rule's name but overrides ``select`` gets ``select`` called."""
+    calls = []
+
+    class EveryOther(ThresholdBreaker):
+        def select(self, state, tension, rng):
+            calls.append(1)
+            return super().select(state, tension, rng)[::2]
+
+    class Restated(EveryOther):
+        kernel_rule = "over-threshold"  # names the rule, but its select is EveryOther's: not trusted
+
+    assert _trusted_rule(ThresholdBreaker()) == "over-threshold"
+    assert _trusted_rule(EveryOther()) is None
+    assert _trusted_rule(Restated()) is None
+    assert _trusted_rule(ProbabilisticBreaker()) is None
+    sim = make_sim(n_bases=300, backend="numba", breakers=[EveryOther()])
+    sim.run(Stop(until_time=4.0))
+    assert calls and sim.n_broken > 0
+
+
+@pytest.mark.parametrize("trigger", [Periodic(7), Every(0.4), At([1.0, 2.5])])
+def test_time_and_step_triggers_let_the_kernel_break(trigger):
+    assert not trigger.watches_breaks()
+    assert OnEvent("break").watches_breaks() and (trigger | OnEvent("break")).watches_breaks()
+    assert not (trigger & Periodic(3)).watches_breaks() and not (~trigger).watches_breaks()
+
+
+@attrs.frozen(kw_only=True)
+class _SqrtThenNaN(SqrtGrowth):
+    t_bad: float = 1.0
+
+    def radius(self, t, z):
+        return math.nan if t > self.t_bad else super().radius(t, z)
+
+
+def test_nan_in_a_call_that_broke_springs_keeps_them_broken():
+    """A call that breaks springs and then meets a NaN radius: the state goes back to the last
+    finite step, and exactly the springs broken up to it are broken, in graph, arrays and log."""
+    dt, bad_step = 0.05, 97  # inside the fifth call (8, 16, 32, 64, ...): past the first breaks
+
+    ref = build_sim(n_bases=400, seed=2, dt=dt, backend="numba")  # G = 0.05
+    sim = attrs.evolve(ref, growth=_SqrtThenNaN(G=0.05, t_bad=(bad_step - 0.5) * dt))
+    with pytest.raises(NonFiniteStateError):
+        sim.run(Stop(until_time=100.0))
+    for _ in range(bad_step - 1):
+        ref.step()
+    _assert_same(sim, ref)
+    assert _graph_matches_arrays(sim) and len(sim.breaks) == sim.n_broken
+    assert sim.breaks.arrays()["step"].max() > bad_step - 30  # springs broke in the call that met the NaN
+
+
+def test_break_springs_logs_a_batch_in_step_order():
+    sim = build_sim(n_bases=300, backend="numba")
+    tension = np.arange(sim.state.n_springs, dtype=float)
+    got = sim.break_springs([9, 4, 6, 4], tension, step=[3, 5, 3, 2], t=[0.3, 0.5, 0.3, 0.2])
+    assert got.tolist() == [4, 6, 9]
+    log = sim.breaks.arrays()
+    assert log["spring"].tolist() == [4, 6, 9] and log["step"].tolist() == [2, 3, 3]
+    assert log["t"].tolist() == [0.2, 0.3, 0.3] and log["tension"].tolist() == [4.0, 6.0, 9.0]
+    assert _graph_matches_arrays(sim)
