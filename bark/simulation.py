@@ -301,10 +301,14 @@ class Simulation:
         applies when the integrator names a ``quiet_kernel`` that the backend has, every breaker is
         ``overload_only`` (so nothing needs Python until a spring is over its threshold), the
         growth law is uniform (the radius does not depend on height) and the step is full size.
-        It returns after the first step that overloads a spring (whose breaks are then made here,
-        as in :meth:`step`), on a non-finite state, or at the step where ``stop``'s time or radius
-        is reached.  A last step that adaptive stepping rejects comes back undone (the kernel
-        replays its call up to the step before, exactly) and is retried here at half the size.
+        It returns on a non-finite state, at the step where ``stop``'s time or radius is reached
+        or a trigger is next due, and around breaks: if every breaker names the same trusted
+        ``kernel_rule`` and stepping is not adaptive, the kernel breaks springs itself and goes on
+        (the batch is handed to :meth:`break_springs` here), returning after a breaking step only
+        when Python must see it (a patch stop, a trigger that watches breaks, a degenerate step);
+        otherwise it returns after the first step that overloads a spring, whose breaks are then
+        made here, as in :meth:`step`.  A last step that adaptive stepping rejects comes back undone
+        (the kernel replays its call up to the step before, exactly) and is retried at half the size.
         """
         kernel = self._quiet_kernel() if self._halvings == 0 else None
         radii = self._quiet_radii(stop) if kernel is not None else None

@@ -15,7 +15,8 @@ out) -> max_load``                       anchors (radius × fixed direction), th
 =======================================  ========================================================
 
 numba also has ``euler_cromer_quiet``, many Euler–Cromer steps in one compiled call (the quiet path
-of ``Simulation.advance``, named by ``EulerCromer.quiet_kernel``); a backend without it steps one by one.
+of ``Simulation.advance``, named by ``EulerCromer.quiet_kernel``), which can also break springs by
+the ``over-threshold`` rule inside the call; a backend without it steps one by one.
 
 ``numpy`` is always there; ``numba`` is used when importable.  ``auto`` picks numba if it imports,
 else numpy.  Both give the same results to round-off (summation order differs).
