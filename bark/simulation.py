@@ -322,7 +322,7 @@ class Simulation:
         must_see = rule is not None and self._must_see_breaks(stop)  # long call of breaks costs a replay
         done, load, (ids, steps, tensions) = kernel(
             s, self.h, radii, self._tension, 1.0 + self.overshoot_tol if adaptive else math.inf,
-            break_rule=rule, return_on_break=must_see, max_batch=self.degenerate_fraction * s.n_springs,
+            break_rule=rule, return_on_break=must_see, max_batch=self._degenerate_limit,
         )
         first_step, first_tick = self.step_count, self._ticks
         self._ticks += done << self._levels
@@ -333,9 +333,7 @@ class Simulation:
             self._tension[ids] = tensions
             self.break_springs(ids, self._tension, step=first_step + steps,
                                t=(first_tick + (steps << self._levels)) * self._h_min)
-            last = np.count_nonzero(steps == done)
-            if last > self.degenerate_fraction * s.n_springs:  # the kernel returns after such a step
-                self._degenerate(last)
+            self._check_degenerate(np.count_nonzero(steps == done))  # the kernel returns after such a step
         # quiet steps come in runs: grow the next call while they last, start small after a break
         # that Python had to see (with the kernel breaking springs itself, every step is quiet)
         saw_break = load > 1.0 and (rule is None or must_see)
@@ -384,8 +382,7 @@ class Simulation:
     def _break_selected(self, max_load: float) -> None:
         ids = self._select(self._tension, max_load)
         if ids.size:
-            if ids.size > self.degenerate_fraction * self.state.n_springs:
-                self._degenerate(ids.size)
+            self._check_degenerate(ids.size)
             self.break_springs(ids, self._tension)
 
     def _non_finite(self, bad_t: float) -> None:
@@ -469,7 +466,15 @@ class Simulation:
         ids = np.unique(np.concatenate(picks))
         return ids[self.state.intact[ids]]
 
-    def _degenerate(self, n: int) -> None:
+    @property
+    def _degenerate_limit(self) -> float:
+        """A step that breaks more springs than this is a degenerate event."""
+        return self.degenerate_fraction * self.state.n_springs
+
+    def _check_degenerate(self, n: int) -> None:
+        """Record a degenerate event (and stop, if asked) when one step breaks ``n`` springs, too many."""
+        if n <= self._degenerate_limit:
+            return
         self.events.append(
             {
                 "kind": "degenerate",

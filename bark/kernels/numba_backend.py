@@ -81,11 +81,18 @@ def _none():
 
 
 @_jit
-def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
-    f[:] = 0.0
+def _spring_forces(x0, x1, x2, pi, pj, rest, k, intact, f0, f1, f2):
+    """``f`` = the intact springs' forces alone: :func:`_spring_pass` with no loads and no breaking."""
+    f0[:] = 0.0
+    f1[:] = 0.0
+    f2[:] = 0.0
     no_f, no_i = _none()
-    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, no_f, f[:, 0], f[:, 1], f[:, 2],
-                 no_f, no_i, no_i, no_f, 0, 0)
+    _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, no_f, f0, f1, f2, no_f, no_i, no_i, no_f, 0, 0)
+
+
+@_jit
+def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
+    _spring_forces(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, f[:, 0], f[:, 1], f[:, 2])
     if c != 0.0:
         for a in range(3):
             xa, aa, fa = x[:, a], anchor[:, a], f[:, a]
@@ -95,10 +102,7 @@ def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
 
 @_jit
 def _euler_cromer(x, v, anchor, pi, pj, rest, k, c, b, m, h, intact, f):
-    f[:] = 0.0
-    no_f, no_i = _none()
-    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, no_f, f[:, 0], f[:, 1], f[:, 2],
-                 no_f, no_i, no_i, no_f, 0, 0)
+    _spring_forces(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, f[:, 0], f[:, 1], f[:, 2])
     hm = h / m
     for a in range(3):
         xa, va, aa, fa = x[:, a], v[:, a], anchor[:, a], f[:, a]
@@ -168,11 +172,14 @@ def _ends(state) -> tuple[np.ndarray, np.ndarray]:
     return sc["ends"]
 
 
-def _scratch(state, name: str, like: np.ndarray) -> np.ndarray:
-    """A work buffer shaped and laid out like ``like``, kept in ``state.scratch`` between calls."""
+def _scratch(state, name: str, like: np.ndarray, dtype=None) -> np.ndarray:
+    """A work buffer shaped and laid out like ``like`` (of ``dtype``, default ``like``'s), kept in
+    ``state.scratch`` between calls."""
+    dtype = like.dtype if dtype is None else np.dtype(dtype)
     buf = state.scratch.get(name)
-    if buf is None or buf.shape != like.shape or buf.strides != like.strides:
-        buf = state.scratch[name] = np.empty_like(like)
+    if (buf is None or buf.shape != like.shape or buf.dtype != dtype
+            or buf.flags.f_contiguous != like.flags.f_contiguous):
+        buf = state.scratch[name] = np.empty_like(like, dtype=dtype)
     return buf
 
 
@@ -280,9 +287,7 @@ def _euler_cromer_quiet(x, v, anchor, anchor_dir, pi, pj, rest, k, c, b, m, h, i
     ax, ay, az = anchor[:, 0], anchor[:, 1], anchor[:, 2]
     dx, dy = anchor_dir[:, 0], anchor_dir[:, 1]
     breaking = log_id.shape[0] > 0
-    f[:] = 0.0
-    no_f, no_i = _none()
-    _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, no_f, f0, f1, f2, fmax, no_i, no_i, no_f, 0, 0)
+    _spring_forces(x0, x1, x2, pi, pj, rest, k, intact, f0, f1, f2)
     top = -np.inf
     finite = True
     done = 0
@@ -333,9 +338,8 @@ def euler_cromer_quiet(state, h: float, radii: np.ndarray, tension: np.ndarray, 
         live, log = state.intact, (no_i, no_i, no_f)
     else:
         live = _scratch(state, "live", state.intact)
-        m = state.n_springs
-        log = (_scratch(state, "log_id", np.empty(m, np.int64)), _scratch(state, "log_step", np.empty(m, np.int64)),
-               _scratch(state, "log_t", np.empty(m)))
+        log = (_scratch(state, "log_id", state.intact, np.int64), _scratch(state, "log_step", state.intact, np.int64),
+               _scratch(state, "log_t", state.intact, float))
 
     def call(r):
         if live is not state.intact:
