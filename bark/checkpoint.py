@@ -1,27 +1,40 @@
 """Checkpoints: a run written down so that it can go on later, bit for bit as if never stopped.
 
-A checkpoint is one ``checkpoint.npz`` (numpy arrays; ``np.load(..., allow_pickle=False)`` reads it)
-holding:
+A checkpoint is one ``checkpoint.npz`` (numpy arrays, stored uncompressed so that writing one is
+fast; ``np.load(..., allow_pickle=False)`` reads it) holding:
 
 * the state: positions ``x``, velocities ``v``, ``anchor``, the ``intact`` mask, thresholds ``fmax``
   and the spring ends ``pairs`` (a check that the scene rebuilds the same lattice);
 * the break log so far (``breaks_*`` columns);
+* what was recorded along the way (``rec_series_*``: the statistics series; ``rec_frames_*``: the
+  animation's frames), so that a resumed run's files are the whole run's;
 * ``meta``, a JSON text: checkpoint format, bark's version, the whole scene (every setting, as in
   summary.json), the stop conditions, the clock (t, step count, tick count), adaptive stepping's
-  current level, the random generator's state, the events so far, and why it was written
-  (``periodic``, ``interrupted`` or ``end``).
+  current level, the random generator's state, the events so far, why it was written
+  (``periodic``, ``interrupted`` or ``end``), and a checksum of every array.
+
+**Trust.**  Nothing in a checkpoint is used before all of it is verified: every array against its
+checksum, the types and shapes of the parts against one another (the break log's columns, the
+springs against the bases), positions finite, the random generator's state valid, and the format
+and bark version it was written by.  A damaged file is one line naming what is wrong.
+
+**Never the only copy.**  A new checkpoint is written to a temporary file, read back and verified,
+and only then moved into place; the one it replaces is kept as ``checkpoint.prev.npz``.  If the
+newest is damaged (a disk fault, a crash in the middle of the move), resuming falls back to the
+previous one, and says so.
 
 The leaf-base graph is not stored: it is rebuilt from the scene (same seed, same lattice) and the
-intact mask.  Writing is atomic (temporary file, then ``os.replace``), so a crash while writing leaves
-the previous checkpoint whole.  A resumed run rewrites the run's outputs (patches.csv, breaks.csv,
-summary.json, state.npz, pattern.png) at its end; the break log in them is the whole run's.
+intact mask.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import zipfile
+import zlib
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import attrs
 import numpy as np
@@ -29,44 +42,203 @@ import numpy as np
 from bark.errors import BarkError
 from bark.output import write_npz
 
-__all__ = ["FORMAT", "save", "load", "CHECKPOINT_NAME"]
+__all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "load", "read", "read_meta", "Damaged"]
 
-FORMAT = 1
+FORMAT = 2
 CHECKPOINT_NAME = "checkpoint.npz"
+PREVIOUS_NAME = "checkpoint.prev.npz"
+REASONS = ("periodic", "interrupted", "end")
+"""Why a checkpoint was written: along the way, on a signal, or at the run's end."""
+
+STATE = {"x": ("float64", 2), "v": ("float64", 2), "anchor": ("float64", 2), "intact": ("bool", 1),
+         "fmax": ("float64", 1), "pairs": ("int64", 2)}
+BREAKS = {"spring": "int64", "i": "int64", "j": "int64", "step": "int64", "t": "float64", "tension": "float64"}
+META_KEYS = ("format", "bark_version", "reason", "scene", "stop", "t", "h_last", "h", "step_count", "ticks", "halvings",
+             "quiet_n", "events", "rng", "checksums")
 
 
-def save(path: str | Path, sim, scene, stop, reason: str, extra: dict[str, Any] | None = None) -> Path:
-    """Write ``sim``'s checkpoint to ``path`` atomically."""
+class Damaged(BarkError):
+    """A checkpoint that cannot be trusted; the message names the file and what is wrong."""
+
+
+def digest(a: np.ndarray) -> str:
+    """Checksum of an array's type, shape and bytes (BLAKE2b, 128 bits)."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.blake2b(digest_size=16)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(memoryview(a).cast("B") if a.size else b"")
+    return h.hexdigest()
+
+
+def save(folder: str | Path, sim, scene, stop, reason: str, extra: dict[str, Any] | None = None,
+         recorders=()) -> Path:
+    """Write ``sim``'s checkpoint into ``folder``: verified before it replaces the last one, which
+    is kept as ``checkpoint.prev.npz``.  ``recorders`` (objects with ``name`` and ``arrays()``)
+    are saved with it."""
     from bark import __version__
 
     arrays, meta = sim.snapshot()
+    for rec in recorders:
+        arrays.update({f"rec_{rec.name}_{k}": v for k, v in rec.arrays().items()})
     meta = {
         "format": FORMAT, "bark_version": __version__, "reason": reason, "scene": scene.to_dict(),
         "stop": attrs.asdict(stop), **meta, **(extra or {}),
+        "checksums": {name: digest(a) for name, a in arrays.items()},
     }
-    return write_npz(path, meta=np.array(json.dumps(meta)), **arrays)
+    folder = Path(folder)
+    return write_npz(folder / CHECKPOINT_NAME, compress=False, verify=read, keep=folder / PREVIOUS_NAME,
+                     meta=np.array(json.dumps(meta)), **arrays)
 
 
-def load(path: str | Path):
-    """``(scene, simulation, stop, meta)`` restored from a checkpoint; one-line BarkError if unreadable."""
-    from bark.scene import Scene
-    from bark.simulation import Stop
+def read_meta(path: str | Path) -> dict:
+    """Only the meta record of a checkpoint (cheap: the arrays are not read); :class:`Damaged` if unreadable."""
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as zf, zf.open("meta.npy") as fh:
+            meta = json.loads(str(np.lib.format.read_array(fh, allow_pickle=False)))
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its meta record cannot be read ({_why(err)})") from None
+    if not isinstance(meta, dict):
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its meta record is not a table")
+    return meta
+
+
+def _why(err: Exception) -> str:
+    text = str(err).splitlines()[0] if str(err) else type(err).__name__
+    return text[:200]
+
+
+def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
+    """``(arrays, meta)`` of a checkpoint, every part verified (see the module's docstring);
+    :class:`Damaged` naming the file and the first problem found."""
+    from bark import __version__
 
     path = Path(path)
+    where = f"checkpoint {str(path)!r}"
+
+    def bad(problem: str) -> Damaged:
+        return Damaged(f"{where} is damaged: {problem}")
+
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
     except FileNotFoundError:
-        raise BarkError(f"no checkpoint at {str(path)!r}") from None
-    except (OSError, ValueError) as err:
-        raise BarkError(f"checkpoint {str(path)!r} cannot be read: {err}") from None
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise bad(f"it cannot be read ({_why(err)})") from None
+    if "meta" not in arrays:
+        raise bad("its meta record is missing")
     try:
         meta = json.loads(str(arrays.pop("meta")))
-    except (KeyError, ValueError):
-        raise BarkError(f"checkpoint {str(path)!r} has no readable meta record") from None
-    if meta.get("format") != FORMAT:
-        raise BarkError(f"checkpoint {str(path)!r} has format {meta.get('format')!r}; this bark reads format {FORMAT}")
-    scene = Scene.from_dict(meta["scene"])
+    except ValueError as err:
+        raise bad(f"its meta record is not JSON ({_why(err)})") from None
+    if not isinstance(meta, dict):
+        raise bad("its meta record is not a table")
+    missing = [k for k in META_KEYS if k not in meta]
+    if missing:
+        raise bad(f"its meta record lacks {missing[0]!r}")
+    if meta["format"] != FORMAT:
+        raise Damaged(f"{where} has format {meta['format']!r}; this bark reads format {FORMAT}")
+    if meta["bark_version"] != __version__:
+        raise Damaged(f"{where} was written by bark {meta['bark_version']}, this is bark {__version__}: "
+                      f"a resumed run is bit-identical only on the version that began it")
+    if meta["reason"] not in REASONS:
+        raise bad(f"it was written for an unknown reason {meta['reason']!r}")
+    sums = meta["checksums"]
+    if not isinstance(sums, dict) or set(sums) != set(arrays):
+        lost = sorted(set(sums) - set(arrays)) if isinstance(sums, dict) else []
+        raise bad(f"member {lost[0]!r} is missing" if lost else "its members do not match its list of checksums")
+    for name, a in arrays.items():
+        if digest(a) != sums[name]:
+            raise bad(f"array {name!r} does not match its checksum")
+    _check_parts(arrays, meta, bad)
+    return arrays, meta
+
+
+def _check_parts(arrays: dict[str, np.ndarray], meta: dict, bad: Callable[[str], Damaged]) -> None:
+    """The parts of a checkpoint agree with one another (its checksums cannot see a writer's bug)."""
+    for name, (dtype, ndim) in {**STATE, **{f"breaks_{k}": (v, 1) for k, v in BREAKS.items()}}.items():
+        if name not in arrays:
+            raise bad(f"array {name!r} is missing")
+        a = arrays[name]
+        if a.dtype != np.dtype(dtype) or a.ndim != ndim:
+            raise bad(f"array {name!r} is {a.dtype}{list(a.shape)}, expected {dtype} with {ndim} dimension(s)")
+    n, m = arrays["x"].shape[0], arrays["pairs"].shape[0]
+    for name, shape in {"x": (n, 3), "v": (n, 3), "anchor": (n, 3), "pairs": (m, 2), "intact": (m,), "fmax": (m,)}.items():
+        if arrays[name].shape != shape:
+            raise bad(f"array {name!r} has shape {list(arrays[name].shape)}, expected {list(shape)}")
+    for name in ("x", "v", "anchor", "fmax"):
+        if not np.isfinite(arrays[name]).all():
+            raise bad(f"array {name!r} holds NaN or infinite values")
+    if m and (arrays["pairs"].min() < 0 or arrays["pairs"].max() >= n):
+        raise bad("a spring joins a base that does not exist")
+    lengths = {k: arrays[f"breaks_{k}"].shape[0] for k in BREAKS}
+    if len(set(lengths.values())) != 1:
+        raise bad("the break log's columns have different lengths (" + ", ".join(f"{k} {v}" for k, v in lengths.items()) + ")")
+    ids = arrays["breaks_spring"]
+    if ids.size and (ids.min() < 0 or ids.max() >= m or np.unique(ids).size != ids.size or arrays["intact"][ids].any()):
+        raise bad("the break log names springs that are not broken, or one spring twice")
+    if ids.size and ids.size != m - int(np.count_nonzero(arrays["intact"])):
+        raise bad(f"the break log holds {ids.size} breaks but {m - int(np.count_nonzero(arrays['intact']))} springs are broken")
+    for key in ("step_count", "ticks", "halvings", "quiet_n"):
+        if isinstance(meta[key], bool) or not isinstance(meta[key], int) or meta[key] < 0:
+            raise bad(f"its {key} is {meta[key]!r}, not a count")
+    for key in ("t", "h", "h_last"):
+        if isinstance(meta[key], bool) or not isinstance(meta[key], (int, float)) or not np.isfinite(meta[key]) or meta[key] < 0:
+            raise bad(f"its {key} is {meta[key]!r}, not a time")
+    try:
+        gen = np.random.Generator(np.random.PCG64())
+        if not isinstance(meta["rng"], dict) or meta["rng"].get("bit_generator") != "PCG64":
+            raise ValueError("not a PCG64 state")
+        gen.bit_generator.state = meta["rng"]
+    except (TypeError, ValueError, KeyError, OverflowError) as err:
+        raise bad(f"its random generator state is invalid ({_why(err)})") from None
+    if not isinstance(meta["events"], list) or not isinstance(meta["scene"], dict) or not isinstance(meta["stop"], dict):
+        raise bad("its events, scene or stop record has the wrong shape")
+
+
+def load(folder: str | Path, warn: Callable[[str], None] | None = None):
+    """``(scene, simulation, stop, meta, recorded)`` restored from the checkpoint in ``folder``,
+    where ``recorded`` maps a recorder's name to its arrays.  Falls back to the previous checkpoint
+    (and says so through ``warn``) when the newest is missing or damaged."""
+    folder = Path(folder)
+    newest, previous = folder / CHECKPOINT_NAME, folder / PREVIOUS_NAME
+    try:
+        arrays, meta = read(newest)
+        used = newest
+    except (FileNotFoundError, Damaged) as first:
+        if not previous.exists():
+            if isinstance(first, FileNotFoundError):
+                raise BarkError(f"no checkpoint in {str(folder)!r}: nothing to resume there") from None
+            raise first from None
+        try:
+            arrays, meta = read(previous)
+        except Damaged as second:
+            raise (second if isinstance(first, FileNotFoundError) else first) from None
+        used = previous
+        if warn is not None:
+            why = "is missing" if isinstance(first, FileNotFoundError) else f"cannot be used ({first})"
+            warn(f"{CHECKPOINT_NAME} {why}; going on from the previous checkpoint, t = {meta['t']:.6g}")
+    return (*restore(arrays, meta, used), used)
+
+
+def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
+    """Rebuild ``(scene, simulation, stop, meta, recorded)`` from verified checkpoint parts."""
+    from bark.scene import Scene
+    from bark.simulation import Stop
+
+    try:
+        scene = Scene.from_dict(meta["scene"])
+        stop = Stop(**meta["stop"])
+    except (BarkError, TypeError) as err:
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its scene is not valid ({err})") from None
     sim = scene.simulation()
     sim.restore(arrays, meta)
-    return scene, sim, Stop(**meta["stop"]), meta
+    recorded: dict[str, dict[str, np.ndarray]] = {}
+    for key, a in arrays.items():
+        if key.startswith("rec_"):
+            name, _, column = key[4:].partition("_")
+            recorded.setdefault(name, {})[column] = a
+    return scene, sim, stop, meta, recorded

@@ -57,7 +57,7 @@ def resolve(wanted) -> dict[str, str]:
     wanted = list(wanted)
     for name in wanted:
         if not isinstance(name, str) or name not in EFFECTS:
-            raise BarkError(f"unknown effect {name!r} in [effects] want: allowed are {', '.join(EFFECTS)}")
+            raise BarkError(f"unknown effect {name!r}; allowed are {', '.join(EFFECTS)}")
     why: dict[str, str] = {name: "asked for" for name in wanted}
     todo = list(wanted)
     while todo:

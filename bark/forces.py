@@ -20,7 +20,8 @@ import attrs
 import numpy as np
 import scipy.sparse as sp
 
-from bark._validate import non_negative, optional, positive
+from bark._validate import in_range, non_negative, optional, positive
+from bark.errors import BarkError, Ref
 
 __all__ = [
     "Mechanics",
@@ -45,21 +46,25 @@ class Mechanics:
     b: float = attrs.field(default=5.0, validator=non_negative)
     """Damping constant (force / velocity)."""
     m: float = attrs.field(default=1.0, validator=positive)
-    """Mass of one leaf base."""
+    """Mass of one leaf base (mass units; Table 2: 1)."""
     f_max: float = attrs.field(default=0.0028, validator=positive)
     """Mean breaking threshold of a neighbour spring, force units (Table 2: 0.0028 vertical,
     0.005 reticulate, 0.008 diamond)."""
-    fmax_spread: float = attrs.field(default=0.0, validator=non_negative)
+    fmax_spread: float = attrs.field(default=0.0, validator=in_range(0.0, 10.0))
     """Relative spread of the per-spring thresholds: each spring's f_max is drawn log-normally
-    with mean ``f_max`` and coefficient of variation ≈ ``fmax_spread``.  0 = all equal."""
-    fmax_weibull_shape: float | None = attrs.field(default=None, validator=optional(positive))
+    with mean ``f_max`` and coefficient of variation ≈ ``fmax_spread``.  0 = all equal.  At most
+    10: beyond that some thresholds underflow to zero."""
+    fmax_weibull_shape: float | None = attrs.field(default=None, validator=optional(in_range(0.01, 1e12)))
     """Instead: draw each spring's threshold from a Weibull distribution of this shape (modulus) k,
     scaled to mean ``f_max`` — the weakest-link law of brittle strength (small k: very unequal
-    springs; k ≈ 10: a few percent).  ``None``: log-normal with ``fmax_spread``."""
+    springs; k ≈ 10: a few percent).  ``None``: log-normal with ``fmax_spread``.  At least 0.01:
+    below that the Weibull scale Γ(1 + 1/k) overflows."""
 
     def __attrs_post_init__(self) -> None:
         if self.fmax_weibull_shape is not None and self.fmax_spread > 0:
-            raise ValueError("fmax_spread and fmax_weibull_shape are two ways to spread thresholds: give one")
+            raise BarkError("{0} and {1} are two ways to spread the thresholds: give one",
+                            Ref("mechanics", "fmax_spread", self.fmax_spread),
+                            Ref("mechanics", "fmax_weibull_shape", self.fmax_weibull_shape))
 
     def thresholds(self, n_springs: int, rng: np.random.Generator) -> np.ndarray:
         """Per-spring breaking thresholds, drawn from ``rng`` (the normal draw is always made, for a

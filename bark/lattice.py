@@ -2,7 +2,7 @@
 
 Leaf base ``i`` sits at angle ``i·φ`` and height ``i·h``.  Springs join it to the bases at the
 index offsets ``±o`` for each ``o`` in ``offsets`` (Table 2: ±21, ±34), giving each interior base
-four neighbours.  The exact lattice is degenerate (NOTES.md §1: every spring of one offset has the
+four neighbours.  The exact lattice is degenerate (every spring of one offset has the
 same length and reaches its threshold in the same step), so the lattice carries an explicit,
 seeded position jitter; ``jitter=0`` keeps the exact lattice available.
 
@@ -17,7 +17,8 @@ import math
 import attrs
 import numpy as np
 
-from bark._validate import in_range, non_negative, positive, positive_int
+from bark._validate import INT_MAX, in_range, non_negative, positive, positive_int
+from bark.errors import BarkError, Ref
 
 __all__ = ["GOLDEN_ANGLE_DEG", "Lattice"]
 
@@ -38,11 +39,11 @@ def _check_offsets(instance, attribute, value) -> None:
     ok = (
         isinstance(value, tuple)
         and len(value) > 0
-        and all(isinstance(o, int) and not isinstance(o, bool) and o >= 1 for o in value)
+        and all(isinstance(o, int) and not isinstance(o, bool) and 1 <= o <= INT_MAX for o in value)
         and len(set(value)) == len(value)
     )
     if not ok:
-        raise ValueError(f"offsets = {value!r}: must be a list of distinct integers >= 1, e.g. [21, 34]")
+        raise BarkError("{0}: must be a list of distinct integers >= 1, e.g. [21, 34]", Ref(None, attribute.name, value))
 
 
 @attrs.frozen(kw_only=True)
@@ -54,7 +55,7 @@ class Lattice:
     divergence_deg: float = attrs.field(default=GOLDEN_ANGLE_DEG, validator=in_range(0.0, 360.0, lo_open=True, hi_open=True))
     """Divergence angle φ between successive bases, degrees (default: the golden angle)."""
     rise: float = attrs.field(default=0.0005, validator=positive)
-    """Vertical displacement h between successive bases (Table 2: 0.0005)."""
+    """Vertical displacement h between successive bases, length units (1 = 0.3 m; Table 2: 0.0005)."""
     offsets: tuple[int, ...] = attrs.field(default=(21, 34), converter=_offsets, validator=_check_offsets)
     """Index offsets to neighbouring bases; each offset o joins base i to base i+o (Table 2: 21, 34)."""
     jitter: float = attrs.field(default=0.05, validator=non_negative)

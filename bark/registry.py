@@ -15,9 +15,8 @@ from __future__ import annotations
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-import attrs
-
-from bark.errors import BarkError
+from bark._validate import construct
+from bark.errors import BarkError, Ref
 from bark.strategies import KINDS, Strategy
 
 __all__ = ["GROUPS", "available", "load", "create"]
@@ -42,7 +41,7 @@ def load(kind: str, name: str) -> type[Strategy]:
     eps = available(kind)
     if name not in eps:
         names = ", ".join(eps) or "(none installed)"
-        raise BarkError(f"unknown {kind} {name!r}: installed are {names}")
+        raise BarkError("{0}: no " + kind + " strategy of that name; installed are " + names, Ref(kind, "name", name))
     cls = eps[name].load()
     if not (isinstance(cls, type) and issubclass(cls, Strategy) and cls.kind == kind):
         raise BarkError(f"{kind} {name!r} ({eps[name].value}) is not a bark {kind} strategy class")
@@ -50,15 +49,7 @@ def load(kind: str, name: str) -> type[Strategy]:
 
 
 def create(kind: str, name: str, **params: Any) -> Strategy:
-    """Instantiate ``name`` of ``kind`` with ``params``; bad or unknown keywords give one line."""
+    """Instantiate ``name`` of ``kind`` with ``params``; an unknown, missing or bad keyword is a
+    one-line :class:`BarkError` whose ref names the key (section ``kind``)."""
     cls = load(kind, name)
-    allowed = [a.name for a in attrs.fields(cls) if a.init]
-    unknown = sorted(set(params) - set(allowed))
-    if unknown:
-        raise BarkError(
-            f"unknown {kind} parameter {unknown[0]!r} for {name!r}: allowed are {', '.join(allowed) or '(none)'}"
-        )
-    try:
-        return cls(**params)
-    except (TypeError, ValueError) as err:
-        raise BarkError(f"{kind} {name!r}: {err}") from None
+    return construct(cls, params, f"{kind} {name!r}")

@@ -25,10 +25,11 @@ from pathlib import Path
 from typing import Any
 
 import attrs
+import numpy as np
 
 from bark import effects, registry
-from bark._validate import in_range, one_of, optional, positive, positive_int
-from bark.errors import BarkError
+from bark._validate import MISSING, construct, in_range, int_in, one_of, optional, positive, positive_int
+from bark.errors import BarkError, Ref
 from bark.forces import Mechanics
 from bark.kernels import BACKENDS
 from bark.lattice import Lattice
@@ -37,19 +38,14 @@ from bark.simulation import DEFAULT_DT, DEFAULT_OVERSHOOT_TOL, DEFAULT_STEPPING,
 __all__ = ["RunSettings", "Scene", "STRATEGY_SECTIONS", "DEFAULT_STRATEGIES"]
 
 
-def _seed(instance, attribute, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ValueError(f"{attribute.name} = {value!r}: must be an integer >= 0")
-
-
 @attrs.frozen(kw_only=True)
 class RunSettings:
     """How a run is stepped and when it stops."""
 
     dt: float = attrs.field(default=DEFAULT_DT, validator=positive)
     """Time step, time units (1 = 88.5 days); with adaptive stepping the largest one.  The paper
-    used a fixed 0.01 (21 h): dt = 0.01 with stepping = "fixed" reproduces it."""
-    seed: int = attrs.field(default=0, validator=_seed)
+    used a fixed 0.01 (21 h): dt 0.01 with fixed stepping reproduces it."""
+    seed: int = attrs.field(default=0, validator=int_in(0, 2**63 - 1))
     """Seed of the one random generator: same seed → identical run."""
     until_time: float | None = attrs.field(default=1000.0, validator=optional(positive))
     """Stop at this simulated time (time units; 1 = 88.5 days)."""
@@ -68,8 +64,8 @@ class RunSettings:
     sub-steps; ``adaptive``: also halve steps around breaks to keep overshoot below overshoot_tol."""
     overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
     """Adaptive stepping: largest relative overshoot tension/fmax − 1 allowed at a break."""
-    max_halvings: int = attrs.field(default=10, validator=positive_int)
-    """Adaptive stepping: the smallest step is the full step / 2**max_halvings."""
+    max_halvings: int = attrs.field(default=10, validator=int_in(1, 40))
+    """Adaptive stepping: the smallest step is the full step / 2**max_halvings (at most 40)."""
     backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
     """Compute backend: ``numpy``, ``numba``, or ``auto`` (numba if installed, else numpy)."""
 
@@ -89,18 +85,92 @@ PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "
 SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS, "effects")
 
 
-def _fields(cls) -> list[str]:
-    return [a.name for a in attrs.fields(cls) if a.init]
+def _place(section: str, build):
+    """``build()``, with the refs of any BarkError it raises placed in ``section``."""
+    try:
+        return build()
+    except BarkError as err:
+        raise err.within(section) from None
 
 
 def _build(section: str, cls, params: dict[str, Any]):
-    unknown = sorted(set(params) - set(_fields(cls)))
-    if unknown:
-        raise BarkError(f"unknown key {unknown[0]!r} in [{section}]: allowed are {', '.join(_fields(cls))}")
+    return _place(section, lambda: construct(cls, params, f"[{section}]"))
+
+
+@attrs.frozen(kw_only=True)
+class SceneInfo:
+    """The ``[scene]`` table: free text, recorded in summary.json."""
+
+    name: str = attrs.field(default="", converter=str)
+    description: str = attrs.field(default="", converter=str)
+
+
+def _want(value):
+    if value is None:
+        return None
+    if isinstance(value, str) or not isinstance(value, (list, tuple)):
+        raise BarkError("{0}: must be a list of effect names, e.g. ['fracture', 'pattern-image']", Ref(None, "want", value))
     try:
-        return cls(**params)
-    except (TypeError, ValueError) as err:
-        raise BarkError(f"[{section}] {err}") from None
+        effects.resolve(value)
+    except BarkError as err:
+        raise BarkError("{0}: " + str(err), Ref(None, "want", list(value))) from None
+    return tuple(value)
+
+
+@attrs.frozen(kw_only=True)
+class EffectSettings:
+    """The ``[effects]`` table."""
+
+    want: tuple[str, ...] | None = attrs.field(default=None, converter=_want)
+    """The effects asked for (``bark.effects``); ``None``: the usual outputs of the configured model."""
+    frame_every: float = attrs.field(default=10.0, validator=positive)
+    """With the ``animation`` effect: simulated time between frames."""
+    series_every: float = attrs.field(default=10.0, validator=positive)
+    """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+
+
+MEMORY = {"fixed": 300 * 2**20, "per_base": 800, "per_spring": 400, "per_base_image": 4000}
+"""Coefficients of ``Scene.memory_estimate`` (bytes), measured as peak resident memory of whole
+``bark simulate`` processes at 10 000 to 160 000 bases (interpreter, numpy, scipy and numba's
+runtime; state, graph and work arrays; the image's points and spring segments)."""
+
+
+def available_memory() -> int | None:
+    """Memory this machine can give a new process now (Linux's MemAvailable), or ``None`` if unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+FAR_FUTURE = 1e12
+"""Time at which a radius stop with no time bound must have been reached, or it never will."""
+
+
+def _check_feasible(lattice: Lattice, run: RunSettings, growth, resolved: dict) -> None:
+    """Refuse a run that has nothing to simulate or whose stop conditions can never hold."""
+    if min(lattice.offsets) >= lattice.n_bases:
+        raise BarkError("{0} with {1}: no spring fits (each offset must be below the number of bases); nothing to simulate",
+                        Ref("lattice", "n_bases", lattice.n_bases), Ref("lattice", "offsets", list(lattice.offsets)))
+    if run.until_patches is not None and run.until_patches * run.min_patch_size > lattice.n_bases:
+        raise BarkError("{0} patches of {1} or more bases need more bases than {2}: this stop can never hold "
+                        "(ask for fewer patches, or smaller ones)",
+                        Ref("run", "until_patches", run.until_patches), Ref("run", "min_patch_size", run.min_patch_size),
+                        Ref("lattice", "n_bases", lattice.n_bases))
+    if run.until_radius is not None:
+        z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
+        mean_radius = lambda t: float(np.mean(np.broadcast_to(growth.radius(t, z), z.shape)))  # noqa: E731
+        start = mean_radius(0.0)
+        if run.until_radius <= start:
+            raise BarkError(f"{{0}} is not above the trunk's initial mean radius {start:.6g}: the run would stop before it starts",
+                            Ref("run", "until_radius", run.until_radius))
+        if run.until_time is None and not mean_radius(FAR_FUTURE) >= run.until_radius:
+            raise BarkError(f"{{0}} is never reached (at t = {FAR_FUTURE:g} the mean radius is {mean_radius(FAR_FUTURE):.6g}) "
+                            "and no time bound is given: this stop can never hold", Ref("run", "until_radius", run.until_radius))
 
 
 def merge(base: dict, overrides: dict) -> dict:
@@ -113,7 +183,7 @@ def merge(base: dict, overrides: dict) -> dict:
     out = copy.deepcopy(base)
     for section, table in [*base.items(), *overrides.items()]:
         if not isinstance(table, dict):
-            raise BarkError(f"scene key {section!r} must be a table like [{section}], not a value")
+            raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
     for section, table in overrides.items():
         target = out.setdefault(section, {})
         current = target.get("name", DEFAULT_STRATEGIES.get(section))
@@ -156,59 +226,54 @@ class Scene:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Scene":
-        """Validate a scene dictionary (as read from TOML); missing tables take their defaults."""
+        """Validate a scene dictionary (as read from TOML); missing tables take their defaults.
+
+        Beyond each value's own domain, settings that meet are checked together, so that a run that
+        could never do what it is asked is refused before it starts: a lattice with no springs, a
+        patch count more patches than the bases can make, a radius the trunk starts above or never
+        reaches."""
         for section, table in data.items():
             if not isinstance(table, dict):
-                raise BarkError(f"scene key {section!r} must be a table like [{section}], not a value")
-        unknown = sorted(set(data) - set(SECTIONS))
+                raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
+        unknown = sorted(set(data) - set(SECTIONS), key=str)
         if unknown:
             raise BarkError(f"unknown table [{unknown[0]}] in scene: allowed are {', '.join(f'[{s}]' for s in SECTIONS)}")
-        meta = dict(data.get("scene", {}))
-        bad = sorted(set(meta) - {"name", "description"})
-        if bad:
-            raise BarkError(f"unknown key {bad[0]!r} in [scene]: allowed are name, description")
+        meta = construct(SceneInfo, dict(data.get("scene", {})), "[scene]")
         tables = {s: dict(data.get(s, {})) for s in PARAM_SECTIONS}
         if any(k in tables["run"] for k in STOP_KEYS):  # stop conditions given replace the default ones
             for k in STOP_KEYS:
                 tables["run"].setdefault(k, None)
         parts = {s: _build(s, c, tables[s]) for s, c in PARAM_SECTIONS.items()}
-        if parts["run"].until_time is None and parts["run"].until_radius is None and parts["run"].until_patches is None:
-            raise BarkError("[run] no stop condition: give until_time, until_radius or until_patches")
-        eff = dict(data.get("effects", {}))
-        bad = sorted(set(eff) - {"want", "frame_every", "series_every"})
-        if bad:
-            raise BarkError(f"unknown key {bad[0]!r} in [effects]: allowed are want, frame_every, series_every")
-        wanted = eff.get("want")
+        run = parts["run"]
+        if run.until_time is None and run.until_radius is None and run.until_patches is None:
+            raise BarkError("no stop condition: give {0}, {1} or {2}", *(Ref("run", k, MISSING) for k in STOP_KEYS))
+        eff = _build("effects", EffectSettings, dict(data.get("effects", {})))
+        wanted = eff.want
         if wanted is None:  # no list: the default outputs, and the model the scene configures
             growth_name = dict(data.get("growth", {})).get("name", DEFAULT_STRATEGIES["growth"])
             wanted = effects.DEFAULT + (("bulges",) if growth_name == "bulge" else ())
-        if isinstance(wanted, str) or not isinstance(wanted, (list, tuple)):
-            raise BarkError(f"[effects] want = {wanted!r}: must be a list of effect names, e.g. ['fracture', 'pattern-image']")
         resolved = effects.resolve(wanted)
-        every = {key: eff.get(key, 10.0) for key in ("frame_every", "series_every")}
-        for key, value in every.items():
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-                raise BarkError(f"[effects] {key} = {value!r}: must be a number > 0")
-        if parts["run"].until_patches is not None and "fracture" not in resolved:
-            raise BarkError("[run] until_patches needs the effect 'fracture' (no fracture, no patches)")
+        if run.until_patches is not None and "fracture" not in resolved:
+            raise BarkError("{0} needs the effect 'fracture' (no fracture, no patches)", Ref("run", "until_patches", run.until_patches))
         strategies, names = {}, {}
         for section, kind in STRATEGY_SECTIONS.items():
             params = dict(data.get(section, {}))
             name = params.pop("name", DEFAULT_STRATEGIES[section])
             if not isinstance(name, str):
-                raise BarkError(f"[{section}] name = {name!r}: must be a string naming a {kind} strategy")
-            strategies[section] = registry.create(kind, name, **params)
+                raise BarkError("{0}: must be a string naming a " + kind + " strategy", Ref(section, "name", name))
+            strategies[section] = _place(section, lambda: registry.create(kind, name, **params))
             names[section] = name
         if "bulges" in resolved and names["growth"] != "bulge":
-            raise BarkError("the effect 'bulges' needs [growth] name = 'bulge' with its bulges")
+            raise BarkError("the effect 'bulges' needs {0} with its bulges", Ref("growth", "name", "bulge"))
+        _check_feasible(parts["lattice"], run, strategies["growth"], resolved)
         return cls(
-            name=str(meta.get("name", "")),
-            description=str(meta.get("description", "")),
+            name=meta.name,
+            description=meta.description,
             strategies=strategies,
             names=names,
             wanted=tuple(wanted),
-            frame_every=float(every["frame_every"]),
-            series_every=float(every["series_every"]),
+            frame_every=eff.frame_every,
+            series_every=eff.series_every,
             **parts,
         )
 
@@ -217,9 +282,10 @@ class Scene:
         """Read a TOML scene file, apply ``overrides`` (same shape), validate."""
         return cls.from_dict(merge(read_toml(path), overrides or {}))
 
-    def simulation(self) -> Simulation:
-        """A fresh simulation composed of exactly this scene's effects: what is not asked for is not
-        built (no bulge wrapper, no breaker, no analyzer, no anchor or damping terms, no break log)."""
+    def components(self) -> dict[str, Any]:
+        """The parts a simulation of this scene is composed of — exactly the scene's effects: what is
+        not asked for is not built (no bulge wrapper, no breaker, no analyzer, no anchor or damping
+        terms, no break log).  Cheap: nothing is allocated (``bark plan`` shows these)."""
         has = self.effects
         growth = self.strategies["growth"]
         if self.names["growth"] == "bulge" and "bulges" not in has:
@@ -228,7 +294,7 @@ class Scene:
         if "anchors" not in has or "damping" not in has:
             mechanics = attrs.evolve(mechanics, c=mechanics.c if "anchors" in has else 0.0,
                                      b=mechanics.b if "damping" in has else 0.0)
-        return Simulation(
+        return dict(
             lattice=self.lattice,
             mechanics=mechanics,
             growth=growth,
@@ -245,6 +311,25 @@ class Scene:
             max_halvings=self.run.max_halvings,
             backend=self.run.backend,
         )
+
+    def memory_estimate(self) -> int:
+        """Peak memory of a run of this scene, in bytes, from measured coefficients (``MEMORY``):
+        the interpreter and libraries, then per base and per spring, more with an image."""
+        n = self.lattice.n_bases
+        m = sum(max(n - o, 0) for o in self.lattice.offsets)
+        per_base, per_spring = MEMORY["per_base"], MEMORY["per_spring"]
+        if self.has("pattern-image") or self.has("animation"):
+            per_base += MEMORY["per_base_image"]
+        return int(MEMORY["fixed"] + per_base * n + per_spring * m)
+
+    def simulation(self) -> Simulation:
+        """A fresh simulation composed of exactly this scene's effects (:meth:`components`).  A run
+        whose estimated peak memory exceeds what this machine has available is refused first."""
+        need, have = self.memory_estimate(), available_memory()
+        if have is not None and need > have:
+            raise BarkError(f"{{0}}: a run this size needs about {need / 2**30:.3g} GiB of memory, and this machine "
+                            f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", self.lattice.n_bases))
+        return Simulation(**self.components())
 
     def stop(self) -> Stop:
         return self.run.stop()

@@ -16,8 +16,8 @@ import networkx as nx
 import numpy as np
 
 from bark import kernels
-from bark._validate import in_range, one_of, optional, positive, positive_int
-from bark.errors import BarkError, NonFiniteStateError
+from bark._validate import in_range, int_in, one_of, optional, positive, positive_int
+from bark.errors import BarkError, NonFiniteStateError, Ref
 from bark.forces import Mechanics, spring_geometry
 from bark.lattice import Lattice
 from bark.state import State, cylinder_points
@@ -70,7 +70,9 @@ def _round_down(x: float) -> str:
 
 @attrs.frozen(kw_only=True)
 class Stop:
-    """When a run ends: the first of these conditions to hold (NOTES.md §2).  At least one is needed."""
+    """When a run ends: the first of these conditions to hold.  At least one is needed.  (The model
+    has no natural end: after the first burst springs keep breaking as fragments move outward, so
+    when to stop is part of a result, and summary.json records which condition ended the run.)"""
 
     until_time: float | None = attrs.field(default=None, validator=optional(positive))
     """Stop once simulated time ≥ this."""
@@ -83,7 +85,7 @@ class Stop:
 
     def __attrs_post_init__(self) -> None:
         if self.until_time is None and self.until_radius is None and self.until_patches is None:
-            raise ValueError("no stop condition: give until_time, until_radius or until_patches")
+            raise BarkError("no stop condition: give until_time, until_radius or until_patches")
 
     def reason(self, sim: "Simulation") -> str | None:
         """Which condition holds now (``'time'``, ``'radius'``, ``'patches'``), or ``None``."""
@@ -143,7 +145,8 @@ class Simulation:
     seed: int = attrs.field(default=0)
     """Seed of the simulation's one random generator (jitter, thresholds, stochastic breakers)."""
     degenerate_fraction: float = attrs.field(default=0.1, validator=in_range(0.0, 1.0, lo_open=True))
-    """A step that breaks more than this share of all springs is a degenerate event (NOTES.md §1)."""
+    """A step that breaks more than this share of all springs is a degenerate event: the lattice is too
+    regular (on the exact lattice every spring of one offset reaches its threshold in the same step)."""
     on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
     """What a degenerate event does: ``warn`` records it and goes on; ``stop`` ends the run."""
     stepping: str = attrs.field(default=DEFAULT_STEPPING, validator=one_of("fixed", "auto", "adaptive"))
@@ -155,7 +158,7 @@ class Simulation:
     overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
     """Adaptive stepping's accuracy knob: largest allowed relative overshoot ``tension/fmax − 1``
     at a break (0.002 = a spring may break at up to 100.2 % of its threshold)."""
-    max_halvings: int = attrs.field(default=10, validator=positive_int)
+    max_halvings: int = attrs.field(default=10, validator=int_in(1, 40))
     """Adaptive stepping's smallest step is the full step / 2**max_halvings."""
     backend: str = attrs.field(default="auto", validator=one_of(*kernels.BACKENDS))
     """Compute backend of the hot loop: ``numpy``, ``numba``, or ``auto`` (numba if installed)."""
@@ -223,12 +226,25 @@ class Simulation:
         if self.stepping == "fixed":
             name = type(self.integrator).__name__
             raise BarkError(
-                f"dt = {self.dt:g} is above {name}'s stability limit h_max = {limit:.4g} for this scene "
-                f"(NOTES.md §3): use dt <= {_round_down(limit)}, or stepping = auto for sub-steps, "
-                f"or the implicit-overdamped integrator"
+                f"{{0}} is above {name}'s stability limit h_max = {limit:.4g} for this scene: use a step of at "
+                f"most {_round_down(limit)}, or {{1}} for sub-steps, or {{2}} (docs/numerics.md)",
+                Ref("run", "dt", self.dt), Ref("run", "stepping", "auto"), Ref("integrator", "name", "implicit-overdamped"),
             )
         self.h = self.dt / math.ceil(self.dt / (SAFETY * limit))
         self._set_grid()
+
+    def check(self, stop: "Stop") -> None:
+        """Refuse, before a run starts, a stop time that the clock cannot count: time is kept as an
+        integer number of the smallest step (``h / 2**max_halvings``), exact only below 2**53 of them."""
+        if stop.until_time is None:
+            return
+        ticks = stop.until_time / self._h_min
+        if not ticks < 2.0**53:
+            raise BarkError(
+                f"{{0}} is {ticks:.3g} of the smallest step (the step {self.h:.3g} / 2^{self._levels}), more than "
+                "the 2^53 that time can be counted in exactly: lower {1} or {2}, or stop earlier",
+                Ref("run", "until_time", stop.until_time), Ref("run", "dt", self.dt), Ref("run", "max_halvings", self.max_halvings),
+            )
 
     def _fit_step_to(self, stop: Stop) -> None:
         """With auto or adaptive stepping, a fresh run shrinks the full step a little so that
@@ -236,7 +252,7 @@ class Simulation:
         the user's: such a run ends at the first step at or past the stop time.)"""
         if self.stepping == "fixed" or self._ticks or stop.until_time is None:
             return
-        steps = math.ceil(stop.until_time / self.h - 1e-9)
+        steps = max(1, math.ceil(stop.until_time / self.h - 1e-9))
         self.h = stop.until_time / steps
         self._set_grid()
 
@@ -506,8 +522,8 @@ class Simulation:
     def restore(self, arrays: dict[str, np.ndarray], meta: dict) -> None:
         """Put this (freshly built, same scene) simulation in the state ``snapshot`` recorded."""
         s = self.state
-        if not np.array_equal(arrays["pairs"], s.pairs):
-            raise BarkError("the checkpoint's springs do not match its scene's lattice: it was written by another scene")
+        if arrays["pairs"].shape != s.pairs.shape or not np.array_equal(arrays["pairs"], s.pairs) or arrays["x"].shape != s.x.shape:
+            raise BarkError("the checkpoint's bases and springs do not match its scene's lattice: it was written by another scene")
         for name in ("x", "v", "anchor", "intact", "fmax"):
             np.copyto(getattr(s, name), arrays[name])
         broken = s.pairs[~s.intact]

@@ -1,4 +1,4 @@
-"""Explicit stability bound (NOTES.md §3) and the largest stiffness eigenvalue it needs.
+"""Explicit stability bound (docs/numerics.md) and the largest stiffness eigenvalue it needs.
 
 For Euler–Cromer on the damped mass-spring system with ``β = b/m`` and ``ω² = λ_max(K)/m``:
 stable iff ``βh < 2`` and ``ω²h² + 2βh < 4``, i.e. ``h < h_max = (√(β² + 4ω²) − β)/ω²``.
@@ -50,6 +50,6 @@ def explicit_h_max(beta: float, omega2: float) -> float:
 
 
 def euler_cromer_h_max(state, method: str = "lanczos") -> float:
-    """Largest stable Euler–Cromer step for ``state`` (NOTES.md §3)."""
+    """Largest stable Euler–Cromer step for ``state`` (docs/numerics.md)."""
     m = state.mechanics.m
     return explicit_h_max(state.mechanics.b / m, lambda_max(state, method) / m)

@@ -1,8 +1,8 @@
 """The development animation: the unwrapped pattern through time, like the paper's videos S1–S3.
 
-Frames are recorded along the way by an action on a trigger (``Every(frame_every)``), only when a
-scene asks for the ``animation`` effect; each frame keeps the unwrapped positions and patch labels
-(float32/int32), and the GIF is drawn at the end with matplotlib's Pillow writer.
+Frames are recorded along the way (``bark.output.Frames``, an action on ``Every(frame_every)``),
+only when a scene asks for the ``animation`` effect; this module draws them into a GIF with
+Pillow (matplotlib's own image dependency), with the figure bounded as ``pattern.png``'s is.
 """
 
 from __future__ import annotations
@@ -11,50 +11,45 @@ import io
 from pathlib import Path
 
 import numpy as np
-from matplotlib.animation import FuncAnimation, PillowWriter
+from PIL import Image
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from bark.output import atomic_write
-from bark_cli.plot import patch_colours, unwrap
+from bark.output import Frames, atomic_write
+from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, patch_colours
 
 
-class Frames:
-    def __init__(self) -> None:
-        self.frames: list[tuple[float, float, np.ndarray, np.ndarray]] = []
+def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
+    if not frames.frames:
+        raise ValueError("no frames recorded")
+    width = max(2 * np.pi * r for _, r, _, _ in frames.frames)
+    z = np.concatenate([uv[:, 1] for _, _, uv, _ in frames.frames])
+    height = float(np.ptp(z)) or width
+    aspect = height / width
+    shown = min(max(aspect, MIN_ASPECT), MAX_ASPECT)
+    fig = Figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=90)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.set_xlim(0, width)
+    ax.set_ylim(z.min() - 0.01 * height, z.max() + 0.01 * height)
+    ax.set_aspect(shown / aspect)
+    ax.set_xlabel("arc length r·θ")
+    ax.set_ylabel("height z")
+    n = max(uv.shape[0] for _, _, uv, _ in frames.frames)
+    points = ax.scatter([], [], s=float(np.clip(3.0 * 3000 / n, 0.05, 3.0)), linewidths=0)
 
-    def record(self, sim) -> None:
-        if self.frames and self.frames[-1][0] == sim.state.t:
-            return
-        r = sim.radius
-        self.frames.append((sim.state.t, r, unwrap(sim.state.x, r).astype(np.float32), sim.patch_labels().astype(np.int32)))
+    def draw(i):
+        t, r, uv, labels = frames.frames[i]
+        points.set_offsets(uv)
+        points.set_color(patch_colours(labels, min_size))
+        count = int(np.count_nonzero(np.bincount(labels) >= min_size))
+        ax.set_title(f"t = {t:.1f}   r = {r:.3f}   {count} patches", fontsize=9)
 
-    def write(self, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
-        if not self.frames:
-            raise ValueError("no frames recorded")
-        width = max(2 * np.pi * r for _, r, _, _ in self.frames)
-        z = np.concatenate([uv[:, 1] for _, _, uv, _ in self.frames])
-        fig = Figure(figsize=(7.0, max(3.0, 7.0 * float(np.ptp(z) or 1.0) / width) + 0.6), dpi=90)
-        FigureCanvasAgg(fig)
-        ax = fig.add_subplot()
-        ax.set_xlim(0, width)
-        ax.set_ylim(z.min() - 0.01, z.max() + 0.01)
-        ax.set_aspect("equal")
-        ax.set_xlabel("arc length r·θ")
-        ax.set_ylabel("height z")
-        points = ax.scatter([], [], s=3, linewidths=0)
-
-        def draw(i):
-            t, r, uv, labels = self.frames[i]
-            points.set_offsets(uv)
-            points.set_color(patch_colours(labels, min_size))
-            n = int(np.count_nonzero(np.bincount(labels) >= min_size))
-            ax.set_title(f"t = {t:.1f}   r = {r:.3f}   {n} patches", fontsize=9)
-            return (points,)
-
-        anim = FuncAnimation(fig, draw, frames=len(self.frames), blit=False)
-        tmp = Path(path).with_suffix(".tmp.gif")
-        anim.save(tmp, writer=PillowWriter(fps=fps))
-        data = tmp.read_bytes()
-        tmp.unlink()
-        return atomic_write(path, lambda fh: fh.write(data))
+    images = []
+    for i in range(len(frames.frames)):
+        draw(i)
+        fig.canvas.draw()
+        images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert("RGB").quantize(colors=128))
+    buf = io.BytesIO()
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))

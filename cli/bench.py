@@ -62,13 +62,16 @@ PHASES = {
 
 
 @bench.command()
-@click.option("--n-bases", "sizes", type=int, multiple=True, default=(3000, 70000), show_default=True)
+@click.option("--n-bases", "sizes", type=click.IntRange(100, 10_000_000), multiple=True, default=(3000, 70000),
+              show_default=True, help="Sizes of the default scene to measure (repeatable).")
 @click.option("--backend", "backends", type=click.Choice(["numpy", "numba"]), multiple=True,
               default=("numpy", "numba"), show_default=True, help="numpy is always measured: it is the baseline.")
 @click.option("--phase", "phases", type=click.Choice(list(PHASES)), multiple=True, default=("quiet", "cracking"),
               show_default=True, help="cracking is measured only up to 10000 bases (reaching it takes long).")
-@click.option("--steps", type=int, default=None, help="Steps per timed stretch (default: about 0.3 s of numpy work).")
-@click.option("--repeats", type=int, default=5, show_default=True, help="Timed stretches per backend, interleaved.")
+@click.option("--steps", type=click.IntRange(1, 10_000_000), default=None,
+              help="Steps per timed stretch (default: about 0.3 s of numpy work).")
+@click.option("--repeats", type=click.IntRange(1, 1000), default=5, show_default=True,
+              help="Timed stretches per backend, interleaved.")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None, help="Also write the table as CSV.")
 def speed(sizes, backends, phases, steps, repeats, csv_path):
     """Steps per second of the full step (integrate, constrain, tensions, breaking, stop checks) on
@@ -77,6 +80,10 @@ def speed(sizes, backends, phases, steps, repeats, csv_path):
     from rich.table import Table
 
     backends = ("numpy", *[b for b in backends if b != "numpy"])
+    from bark.scene import Scene
+
+    for n in sizes:  # every size is a valid scene that fits in memory, before any work
+        Scene.from_dict({"lattice": {"n_bases": n}}).memory_estimate()
     rows = []
     for n in sizes:
         for phase in phases:
@@ -126,9 +133,12 @@ def _accuracy_methods(quick: bool):
 @bench.command()
 @click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
               help="Scene for the pattern error (default: the default scene, vertical regime).")
-@click.option("--seeds", type=int, default=3, show_default=True, help="Seeds per setting (0, 1, ...).")
-@click.option("--until-time", type=float, default=300.0, show_default=True, help="Time each pattern run stops at.")
-@click.option("--reference-dt", type=float, default=0.005, show_default=True, help="dt of the fine Euler–Cromer reference.")
+@click.option("--seeds", type=click.IntRange(2, 100), default=3, show_default=True,
+              help="Seeds per setting (0, 1, ...); at least 2, for the seed-to-seed spread.")
+@click.option("--until-time", type=click.FloatRange(0, 1e6, min_open=True), default=300.0, show_default=True,
+              help="Time each pattern run stops at (time units; 1 = 88.5 days).")
+@click.option("--reference-dt", type=click.FloatRange(0, 1, min_open=True), default=0.005, show_default=True,
+              help="dt of the fine Euler–Cromer reference (fixed steps; must be below the stability limit).")
 @click.option("--quick", is_flag=True, help="A few settings only: a look, not a measurement.")
 @click.option("--out", type=click.Path(file_okay=False), default="bark-bench-accuracy", show_default=True)
 def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
@@ -152,8 +162,14 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
     console = Console(width=150)
     scene = read_toml(scene_file) if scene_file else {}
     scene.pop("run", None)  # the study sets dt, stepping, seed and stop itself
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    from bark.folder import writable_folder
+    from bark.scene import Scene, merge
+
+    # before any work: the scene, the reference's step (below the stability limit) and the folder
+    reference = merge(scene, {"integrator": {"name": "euler-cromer"},
+                              "run": {"dt": reference_dt, "stepping": "fixed", "until_time": until_time}})
+    Scene.from_dict(reference).simulation()
+    out = writable_folder(out)
     position_methods, pattern_methods = _accuracy_methods(quick)
     log = (lambda m: console.print(f"[dim]{m}[/dim]"))
 
@@ -208,7 +224,7 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
 
 @bench.command()
 @click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False), required=True)
-@click.option("--repeats", type=int, default=3, show_default=True, help="Runs per scene, interleaved; medians.")
+@click.option("--repeats", type=click.IntRange(1, 1000), default=3, show_default=True, help="Runs per scene, interleaved; medians.")
 def scenes(scenes, repeats):
     """Wall time and peak memory of `bark simulate --scene S` for each scene, as the command runs it
     (a fresh process each time, outputs to a temporary folder), with ratios against the first."""
@@ -219,6 +235,10 @@ def scenes(scenes, repeats):
     from rich.console import Console
     from rich.table import Table
 
+    from bark.scene import Scene, read_toml
+
+    for scene in scenes:  # every scene is valid before any run
+        Scene.from_dict(read_toml(scene))
     # each run reports its own peak resident memory (RUSAGE_CHILDREN would give the largest so far)
     child = ("import resource, sys\nfrom bark_cli.main import cli\ncode = 0\n"
              "try:\n    cli.main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"

@@ -5,118 +5,213 @@
     bark strategies                                      # what is installed, by kind
     bark bench speed                                     # steps per second
 
-Errors in what the user typed (an option value, a scene key, a file) print one line and exit with
-status 2, before anything is written.
+The CLI parses and reports; running a scene to its outputs is the library's (``bark.runner``).
+Errors in what the user typed (an option value, a scene key, a file) print one line naming the
+option or scene key as the user gave it, and exit with status 2, before anything is written.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import shlex
+import signal
 import sys
-import time
+import threading
 from pathlib import Path
 
 import click
 
-from bark import registry
-from bark.errors import BarkError, NonFiniteStateError
+from bark.errors import BarkError, Ref
 from bark.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.strategies import KINDS
-from bark_cli.options import overrides_from, parameter_options
+from bark_cli.options import LazyHelpOption, Provenance, overrides_from, parameter_options
+
+CONTEXT = {"help_option_names": ["-h", "--help"]}
+_NAMER: contextvars.ContextVar = contextvars.ContextVar("namer", default=None)
+"""How the command being run names a scene setting in a message (its options, see Provenance)."""
+
+
+def _name(ref: Ref) -> str:
+    namer = _NAMER.get()
+    return namer(ref) if namer is not None else Provenance().name(ref)
 
 
 class BarkGroup(click.Group):
     """A click group whose failures are one line on stderr, never a traceback or a usage dump."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        token = _NAMER.set(None)
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.ClickException as err:
             click.echo(f"bark: error: {err.format_message()}", err=True)
             sys.exit(err.exit_code)
         except BarkError as err:
-            click.echo(f"bark: error: {err}", err=True)
+            click.echo(f"bark: error: {err.render(_name)}", err=True)
             sys.exit(2)
         except (click.Abort, KeyboardInterrupt):
             click.echo("bark: interrupted", err=True)
             sys.exit(130)
+        finally:
+            _NAMER.reset(token)
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-@click.group(cls=BarkGroup)
+@click.group(cls=BarkGroup, context_settings=CONTEXT)
 @click.version_option(package_name="bark")
 def cli():
     """Grow a virtual grasstree trunk and let its layer of leaf bases crack."""
 
 
 def _strategy_option(kind: str):
-    return click.option(
-        f"--{kind}",
-        f"{kind}_name",
-        default=None,
-        metavar="NAME",
-        help=f"{kind} strategy (default {DEFAULT_STRATEGIES[kind]!r}; `bark strategies` lists them).",
-    )
+    def text() -> str:
+        from bark import registry
+
+        return (f"{kind.capitalize()} strategy, by name: {', '.join(registry.available(kind)) or 'none installed'} "
+                f"(`bark strategies` shows their parameters). [default: {DEFAULT_STRATEGIES[kind]}]")
+
+    return click.option(f"--{kind}", f"{kind}_name", cls=LazyHelpOption, lazy_help=text, default=None, metavar="NAME")
 
 
-def _parse_set(items: tuple[str, ...]) -> dict:
-    """``--set growth.G=0.01`` → ``{"growth": {"G": 0.01}}`` (values parsed as TOML)."""
+def _parse_set(items: tuple[str, ...]) -> tuple[dict, dict]:
+    """``--set growth.G=0.01`` → ``{"growth": {"G": 0.01}}`` (values parsed as TOML), and the text
+    of each item by (section, key), for messages."""
     import tomllib
 
     out: dict = {}
+    raw: dict = {}
     for item in items:
-        key, sep, raw = item.partition("=")
+        key, sep, text = item.partition("=")
         section, dot, name = key.strip().partition(".")
         if not sep or not dot or not section or not name:
-            raise BarkError(f"--set {item!r}: expected SECTION.KEY=VALUE, e.g. --set growth.G=0.011")
+            raise BarkError(f"--set {shlex.quote(item)}: expected SECTION.KEY=VALUE, e.g. --set growth.G=0.011")
         try:
-            value = tomllib.loads(f"v = {raw.strip()}")["v"]
+            value = tomllib.loads(f"v = {text.strip()}")["v"]
         except tomllib.TOMLDecodeError:
-            value = raw.strip()  # a bare word, e.g. a strategy name
-        out.setdefault(section, {})[name.strip()] = value
-    return out
+            value = text.strip()  # a bare word, e.g. a strategy name
+        out.setdefault(section.strip(), {})[name.strip()] = value
+        raw[(section.strip(), name.strip())] = shlex.quote(item)
+    return out, raw
 
 
 def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kwargs: dict) -> Scene:
-    """The scene a command runs: file (or defaults) ← --set ← strategy names ← explicit options."""
-    data = read_toml(scene_file) if scene_file else {}
-    data = merge(data, _parse_set(sets))
-    data = merge(data, {s: {"name": n} for s, n in strategies.items() if n is not None})
-    data = merge(data, {"growth": {k: v for k, v in shortcuts.items() if v is not None}})
-    data = merge(data, overrides_from(kwargs))
+    """The scene a command runs: file (or defaults) ← strategy names ← --set ← explicit options.
+
+    A strategy named on the command line comes before ``--set``, so that ``--growth linear --set
+    growth.G=0.05`` runs the linear law with G = 0.05 (a new strategy drops the parameters the scene
+    file gave the old one, never those given here).  Errors from here on name settings as given."""
+    prov = Provenance()
+    _NAMER.set(prov.name)
+    sets, prov.set_items = _parse_set(sets)
+    names = {s: {"name": n} for s, n in strategies.items() if n is not None}
+    for section, table in names.items():
+        given = sets.get(section, {}).get("name")
+        if given is not None and given != table["name"]:
+            raise BarkError(f"--{section} {table['name']} and --set {section}.name={given} name two different strategies")
+    data = prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {}
+    for source, layer in (("option", names), ("--set", sets),
+                          ("option", {"growth": {k: v for k, v in shortcuts.items() if v is not None}}),
+                          ("option", overrides_from(kwargs))):
+        data = merge(data, prov.add(source, layer))
     return Scene.from_dict(data)
 
 
-def _check_out_dir(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise BarkError(f"--out {str(out)!r} exists and is not a directory")
+class Signals:
+    """SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``, schedulers) and SIGHUP stop a run between two
+    steps: the handler only notes the signal, which the runner reads after each advance, so a step
+    and the final writes are never cut.  While a picture is drawn, a signal stops the drawing at once
+    (the data are already written)."""
+
+    REASONS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated"}
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+        self.drawing = False
+        self._previous: dict = {}
+
+    def _handle(self, signum, frame) -> None:
+        if self.received is None:
+            self.received = signum
+        if self.drawing:
+            raise KeyboardInterrupt
+
+    def reason(self) -> str | None:
+        return None if self.received is None else self.REASONS[self.received]
+
+    @contextlib.contextmanager
+    def draw(self):
+        self.drawing = True
+        try:
+            yield
+        finally:
+            self.drawing = False
+
+    def __enter__(self) -> "Signals":
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.REASONS:
+                self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
 
 
-@cli.command()
-@click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None, help="Scene TOML file; options given here override it.")
+def _pictures(signals: Signals) -> dict:
+    """The runner's picture writers; matplotlib is imported only when a scene asks for a picture."""
+
+    def pattern(sim, scene, recorded, path):
+        from bark_cli.plot import plot_pattern
+
+        with signals.draw():
+            plot_pattern(sim, path, scene.run.min_patch_size)
+
+    def animation(sim, scene, recorded, path):
+        from bark_cli.animation import write_gif
+
+        with signals.draw():
+            write_gif(recorded["frames"], path, scene.run.min_patch_size)
+
+    return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation)}
+
+
+def _warn(message: str) -> None:
+    click.echo(f"bark: warning: {message}", err=True)
+
+
+@cli.command(context_settings=CONTEXT)
+@click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
+              help="Scene TOML file (examples/scenes/); options given here override it.")
 @_strategy_option("growth")
 @_strategy_option("integrator")
 @_strategy_option("breaker")
 @_strategy_option("analyzer")
-@click.option("--r0", type=float, default=None, help="[growth] initial trunk radius r_i (default 0.2).")
-@click.option("-G", "--growth-rate", "G", type=float, default=None, help="[growth] growth constant G (default 0.014).")
-@click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Set any scene key, e.g. a plugin's parameter.")
+@click.option("--r0", type=float, default=None, help="Initial trunk radius r_i of the growth law, length units (1 = 0.3 m). [default: 0.2]")
+@click.option("-G", "--growth-rate", "G", type=float, default=None,
+              help="Growth constant G of the growth law (sqrt: length / time^½; linear: length / time). [default: 0.014]")
+@click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE",
+              help="Set any scene key, e.g. a plugin's parameter: --set breaker.nu=50 (repeatable).")
 @parameter_options
-@click.option("--out", "out", type=click.Path(file_okay=False), default="bark-out", show_default=True, help="Output folder.")
-@click.option("--resume", "resume", type=click.Path(file_okay=False), default=None,
+@click.option("--out", "out", default="bark-out", show_default=True,
+              help="Output folder (created; '' is the current folder). A finished run's files in it are replaced; "
+                   "an unfinished run's are kept unless --overwrite.")
+@click.option("--overwrite", is_flag=True, help="Discard an unfinished run in --out (its checkpoint) instead of refusing.")
+@click.option("--resume", "resume", default=None, metavar="FOLDER",
               help="Go on with the interrupted run in this folder (its checkpoint has every setting).")
-@click.option("--checkpoint-every", type=float, default=60.0, show_default=True,
-              help="Write a checkpoint every this many seconds of wall time (0: only at the end and on Ctrl-C).")
-@click.option("--quiet", is_flag=True, help="No progress bar and no summary table.")
+@click.option("--checkpoint-every", type=click.FloatRange(0, 1e9), default=60.0, show_default=True,
+              help="Seconds of wall time between checkpoints (0: only at the end and on a signal).")
+@click.option("--quiet", is_flag=True, help="No progress bar, no summary table, no notices (warnings and errors stay).")
 @click.pass_context
-def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, resume,
-             checkpoint_every, quiet, **kwargs):
-    """Grow the trunk and let the bark crack; write pattern.png, patches.csv, breaks.csv,
-    summary.json, state.npz and checkpoint.npz to --out.  Any --until-* option replaces the scene's
-    stop conditions.  Ctrl-C stops between steps, writes a checkpoint, and says how to resume."""
-    from bark import checkpoint
+def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, overwrite,
+             resume, checkpoint_every, quiet, **kwargs):
+    """Grow the trunk and let the bark crack; write what the scene's effects ask for (by default
+    pattern.png, patches.csv, breaks.csv, summary.json, state.npz, checkpoint.npz) to --out.
+    Any --until-* option replaces the scene's stop conditions.  Ctrl-C or SIGTERM stops between
+    steps, writes the outputs and a checkpoint, and prints the command that goes on."""
+    from bark import runner
+    from bark_cli.progress import ProgressBar, print_summary
 
-    if checkpoint_every < 0:
-        raise BarkError(f"--checkpoint-every = {checkpoint_every:g}: must be >= 0")
     if resume is not None:
         given = [p for p, v in ctx.params.items()
                  if ctx.get_parameter_source(p) == click.core.ParameterSource.COMMANDLINE
@@ -124,94 +219,37 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
         if given:
             name = given[0].split("__")[-1].replace("_", "-")
             raise BarkError(f"--resume goes on with the settings in its checkpoint: --{name} cannot be given with it")
-        out = Path(resume)
-        scene, sim, stop, meta = checkpoint.load(out / checkpoint.CHECKPOINT_NAME)
-        if meta["reason"] not in ("periodic", "interrupted"):
-            raise BarkError(f"the run in {str(out)!r} has ended ({meta.get('stop_reason')}): nothing to resume")
-        wall_before = float(meta.get("wall_time_s", 0.0))
     else:
-        strategies = {"growth": growth_name, "integrator": integrator_name, "breaker": breaker_name, "analyzer": analyzer_name}
+        strategies = {"growth": growth_name, "integrator": integrator_name, "breaker": breaker_name,
+                      "analyzer": analyzer_name}
         scene = resolve_scene(scene_file, strategies, {"r0": r0, "G": G}, sets, kwargs)
-        out = Path(out)
-        _check_out_dir(out)
-        sim, stop, wall_before = scene.simulation(), scene.stop(), 0.0
-    return _run(sim, scene, stop, out, quiet, checkpoint_every, wall_before, resumed=resume is not None)
-
-
-def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall_before: float, resumed: bool) -> int:
-    import signal
-
-    from bark import checkpoint
-    from bark.output import write_run
-    from bark_cli.progress import progress_observer
-
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt = out / checkpoint.CHECKPOINT_NAME
-    if not scene.has("checkpoints"):
-        checkpoint_every = 0.0
     show = not quiet and sys.stdout.isatty()
-    series = None
-    if scene.has("statistics-series"):  # the analyzers along the way, on their trigger
-        from bark.output import StatisticsSeries
-        from bark.triggers import Every
+    bar = ProgressBar() if show else None
+    notice = (lambda m: None) if quiet else _warn
+    with Signals() as signals:
+        hooks = dict(checkpoint_every=checkpoint_every, observe=bar, interrupted=signals.reason,
+                     pictures=_pictures(signals), warn=notice)
+        try:
+            if resume is not None:
+                outcome = runner.resume(resume, **hooks)
+            else:
+                outcome = runner.run(scene, out, overwrite=overwrite, **hooks)
+        finally:
+            if bar is not None:
+                bar.close()
+    return _report(outcome, quiet)
 
-        series = StatisticsSeries()
-        sim.add_action(Every(scene.series_every), series.record)
-    frames = None
-    if scene.has("animation"):  # frames along the way: only when asked for
-        from bark.triggers import Every
-        from bark_cli.animation import Frames
 
-        frames = Frames()
-        sim.add_action(Every(scene.frame_every), frames.record)
-    interrupted = []
-    t0 = time.perf_counter()
-    last_save = [t0]
+def _report(outcome, quiet: bool) -> int:
+    """Say how the run ended (stderr for what went wrong, the summary table on stdout) and choose
+    the exit status: 0, 1 (non-finite state or an output not written), 128 + signal."""
+    from bark_cli.progress import print_summary
 
-    def on_sigint(signum, frame):  # stop between steps, never inside one
-        interrupted.append(True)
-
-    def save(reason: str, stop_reason=None):
-        if not scene.has("checkpoints"):
-            return
-        wall = wall_before + time.perf_counter() - t0
-        checkpoint.save(ckpt, sim, scene, stop, reason, {"stop_reason": stop_reason, "wall_time_s": wall})
-
-    previous = signal.signal(signal.SIGINT, on_sigint)
-    reason, code = None, 0
-    try:
-        with progress_observer(sim, stop, enabled=show) as show_progress:
-
-            def observe(s):
-                if show_progress is not None:
-                    show_progress(s)
-                if interrupted:
-                    s.stop_reason = "interrupted"
-                elif checkpoint_every and time.perf_counter() - last_save[0] >= checkpoint_every:
-                    save("periodic")
-                    last_save[0] = time.perf_counter()
-
-            reason = sim.run(stop, observe)
-    except NonFiniteStateError as err:
-        click.echo(f"bark: error: {err}; writing that state to {out}", err=True)
-        reason, code = "non-finite", 1
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if reason == "interrupted":
-        code = 130
-    wall = wall_before + time.perf_counter() - t0
-    summary = write_run(sim, scene, out, reason, wall)
-    if scene.has("pattern-image"):
-        from bark_cli.plot import plot_pattern  # matplotlib is imported only when an image is asked for
-
-        plot_pattern(sim, out / "pattern.png", scene.run.min_patch_size)
-    if series is not None:
-        series.record(sim)
-        series.write(out / "statistics.csv")
-    if frames is not None:
-        frames.record(sim)
-        frames.write(out / "development.gif", scene.run.min_patch_size)
-    save("interrupted" if code == 130 else "end", reason)
+    out, summary, sim = outcome.out, outcome.summary, outcome.sim
+    code = 0
+    if outcome.error is not None:
+        click.echo(f"bark: error: {outcome.error}; that state is written to {out}", err=True)
+        code = 1
     for event in summary["degenerate_events"]:
         click.echo(
             f"bark: warning: degenerate event at t = {event['t']:.4g}: one step broke {event['n_springs']} springs "
@@ -219,32 +257,38 @@ def _run(sim, scene, stop, out: Path, quiet: bool, checkpoint_every: float, wall
             f"or the thresholds are far below the loads",
             err=True,
         )
+    for problem in outcome.failed:
+        click.echo(f"bark: error: {problem}; every other output is in {out}", err=True)
+        code = code or 1
     if not quiet:
-        from bark_cli.progress import print_summary
-
         print_summary(summary, out)
-    if code == 130:
-        click.echo(f"bark: interrupted at t = {sim.state.t:.6g}; outputs of that state and a checkpoint are in {out}; "
-                   f"go on with: bark simulate --resume {out}", err=True)
-    elif resumed and not quiet:
-        click.echo(f"bark: resumed run ended ({reason}) at t = {sim.state.t:.6g}", err=True)
+    if outcome.stop_reason in ("interrupted", "terminated"):
+        signum = {"interrupted": signal.SIGINT, "terminated": signal.SIGTERM}[outcome.stop_reason]
+        click.echo(f"bark: {outcome.stop_reason} at t = {sim.state.t:.6g}; outputs of that state and a checkpoint "
+                   f"are in {out}; go on with: bark simulate --resume {shlex.quote(str(out))}", err=True)
+        code = 128 + int(signum)
+    elif outcome.resumed and not quiet:
+        click.echo(f"bark: resumed run ended ({outcome.stop_reason}) at t = {sim.state.t:.6g}", err=True)
     return code
 
 
-@cli.command()
+@cli.command(context_settings=CONTEXT)
 @click.argument("scene_file", type=click.Path(dir_okay=False), required=False)
 def plan(scene_file):
     """Show what SCENE (default: the default scene) will simulate and write, and why each effect is
-    there: asked for by the scene, or needed by another effect.  Nothing is run."""
+    there: asked for by the scene, or needed by another effect.  Nothing is built or run."""
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
     from bark.effects import EFFECTS
+    from bark.scene import available_memory
 
-    scene = Scene.from_dict(read_toml(scene_file) if scene_file else {})
+    prov = Provenance()
+    _NAMER.set(prov.name)
+    scene = Scene.from_dict(prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {})
     resolved = scene.effects
-    sim = scene.simulation()  # composed, not run: shows what is built
+    parts = scene.components()  # what would be built, without building it
     table = Table("effect", "in the run", "why", "what it does", title=f"bark plan — {scene.name or scene_file or 'default scene'}")
     for name, effect in EFFECTS.items():
         on = name in resolved
@@ -252,31 +296,39 @@ def plan(scene_file):
                       style=None if on else "dim")
     console = Console(width=140)
     console.print(table)
-    built = [f"growth: {type(sim.growth).__name__}", f"integrator: {type(sim.integrator).__name__}",
-             f"breakers: {[type(b).__name__ for b in sim.breakers] or 'none'}",
-             f"analyzers: {[type(a).__name__ for a in sim.analyzers] or 'none'}",
-             f"anchors c = {sim.mechanics.c:g}", f"damping b = {sim.mechanics.b:g}",
-             f"break log: {'kept' if sim.record_breaks else 'not kept'}"]
-    console.print("built: " + "; ".join(built))
+    built = [f"growth: {type(parts['growth']).__name__}", f"integrator: {type(parts['integrator']).__name__}",
+             f"breakers: {[type(b).__name__ for b in parts['breakers']] or 'none'}",
+             f"analyzers: {[type(a).__name__ for a in parts['analyzers']] or 'none'}",
+             f"anchors c = {parts['mechanics'].c:g}", f"damping b = {parts['mechanics'].b:g}",
+             f"break log: {'kept' if parts['record_breaks'] else 'not kept'}"]
+    console.print(escape("built: " + "; ".join(built)))
+    have = available_memory()
+    console.print(f"memory: about {scene.memory_estimate() / 2**20:.0f} MiB"
+                  + (f" (available now: {have / 2**20:.0f} MiB)" if have is not None else ""))
+    stop = scene.stop()
+    if stop.until_time is None:
+        console.print("[yellow]no time bound[/yellow]: the run ends only when its radius or patch condition holds")
 
 
-@cli.command()
+@cli.command(context_settings=CONTEXT)
 def strategies():
     """List the installed strategies of every kind (built-in and plugins alike)."""
+    import attrs
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
+
+    from bark import registry
 
     table = Table("kind", "name", "class", "parameters")
     for kind in KINDS:
         for name, ep in registry.available(kind).items():
             try:
                 cls = registry.load(kind, name)
-                import attrs
-
-                params = ", ".join(f"{a.name}={a.default!r}" for a in attrs.fields(cls) if a.init)
+                params = ", ".join(f"{a.alias}={a.default!r}" for a in attrs.fields(cls) if a.init)
             except Exception as err:  # a broken plugin must not hide the others
                 params = f"(cannot load: {err})"
-            table.add_row(kind, name, ep.value, params)
+            table.add_row(kind, name, ep.value, escape(params))
     Console().print(table)
 
 

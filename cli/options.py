@@ -1,23 +1,38 @@
-"""Command-line options generated from the parameter classes, so options and fields never drift.
+"""Command-line options generated from the parameter classes, so options and fields never drift —
+and the way back: naming a scene setting in the terms the user typed it.
 
 Every init field of :class:`~bark.lattice.Lattice`, :class:`~bark.forces.Mechanics` and
-:class:`~bark.scene.RunSettings` becomes ``--field-name`` (underscores → dashes), with the field's
-docstring-free help taken from the scene table it belongs to.  An option left out is ``None`` and
-leaves the scene's value alone.
+:class:`~bark.scene.RunSettings` becomes ``--field-name`` (underscores → dashes).  Its help is the
+field's docstring (meaning and units), read only when help is shown; a field validated by ``one_of``
+lists its choices.  An option left out is ``None`` and leaves the scene's value alone.
+
+:class:`Provenance` records where each setting of a resolved scene came from (the scene file,
+``--set``, a strategy option, an option), so that an error about it names what the user wrote:
+``--dt 1e+308: must be <= 1e+12``, not ``[run] dt = 1e+308``.
 """
 
 from __future__ import annotations
 
+import ast
+import functools
+import inspect
+import shlex
+import textwrap
 from typing import Any
 
 import attrs
 import click
 
+from bark.errors import Ref, show
 from bark.forces import Mechanics
 from bark.lattice import Lattice
-from bark.scene import RunSettings
+from bark.scene import STRATEGY_SECTIONS, RunSettings
 
 SECTIONS = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings}
+SHORTCUTS = {("growth", "r0"): "--r0", ("growth", "G"): "-G", (None, "out"): "--out", (None, "resume"): "--resume",
+             (None, "overwrite"): "--overwrite", (None, "checkpoint_every"): "--checkpoint-every"}
+"""Options for settings that are not a parameter class's field: the default growth law's
+parameters (beside ``--set growth.KEY=VALUE``) and the run's own (output folder, checkpoints)."""
 
 
 class OffsetsType(click.ParamType):
@@ -32,11 +47,21 @@ class OffsetsType(click.ParamType):
             self.fail(f"{value!r} is not a comma-separated list of integers (e.g. 21,34)", param, ctx)
 
 
+def _allowed(validator) -> tuple[str, ...] | None:
+    """The choices of a ``one_of`` validator (also inside ``optional``), else ``None``."""
+    while validator is not None:
+        if hasattr(validator, "allowed"):
+            return validator.allowed
+        validator = getattr(validator, "inner", None)
+    return None
+
+
 def _click_type(field: attrs.Attribute):
     if field.name == "offsets":
         return OffsetsType()
-    if field.validator is not None and "one_of" in getattr(field.validator, "__qualname__", ""):
-        return click.STRING
+    choices = _allowed(field.validator)
+    if choices:
+        return click.Choice(choices)
     ann = str(field.type)
     if "int" in ann:
         return click.INT
@@ -49,17 +74,71 @@ def option_name(field_name: str) -> str:
     return "--" + field_name.replace("_", "-")
 
 
+@functools.cache
+def field_docs(cls: type) -> dict[str, str]:
+    """The docstring under each field of an attrs class (parsed from its source, on first use)."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body = tree.body[0].body
+    docs = {}
+    for node, after in zip(body, body[1:]):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and isinstance(after, ast.Expr)
+                and isinstance(after.value, ast.Constant) and isinstance(after.value.value, str)):
+            docs[node.target.id] = " ".join(after.value.value.split()).replace("``", "")
+    return docs
+
+
+def _in_option_terms(doc: str, cls: type) -> str:
+    """A field's docstring as command-line help: other fields named by their options (``f_max`` →
+    ``--f-max``); names without an underscore are plain words (``dt``) and stay."""
+    import re
+
+    for name in sorted((f.name for f in attrs.fields(cls) if "_" in f.name), key=len, reverse=True):
+        doc = re.sub(rf"(?<![\w-]){re.escape(name)}(?!\w)", option_name(name), doc)
+    return doc
+
+
+class FieldOption(click.Option):
+    """An option for one field of a parameter class; its help is the field's docstring, read lazily."""
+
+    def __init__(self, *args, field_cls: type, field: attrs.Attribute, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.field_cls, self.field = field_cls, field
+
+    def get_help_record(self, ctx):
+        if self.help is None:
+            default = self.field.default if not isinstance(self.field.default, attrs.Factory) else None
+            doc = _in_option_terms(field_docs(self.field_cls).get(self.field.name, ""), self.field_cls)
+            shown = "none" if default is None else ",".join(map(str, default)) if isinstance(default, tuple) else f"{default:g}" if isinstance(default, float) else str(default)
+            self.help = f"{doc} [default: {shown}]"
+        return super().get_help_record(ctx)
+
+
+class LazyHelpOption(click.Option):
+    """An option whose help text is computed when help is shown (e.g. the installed strategies),
+    not when the command line is imported."""
+
+    def __init__(self, *args, lazy_help, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.lazy_help = lazy_help
+
+    def get_help_record(self, ctx):
+        if self.help is None:
+            self.help = self.lazy_help()
+        return super().get_help_record(ctx)
+
+
 def parameter_options(func):
     """Decorate a click command with one option per model and run parameter."""
     for section, cls in reversed(SECTIONS.items()):
         for field in reversed(attrs.fields(cls)):
-            default = field.default if not isinstance(field.default, attrs.Factory) else None
             func = click.option(
                 option_name(field.name),
                 f"{section}__{field.name}",
+                cls=FieldOption,
+                field_cls=cls,
+                field=field,
                 type=_click_type(field),
                 default=None,
-                help=f"[{section}] {field.name} (default {default!r}).",
             )(func)
     return func
 
@@ -73,3 +152,59 @@ def overrides_from(kwargs: dict[str, Any]) -> dict[str, dict[str, Any]]:
         if value is not None:
             out.setdefault(section, {})[name] = value
     return out
+
+
+def option_for(section: str | None, key: str) -> str | None:
+    """The command-line option that sets ``[section] key``, if there is one."""
+    if section in SECTIONS and key in attrs.fields_dict(SECTIONS[section]):
+        return option_name(key)
+    if section in STRATEGY_SECTIONS and key == "name":
+        return f"--{section}"
+    return SHORTCUTS.get((section, key))
+
+
+def _cli_value(value: Any) -> str:
+    """A value as it would be typed after its option (a very long one shortened in the middle)."""
+    if isinstance(value, (list, tuple)):
+        text = ",".join(str(v) for v in value)
+    else:
+        text = shlex.quote(value) if isinstance(value, str) else show(value)
+    return text if len(text) <= 100 else f"{text[:60]}…{text[-30:]}"
+
+
+@attrs.define
+class Provenance:
+    """Where each setting of a scene came from, in order of precedence (later wins)."""
+
+    layers: list[tuple[str, dict]] = attrs.field(factory=list)
+    """``(source, tables)``: ``source`` is ``"file:PATH"``, ``"--set"``, ``"option"``."""
+    set_items: dict[tuple[str, str], str] = attrs.field(factory=dict)
+    """The text of each ``--set`` item, by (section, key)."""
+
+    def add(self, source: str, tables: dict) -> dict:
+        self.layers.append((source, tables))
+        return tables
+
+    def source(self, section: str | None, key: str) -> str | None:
+        for source, tables in reversed(self.layers):
+            if section is None and key in tables:
+                return source
+            if isinstance(tables.get(section), dict) and key in tables[section]:
+                return source
+        return None
+
+    def name(self, ref: Ref) -> str:
+        """``ref`` named as the user gave it: the option, the ``--set`` item or the scene file key."""
+        source = self.source(ref.section, ref.top_key)
+        nested = ref.key != ref.top_key
+        if source is not None and source.startswith("file:"):
+            return f"{ref} in {source[5:]}"
+        if source == "--set":
+            item = f"--set {self.set_items[(ref.section, ref.top_key)]}"
+            return f"{ref.key} = {show(ref.value)} in {item}" if nested else item
+        option = option_for(ref.section, ref.top_key)
+        if option is None or nested:
+            return str(ref)
+        if not ref.given or ref.value is True:  # a missing setting, or a flag
+            return option
+        return f"{option} {_cli_value(ref.value)}"

@@ -15,13 +15,16 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from bark.output import atomic_write
+from bark.output import atomic_write, unwrap
 
 
-def unwrap(x: np.ndarray, radius: float) -> np.ndarray:
-    """``(arc length, height)`` of 3-D points, arc length in ``[0, 2πr)``."""
-    theta = np.mod(np.arctan2(x[:, 1], x[:, 0]), 2 * np.pi)
-    return np.column_stack([radius * theta, x[:, 2]])
+MAX_ASPECT = 2.0
+"""Tallest figure, as height / width: a longer trunk is drawn with its height axis compressed (said
+in the title), so the image stays bounded (at most 1050 × 2100 pixels) whatever the scene."""
+MIN_ASPECT = 0.4
+SPRINGS_UP_TO = 50_000
+"""Bases up to which the intact springs are drawn; beyond, the springs would be a solid mat of lines
+(and the drawing the slowest part of a run's end), so the patch colours alone show the pattern."""
 
 
 def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = None) -> Path:
@@ -30,23 +33,29 @@ def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = N
     uv = unwrap(s.x, r)
     labels = sim.patch_labels()
     colours = patch_colours(labels, min_size)
-
-    p = s.pairs[s.intact]
-    seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
-    seg = seg[np.abs(seg[:, 0, 0] - seg[:, 1, 0]) < np.pi * r]  # drop springs across the seam
-
     width = 2 * np.pi * r
-    height = float(np.ptp(uv[:, 1])) or 1.0
-    fig = Figure(figsize=(7.0, max(3.0, 7.0 * height / width) + 0.6), dpi=150)
+    z_lo, z_hi = float(uv[:, 1].min()), float(uv[:, 1].max())
+    height = (z_hi - z_lo) or width
+    aspect = height / width
+    shown = min(max(aspect, MIN_ASPECT), MAX_ASPECT)
+    fig = Figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=150)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    ax.add_collection(LineCollection(seg, colors="0.15", alpha=0.6, linewidths=0.4))
-    ax.scatter(uv[:, 0], uv[:, 1], s=4, c=colours, linewidths=0)
+    springs = s.n_bases <= SPRINGS_UP_TO
+    if springs:
+        p = s.pairs[s.intact]
+        seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
+        seg = seg[np.abs(seg[:, 0, 0] - seg[:, 1, 0]) < np.pi * r]  # drop springs across the seam
+        ax.add_collection(LineCollection(seg, colors="0.15", alpha=0.6, linewidths=0.4))
+    # marker area (points²): a small dot between drawn springs; without them, dots that tile the surface
+    per_base = (72 * 7.0) ** 2 * shown / s.n_bases
+    ax.scatter(uv[:, 0], uv[:, 1], s=float(min(4.0, per_base * (0.04 if springs else 1.2))), c=colours, linewidths=0)
     ax.set_xlim(0, width)
-    ax.set_ylim(uv[:, 1].min() - 0.01, uv[:, 1].max() + 0.01)
-    ax.set_aspect("equal")
+    pad = 0.01 * height
+    ax.set_ylim(z_lo - pad, z_hi + pad)
+    ax.set_aspect(shown / aspect)
     ax.set_xlabel("arc length r·θ (length units; θ increases to the right seen from outside)")
-    ax.set_ylabel("height z (length units)")
+    ax.set_ylabel("height z (length units)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"))
     ax.set_title(title or f"t = {s.t:.2f}, r = {r:.4f}, {sim.patch_count(min_size)} patches, {sim.n_broken} broken", fontsize=9)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", bbox_inches="tight")

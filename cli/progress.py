@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import time
 from pathlib import Path
 
@@ -22,36 +21,43 @@ def _fraction(sim, stop, r0: float) -> float:
     return min(1.0, max(parts, default=0.0))
 
 
-@contextlib.contextmanager
-def progress_observer(sim, stop, enabled: bool, every_s: float = 0.1):
-    """Yield an ``observe(sim)`` callback that refreshes a progress bar at most every ``every_s``."""
-    if not enabled:
-        yield None
-        return
-    r0 = sim.radius
-    columns = (
-        TextColumn("[bold]bark"),
-        BarColumn(),
-        TextColumn("t={task.fields[t]:>9.2f}  r={task.fields[r]:.4f}  broken={task.fields[broken]:>6}  patches={task.fields[patches]:>4}"),
-        TimeElapsedColumn(),
-    )
-    with Progress(*columns, transient=False) as progress:
-        task = progress.add_task("run", total=1.0, t=0.0, r=r0, broken=0, patches=0)
-        last = [0.0]
+class ProgressBar:
+    """An ``observe(sim, stop)`` callback for :func:`bark.runner.run` that shows a progress bar,
+    refreshed at most every ``every_s``; it starts at the first call and ends at :meth:`close`."""
 
-        def observe(s):
-            now = time.monotonic()
-            if now - last[0] < every_s:
-                return
-            last[0] = now
-            progress.update(
-                task, completed=_fraction(s, stop, r0), t=s.state.t, r=s.radius, broken=s.n_broken,
-                patches=s.patch_count(stop.min_patch_size),
+    def __init__(self, every_s: float = 0.1) -> None:
+        self.every_s = every_s
+        self._progress = self._task = None
+        self._last = 0.0
+        self._r0 = 0.0
+
+    def __call__(self, sim, stop, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._last < self.every_s:
+            return
+        self._last = now
+        if self._progress is None:
+            self._r0 = sim.radius
+            columns = (
+                TextColumn("[bold]bark"),
+                BarColumn(),
+                TextColumn("t={task.fields[t]:>9.2f}  r={task.fields[r]:.4f}  broken={task.fields[broken]:>6}  "
+                           "patches={task.fields[patches]:>4}"),
+                TimeElapsedColumn(),
             )
+            self._progress = Progress(*columns, transient=False)
+            self._progress.start()
+            self._task = self._progress.add_task("run", total=1.0, t=0.0, r=self._r0, broken=0, patches=0)
+            self._stop = stop
+        self._sim = sim
+        self._progress.update(self._task, completed=_fraction(sim, stop, self._r0), t=sim.state.t, r=sim.radius,
+                              broken=sim.n_broken, patches=sim.patch_count(stop.min_patch_size))
 
-        yield observe
-        last[0] = 0.0
-        observe(sim)
+    def close(self) -> None:
+        if self._progress is not None:
+            self(self._sim, self._stop, force=True)
+            self._progress.stop()
+            self._progress = None
 
 
 def print_summary(summary: dict, out: Path) -> None:

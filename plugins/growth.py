@@ -7,7 +7,8 @@ import math
 import attrs
 import numpy as np
 
-from bark._validate import non_negative, positive
+from bark._validate import construct, non_negative, optional, positive
+from bark.errors import BarkError, Ref
 from bark.strategies import Growth
 
 __all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth"]
@@ -40,7 +41,12 @@ class LinearGrowth(Growth):
 
 
 def _bulges(value):
-    return tuple(v if isinstance(v, Bulge) else Bulge(**v) for v in value)
+    """A list of bulge tables (or :class:`Bulge` s) → a tuple of :class:`Bulge`; a bad entry is a
+    one-line error naming it (``bulges[1].G``)."""
+    if not isinstance(value, (list, tuple)):
+        raise BarkError("{0}: must be a list of bulge tables ([[growth.bulges]] in a scene file)", Ref(None, "bulges", value))
+    return tuple(v if isinstance(v, Bulge) else construct(Bulge, v, "a bulge", prefix=f"bulges[{i}].")
+                 for i, v in enumerate(value))
 
 
 def _base(value):
@@ -50,8 +56,14 @@ def _base(value):
         from bark import registry
 
         params = dict(value)
-        return registry.create("growth", params.pop("name", "sqrt"), **params)
-    raise ValueError(f"base = {value!r}: must be a growth strategy or a table like {{name = 'sqrt', G = 0.014}}")
+        name = params.pop("name", "sqrt")
+        if name == "bulge":
+            raise BarkError("{0}: a bulge law cannot sit on another bulge law; list all bulges in one", Ref(None, "base.name", name))
+        try:
+            return registry.create("growth", name, **params)
+        except BarkError as err:
+            raise err.within(prefix="base.") from None
+    raise BarkError("{0}: must be a growth strategy or a table like {{name = 'sqrt', G = 0.014}}", Ref(None, "base", value))
 
 
 @attrs.frozen(kw_only=True)
@@ -66,10 +78,10 @@ class Bulge:
     """Extra radius at the peak at t = 0 (length units)."""
     decay: float = attrs.field(default=0.0, validator=non_negative)
     """The magnitude falls as ``exp(−decay·t)`` (paper, "Integrative model": the bulge fades)."""
-    G: float | None = attrs.field(default=None)
+    G: float | None = attrs.field(default=None, validator=optional(non_negative))
     """Growth constant at the peak (paper, Table 1: 0.02 at the peak, 0.04 at the ends); ``None``
     keeps the base law's."""
-    f_max: float | None = attrs.field(default=None)
+    f_max: float | None = attrs.field(default=None, validator=optional(positive))
     """Breaking threshold at the peak (paper, Table 1: 0.006 in bulges); ``None`` keeps the scene's."""
 
     def profile(self, z: np.ndarray) -> np.ndarray:

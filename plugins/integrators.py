@@ -9,7 +9,7 @@ import numpy as np
 from scipy.sparse.linalg import LinearOperator, cg
 
 from bark._validate import one_of, positive, positive_int
-from bark.errors import BarkError
+from bark.errors import BarkError, Ref
 from bark.forces import stiffness_matvec
 from bark.stability import euler_cromer_h_max
 from bark.strategies import Integrator
@@ -25,7 +25,7 @@ class EulerCromer(Integrator):
         x ← x + v · dt
 
     First order; stable while ``dt`` is below ``h_max = (√(β² + 4ω²) − β)/ω²`` with ``β = b/m`` and
-    ``ω² = λ_max(K)/m`` (NOTES.md §3; ≈ 0.36 for Table 2's values).
+    ``ω² = λ_max(K)/m`` (docs/numerics.md; ≈ 0.37 for Table 2's values).
     """
 
     quiet_kernel: ClassVar[str | None] = "euler_cromer_quiet"
@@ -69,10 +69,15 @@ class ImplicitOverdamped(Integrator):
     maxiter: int = attrs.field(default=1000, validator=positive_int)
     """Most CG iterations per step."""
 
+    def stability_limit(self, state) -> float:
+        """Stable for any step — given damping, which the overdamped limit divides by."""
+        if state.mechanics.b <= 0:
+            raise BarkError("{0}: the implicit-overdamped integrator needs damping > 0 (and the 'damping' effect)",
+                            Ref("mechanics", "b", state.mechanics.b))
+        return float("inf")
+
     def step(self, state, dt: float) -> None:
         mech = state.mechanics
-        if mech.b <= 0:
-            raise BarkError("integrator 'implicit-overdamped' needs damping: mechanics.b must be > 0")
         matvec, diag = stiffness_matvec(state.x, state.pairs, state.rest, mech.k, state.intact, mech.c, state.incidence)
         size = diag.size
         e_r = state.x[:, :2] / np.hypot(state.x[:, 0], state.x[:, 1])[:, None]

@@ -67,6 +67,7 @@ def test_own_growth_constant_and_threshold_inside():
 def test_scene_builds_bulges_and_the_simulation_uses_their_thresholds():
     sc = Scene.from_dict({
         "lattice": {"n_bases": 600},
+        "run": {"until_time": 10.0},
         "growth": {"name": "bulge", "base": {"name": "linear", "G": 0.001},
                    "bulges": [{"z": 0.15, "half_width": 0.05, "magnitude": 0.01, "f_max": 0.01}]},
     })

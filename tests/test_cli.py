@@ -45,7 +45,7 @@ def _one_line(result) -> str:
 
 
 def _names(text: str, name: str) -> bool:
-    return re.search(rf"(?<![A-Za-z0-9_]){re.escape(name)}(?![A-Za-z0-9_])", text) is not None
+    return re.search(rf"(?<![A-Za-z0-9_-]){re.escape(name)}(?![A-Za-z0-9_.])", text) is not None
 
 
 # -- a successful run --------------------------------------------------------------------------
@@ -176,13 +176,13 @@ def _write(tmp_path, name: str, text: str) -> str:
     return str(path)
 
 
-BAD_INPUTS = {
-    "negative-k": (lambda p: ["--k", "-1"], "k"),
-    "dt-zero": (lambda p: ["--dt", "0"], "dt"),
-    "dt-negative": (lambda p: ["--dt", "-1"], "dt"),
-    "dt-above-stability-limit": (lambda p: ["--dt", "1", "--stepping", "fixed"], "dt"),
-    "unknown-growth": (lambda p: ["--growth", "nope"], "nope"),
-    "unknown-breaker": (lambda p: ["--breaker", "nope"], "nope"),
+BAD_INPUTS = {  # each message names the setting as the user gave it: the option, the --set item or the file's key
+    "negative-k": (lambda p: ["--k", "-1"], "--k -1.0"),
+    "dt-zero": (lambda p: ["--dt", "0"], "--dt 0.0"),
+    "dt-negative": (lambda p: ["--dt", "-1"], "--dt -1.0"),
+    "dt-above-stability-limit": (lambda p: ["--dt", "1", "--stepping", "fixed"], "--dt 1.0"),
+    "unknown-growth": (lambda p: ["--growth", "nope"], "--growth nope"),
+    "unknown-breaker": (lambda p: ["--breaker", "nope"], "--breaker nope"),
     "unknown-scene-key": (lambda p: ["--scene", _write(p, "k.toml", "[lattice]\nfoo = 1\n")], "foo"),
     "unknown-table": (lambda p: ["--scene", _write(p, "t.toml", "[nope]\nx = 1\n")], "nope"),
     "malformed-toml": (lambda p: ["--scene", _write(p, "bad.toml", "[lattice\nn_bases = \n")], "bad.toml"),
@@ -190,13 +190,13 @@ BAD_INPUTS = {
     "set-no-equals": (lambda p: ["--set", "garbage"], "--set"),
     "set-no-section": (lambda p: ["--set", "G=0.1"], "--set"),
     "set-no-value-sep": (lambda p: ["--set", "growth.G"], "--set"),
-    "set-unknown-key": (lambda p: ["--set", "lattice.foo=1"], "foo"),
-    "set-bad-value": (lambda p: ["--set", "mechanics.k=-3"], "k"),
+    "set-unknown-key": (lambda p: ["--set", "lattice.foo=1"], "--set lattice.foo=1"),
+    "set-bad-value": (lambda p: ["--set", "mechanics.k=-3"], "--set mechanics.k=-3"),
     "set-unknown-table": (lambda p: ["--set", "nosuch.key=1"], "nosuch"),
     "bad-int": (lambda p: ["--n-bases", "many"], "--n-bases"),
     "bad-offsets": (lambda p: ["--offsets", "a,b"], "--offsets"),
-    "negative-G": (lambda p: ["-G", "-1"], "G"),
-    "bad-on-degenerate": (lambda p: ["--on-degenerate", "explode"], "on_degenerate"),
+    "negative-G": (lambda p: ["-G", "-1"], "-G -1.0"),
+    "bad-on-degenerate": (lambda p: ["--on-degenerate", "explode"], "--on-degenerate"),
     "unknown-option": (lambda p: ["--bogus"], "--bogus"),
 }
 

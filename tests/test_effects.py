@@ -40,7 +40,7 @@ def test_image_not_asked_means_matplotlib_never_imported(tmp_path):
         "import sys\n"
         "from bark_cli.main import cli\n"
         f"try:\n    cli.main(['simulate', '--scene', {str(SCENES / 'statistics-only.toml')!r}, '--n-bases', '400',"
-        f" '-G', '0.05', '--out', {str(tmp_path / 'out')!r}, '--quiet'])\n"
+        f" '--until-patches', '40', '--until-time', '1000', '-G', '0.05', '--out', {str(tmp_path / 'out')!r}, '--quiet'])\n"
         "except SystemExit as e:\n    assert e.code == 0, e.code\n"
         "print('matplotlib' in sys.modules, sorted(p.name for p in __import__('pathlib').Path("
         f"{str(tmp_path / 'out')!r}).iterdir()))\n"

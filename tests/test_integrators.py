@@ -303,7 +303,7 @@ def test_lanczos_bound_is_deterministic():
 
 
 def test_stability_numbers_of_notes_section_3():
-    """NOTES.md §3: Table 2 values give λ_max ≈ 2.31, h_max ≈ 0.369; k = 100, m = 0.01 gives
+    """docs/numerics.md: Table 2 values give λ_max ≈ 2.31, h_max ≈ 0.369; k = 100, m = 0.01 gives
     h_max ≈ 0.0034."""
     state = Scene.from_dict({"run": {"dt": 0.01}}).simulation().state  # Table 2 values
     assert lambda_max(state, "lanczos") == pytest.approx(2.31, abs=0.02)

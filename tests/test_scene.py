@@ -53,7 +53,7 @@ def test_shipped_vertical_scene_is_the_default_scene():
 
 
 def test_scene_builds_the_simulation_it_describes():
-    s = Scene.from_dict({"lattice": {"n_bases": 300}, "run": {"dt": 0.02, "seed": 9}, "growth": {"G": 0.03}})
+    s = Scene.from_dict({"lattice": {"n_bases": 300}, "run": {"dt": 0.02, "seed": 9, "until_time": 5.0}, "growth": {"G": 0.03}})
     sim = s.simulation()
     assert sim.lattice is s.lattice and sim.mechanics is s.mechanics
     assert sim.growth is s.strategies["growth"]
@@ -63,14 +63,15 @@ def test_scene_builds_the_simulation_it_describes():
 
 
 @given(
-    n=st.integers(1, 5000),
+    n=st.integers(35, 5000),
     G=st.floats(0.0, 1.0),
     dt=st.floats(1e-4, 1.0),
     seed=st.integers(0, 2**32),
     name=st.sampled_from(["sqrt", "linear"]),
 )
 def test_to_dict_round_trips(n, G, dt, seed, name):
-    s = Scene.from_dict({"lattice": {"n_bases": n}, "growth": {"name": name, "G": G}, "run": {"dt": dt, "seed": seed}})
+    s = Scene.from_dict({"lattice": {"n_bases": n}, "growth": {"name": name, "G": G},
+                         "run": {"dt": dt, "seed": seed, "until_patches": max(1, n // 7)}})
     again = Scene.from_dict(s.to_dict())
     assert again == s
     assert again.to_dict() == s.to_dict()
@@ -173,8 +174,8 @@ def test_unknown_key_in_toml_file(tmp_path):
 def test_toml_overrides_apply(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text('[lattice]\nn_bases = 500\njitter = 0.1\n[growth]\nname = "linear"\nG = 0.02\n')
-    s = Scene.from_toml(path, {"lattice": {"n_bases": 700}})
-    assert s.lattice.n_bases == 700 and s.lattice.jitter == 0.1
+    s = Scene.from_toml(path, {"lattice": {"n_bases": 800}})
+    assert s.lattice.n_bases == 800 and s.lattice.jitter == 0.1
     assert s.names["growth"] == "linear" and s.strategies["growth"].G == 0.02
 
 
@@ -242,7 +243,7 @@ def test_shipped_scene_loads(path):
     s = Scene.from_toml(path)
     assert s.name
     assert Scene.from_dict(s.to_dict()) == s
-    small = Scene.from_toml(path, {"lattice": {"n_bases": 50}})
+    small = Scene.from_toml(path, {"lattice": {"n_bases": 50}, "run": {"until_time": 1.0}})
     assert small.simulation().state.n_bases == 50
 
 
