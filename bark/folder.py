@@ -38,7 +38,7 @@ __all__ = ["RUN_FILES", "OutputFolder", "writable_folder"]
 RUN_FILES = ("summary.json", "patches.csv", "breaks.csv", "state.npz", "graph.graphml", "statistics.csv",
              "pattern.png", "development.gif", CHECKPOINT_NAME, PREVIOUS_NAME)
 """Every file a run may write.  A fresh run removes these (and only these) from its folder."""
-PROBE = ".bark-probe"
+PROBE = "bark-probe"
 
 
 def _short(text: str, limit: int = 60) -> str:
@@ -55,7 +55,7 @@ class OutputFolder:
 
     @classmethod
     def open(cls, path: str | Path, *, fresh: bool, overwrite: bool = False, key: str = "out",
-             warn: Callable[[str], None] | None = None) -> "OutputFolder":
+             notice: Callable[[str], None] | None = None) -> "OutputFolder":
         """Open ``path`` for a fresh run (``fresh=True``: created if missing, other runs' files
         replaced) or for resuming the run in it.  ``key`` names the setting in messages (``out``,
         ``resume``).  Raises a one-line :class:`BarkError`."""
@@ -84,7 +84,7 @@ class OutputFolder:
             _probe(path, fail)
             _remove_stale_temporaries(path)
             if fresh:
-                _clear_for_fresh_run(path, overwrite, fail, warn)
+                _clear_for_fresh_run(path, overwrite, fail, notice)
         except BaseException:
             if fd is not None:
                 os.close(fd)
@@ -184,7 +184,7 @@ def _remove_stale_temporaries(path: Path) -> None:
             entry.unlink(missing_ok=True)
 
 
-def _clear_for_fresh_run(path: Path, overwrite: bool, fail, warn) -> None:
+def _clear_for_fresh_run(path: Path, overwrite: bool, fail, notice) -> None:
     present = [name for name in RUN_FILES if (path / name).is_file()]
     if not present:
         return
@@ -200,10 +200,10 @@ def _clear_for_fresh_run(path: Path, overwrite: bool, fail, warn) -> None:
             if meta.get("reason") != "end":
                 t = meta.get("t")
                 when = f"t = {t:.6g}" if isinstance(t, (int, float)) else "a run"
-                raise fail(f"holds an unfinished run (stopped at {when}): go on with it by resuming, or discard it with {{1}}",
-                           Ref(None, "overwrite", True))
+                raise fail(f"holds an unfinished run (stopped at {when}): go on with it ({{1}}), or discard it with {{2}}",
+                           Ref(None, "resume", str(path)), Ref(None, "overwrite", True))
             break
     for name in present:
         (path / name).unlink(missing_ok=True)
-    if warn is not None:
-        warn(f"replaced the earlier run's files in {str(path)!r}")
+    if notice is not None:
+        notice(f"replaced the earlier run's files in {str(path)!r}")

@@ -61,16 +61,21 @@ class Outcome:
     error: str | None = None
     """Why the state went non-finite, if it did (the last finite state was written)."""
     failed: list[str] = attrs.field(factory=list)
+    drawing_stopped: bool = False
+    """Whether a picture was left undrawn because a signal stopped the drawing."""
 
 
 def run(scene, out: str | Path, *, overwrite: bool = False, checkpoint_every: float = 60.0,
         observe: Callable | None = None, interrupted: Callable[[], str | None] | None = None,
-        pictures: dict[str, Picture] | None = None, warn: Callable[[str], None] | None = None) -> Outcome:
-    """Run ``scene`` into the folder ``out`` (see the module's docstring)."""
+        pictures: dict[str, Picture] | None = None, warn: Callable[[str], None] | None = None,
+        notice: Callable[[str], None] | None = None) -> Outcome:
+    """Run ``scene`` into the folder ``out`` (see the module's docstring).  ``warn`` receives what a
+    user must hear (a run with no time bound, a fallback to an older checkpoint), ``notice`` what is
+    merely worth saying (an earlier run's files replaced)."""
     _check_every(checkpoint_every)
     sim, stop = scene.simulation(), scene.stop()
     sim.check(stop)
-    with OutputFolder.open(out, fresh=True, overwrite=overwrite, warn=warn) as folder:
+    with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:
         if stop.until_time is None and warn is not None:
             conds = [f"radius {stop.until_radius:g}" if stop.until_radius is not None else None,
                      f"{stop.until_patches} patches" if stop.until_patches is not None else None]
@@ -81,7 +86,7 @@ def run(scene, out: str | Path, *, overwrite: bool = False, checkpoint_every: fl
 
 def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable | None = None,
            interrupted: Callable[[], str | None] | None = None, pictures: dict[str, Picture] | None = None,
-           warn: Callable[[str], None] | None = None) -> Outcome:
+           warn: Callable[[str], None] | None = None, notice: Callable[[str], None] | None = None) -> Outcome:
     """Go on with the run in ``out`` from its checkpoint (every setting comes from there).  A run
     that had ended but whose outputs were not all written gets them written."""
     _check_every(checkpoint_every)
@@ -185,6 +190,7 @@ def _finish(scene, sim, stop, out: Path, recorders: list, reason: str, wall: flo
             draw(sim, scene, by_name, out / name)
         except KeyboardInterrupt:
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
+            outcome.drawing_stopped = True
         except Exception as err:  # a picture never costs the data: say what failed, keep the rest
             outcome.failed.append(f"{name}: could not be drawn ({type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''})")
     return outcome

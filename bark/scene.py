@@ -352,7 +352,7 @@ def _plain(value):
         from bark.strategies import Strategy
 
         if isinstance(value, Strategy):  # a nested strategy (a bulge law's base) is named as in a scene
-            from bark import effects, registry
+            from bark import registry
 
             name = next((n for n, ep in registry.available(value.kind).items()
                          if ep.value.endswith(":" + type(value).__name__)), type(value).__name__)

@@ -149,8 +149,6 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
     Hellinger distance of orientations) against a fine-dt reference, averaged over seeds, with the
     seed-to-seed spread as the band below which a difference is not an error.  Writes
     accuracy.png, accuracy_position.csv and accuracy_pattern.csv to --out."""
-    from pathlib import Path
-
     from rich.console import Console
     from rich.table import Table
 

@@ -18,7 +18,6 @@ import shlex
 import signal
 import sys
 import threading
-from pathlib import Path
 
 import click
 
@@ -180,6 +179,10 @@ def _warn(message: str) -> None:
     click.echo(f"bark: warning: {message}", err=True)
 
 
+def _notice(message: str) -> None:
+    click.echo(f"bark: {message}", err=True)
+
+
 @cli.command(context_settings=CONTEXT)
 @click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
               help="Scene TOML file (examples/scenes/); options given here override it.")
@@ -210,7 +213,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
     Any --until-* option replaces the scene's stop conditions.  Ctrl-C or SIGTERM stops between
     steps, writes the outputs and a checkpoint, and prints the command that goes on."""
     from bark import runner
-    from bark_cli.progress import ProgressBar, print_summary
+    from bark_cli.progress import ProgressBar
 
     if resume is not None:
         given = [p for p, v in ctx.params.items()
@@ -225,10 +228,9 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
         scene = resolve_scene(scene_file, strategies, {"r0": r0, "G": G}, sets, kwargs)
     show = not quiet and sys.stdout.isatty()
     bar = ProgressBar() if show else None
-    notice = (lambda m: None) if quiet else _warn
     with Signals() as signals:
         hooks = dict(checkpoint_every=checkpoint_every, observe=bar, interrupted=signals.reason,
-                     pictures=_pictures(signals), warn=notice)
+                     pictures=_pictures(signals), warn=_warn, notice=None if quiet else _notice)
         try:
             if resume is not None:
                 outcome = runner.resume(resume, **hooks)
@@ -237,12 +239,14 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
         finally:
             if bar is not None:
                 bar.close()
-    return _report(outcome, quiet)
+    return _report(outcome, quiet, signals.received)
 
 
-def _report(outcome, quiet: bool) -> int:
+def _report(outcome, quiet: bool, signum: int | None = None) -> int:
     """Say how the run ended (stderr for what went wrong, the summary table on stdout) and choose
-    the exit status: 0, 1 (non-finite state or an output not written), 128 + signal."""
+    the exit status: 0, 1 (non-finite state or an output not written), 128 + signal (stopped by a
+    signal between steps, or while drawing).  A signal during the final data writes waits for them:
+    the run is whole, and ends with its own status."""
     from bark_cli.progress import print_summary
 
     out, summary, sim = outcome.out, outcome.summary, outcome.sim
@@ -259,7 +263,7 @@ def _report(outcome, quiet: bool) -> int:
         )
     for problem in outcome.failed:
         click.echo(f"bark: error: {problem}; every other output is in {out}", err=True)
-        code = code or 1
+        code = code or (128 + signum if outcome.drawing_stopped and signum is not None else 1)
     if not quiet:
         print_summary(summary, out)
     if outcome.stop_reason in ("interrupted", "terminated"):

@@ -9,7 +9,10 @@ Every simulation here is small (a few hundred bases) and uses a large growth con
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -78,3 +81,44 @@ def broken_sim() -> Simulation:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+# -- fault injection: bounded CLI runs and the contract every outcome must keep -----------------
+
+
+@contextlib.contextmanager
+def signal_after(seconds: float, sig: int = signal.SIGTERM):
+    """Send ``sig`` to this process after ``seconds`` (a run that would go on too long is stopped the
+    way a scheduler stops it).  A signal that comes after the command returned is ignored."""
+    previous = signal.signal(sig, lambda *args: None)
+    timer = threading.Timer(seconds, os.kill, (os.getpid(), sig))
+    timer.start()
+    try:
+        yield
+    finally:
+        timer.cancel()
+        timer.join()
+        signal.signal(sig, previous)
+
+
+def assert_clean_outcome(result, out: Path | None = None) -> None:
+    """The CLI's promise for any input: exit 0 (warnings at most), 2 (one line naming what is wrong,
+    nothing written), 1 (a non-finite state or an output that could not be written, said in lines of
+    its own) or 128 + signal (stopped from outside, with the command that goes on); never a traceback."""
+    code, err = result.exit_code, result.stderr
+    assert "Traceback" not in result.output and "Traceback" not in err, err
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    lines = err.splitlines()
+    assert all(line.startswith("bark: ") for line in lines), err
+    if code == 2:
+        assert len(lines) == 1 and lines[0].startswith("bark: error: "), err
+        if out is not None:
+            assert not out.exists() or not any(out.iterdir()), sorted(p.name for p in out.iterdir())
+    elif code == 0:
+        assert not any(line.startswith("bark: error") for line in lines), err
+    elif code == 1:
+        assert any("NaN or infinite" in line or "could not be drawn" in line for line in lines), err
+    elif code in (128 + signal.SIGTERM, 128 + signal.SIGINT):
+        assert "go on with: bark simulate --resume" in err or "not drawn" in err, err
+    else:
+        raise AssertionError(f"exit status {code}: {err}")

@@ -2,12 +2,6 @@
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
-import time
-
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -69,59 +63,4 @@ def test_checkpoint_holds_what_it_documents(tmp_path):
     assert sim.graph.number_of_edges() == int(sim.state.intact.sum())  # the graph of record, rebuilt
 
 
-# -- real signals, in a real process ---------------------------------------------------------
-
-LONG = ["--scene", "examples/scenes/diamond.toml", "--n-bases", "1500", "--dt", "0.01", "--stepping", "fixed", "--quiet"]
-
-
-def _start(out, *extra):
-    return subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", *LONG, *extra, "--out", str(out)],
-                            cwd=os.path.dirname(os.path.dirname(__file__)), stderr=subprocess.PIPE, text=True)
-
-
-def _wait_for(path, proc, limit_s=120.0):
-    """Until ``path`` exists (a periodic checkpoint was written): the signal then lands mid-run."""
-    deadline = time.monotonic() + limit_s
-    while not path.exists():
-        assert proc.poll() is None, "the run ended before its first checkpoint"
-        assert time.monotonic() < deadline, "no checkpoint appeared"
-        time.sleep(0.05)
-
-
-@pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory):
-    out = tmp_path_factory.mktemp("uninterrupted")
-    proc = _start(out)
-    assert proc.wait() == 0, proc.stderr.read()
-    return out
-
-
-@pytest.mark.slow
-def test_sigint_writes_a_checkpoint_and_the_resumed_run_is_identical(tmp_path, uninterrupted):
-    out = tmp_path / "run"
-    proc = _start(out, "--checkpoint-every", "0.3")
-    _wait_for(out / "checkpoint.npz", proc)
-    proc.send_signal(signal.SIGINT)
-    assert proc.wait() == 130
-    err = proc.stderr.read()
-    assert "bark simulate --resume" in err and "Traceback" not in err
-    assert checkpoint.load(out)[3]["reason"] == "interrupted"
-    resumed = subprocess.run([sys.executable, "-m", "bark_cli.main", "simulate", "--resume", str(out), "--quiet"],
-                             capture_output=True, text=True)
-    assert resumed.returncode == 0, resumed.stderr
-    assert _files_equal(uninterrupted, out)
-
-
-@pytest.mark.slow
-def test_sigkill_between_checkpoints_loses_nothing_but_time(tmp_path, uninterrupted):
-    out = tmp_path / "run"
-    proc = _start(out, "--checkpoint-every", "0.3")
-    _wait_for(out / "checkpoint.npz", proc)
-    time.sleep(0.2)  # somewhere between two checkpoints
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    assert not (out / "summary.json").exists()  # it really died mid-run
-    resumed = subprocess.run([sys.executable, "-m", "bark_cli.main", "simulate", "--resume", str(out), "--quiet"],
-                             capture_output=True, text=True)
-    assert resumed.returncode == 0, resumed.stderr
-    assert _files_equal(uninterrupted, out)
+# Real signals in a real process, and damaged checkpoints: tests/test_faults_signals.py, tests/test_faults_files.py.

@@ -1,0 +1,145 @@
+"""Fault injection, signals: SIGINT, SIGTERM and SIGKILL at random points of a real `bark simulate`
+process, then `--resume`: the outputs are byte-identical to the run that was never stopped.  And
+signals at the end: during the final writes (they wait), and while a picture is drawn (it stops)."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from bark import checkpoint, runner
+from bark_cli.main import cli
+
+from conftest import REPO_ROOT, assert_clean_outcome
+
+# the diamond regime with the paper's integration (fixed dt = 0.01), smaller: about 2 s of stepping
+LONG = ["--scene", "examples/scenes/diamond.toml", "--n-bases", "1500", "--dt", "0.01", "--stepping", "fixed",
+        "--until-patches", "60", "--quiet"]
+COMPARED = ("breaks.csv", "state.npz", "patches.csv")
+
+
+def _start(out: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", *LONG, *extra, "--out", str(out)],
+                            cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
+
+
+def _resume(out: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "bark_cli.main", "simulate", "--resume", str(out), "--quiet"],
+                          cwd=REPO_ROOT, capture_output=True, text=True)
+
+
+def _wait_for(path: Path, proc: subprocess.Popen, limit_s: float = 120.0) -> None:
+    deadline = time.monotonic() + limit_s
+    while not path.exists():
+        assert proc.poll() is None, "the run ended before its first checkpoint: " + proc.stderr.read()
+        assert time.monotonic() < deadline, "no checkpoint appeared"
+        time.sleep(0.02)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("uninterrupted") / "out"
+    proc = _start(out)
+    assert proc.wait() == 0, proc.stderr.read()
+    return out
+
+
+# a few random points of the run (seeded: a failure names its point), after the first checkpoint
+POINTS = random.Random(20261122).sample([0.05 * k for k in range(1, 30)], 4)
+CASES = [(signal.SIGINT, POINTS[0]), (signal.SIGTERM, POINTS[1]), (signal.SIGKILL, POINTS[2]), (signal.SIGKILL, POINTS[3])]
+
+
+@pytest.mark.parametrize("sig, delay", CASES, ids=[f"{signal.Signals(s).name}-{d:.2f}s" for s, d in CASES])
+def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted, sig, delay):
+    out = tmp_path / "out"
+    proc = _start(out, "--checkpoint-every", "0.2")
+    _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
+    time.sleep(delay)
+    proc.send_signal(sig)
+    code = proc.wait()
+    err = proc.stderr.read()
+    assert "Traceback" not in err, err
+    if code == 0:
+        pytest.skip(f"the run ended before the signal at {delay:.2f} s")
+    if sig == signal.SIGKILL:
+        assert code == -signal.SIGKILL
+    else:
+        assert code == 128 + sig, (code, err)
+        assert f"go on with: bark simulate --resume {out}" in err
+        assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "interrupted"
+        summary = json.loads((out / "summary.json").read_text())  # the outputs of that state, written
+        assert summary["stop_reason"] in ("interrupted", "terminated")
+    assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")] or sig == signal.SIGKILL
+    resumed = _resume(out)
+    assert resumed.returncode == 0, resumed.stderr
+    assert "Traceback" not in resumed.stderr
+    for name in COMPARED:
+        assert (out / name).read_bytes() == (uninterrupted / name).read_bytes(), name
+    assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_stopped_twice_and_resumed_twice_is_byte_identical(tmp_path, uninterrupted):
+    out = tmp_path / "out"
+    proc = _start(out, "--checkpoint-every", "0.2")
+    _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait() in (0, 143)
+    again = subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", "--resume", str(out), "--quiet",
+                              "--checkpoint-every", "0.2"], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.4)
+    again.send_signal(signal.SIGINT)
+    assert again.wait() in (0, 130)
+    assert _resume(out).returncode in (0, 2)  # 2: it had already ended
+    for name in COMPARED:
+        assert (out / name).read_bytes() == (uninterrupted / name).read_bytes(), name
+
+
+SMALL = ["--n-bases", "300", "-G", "0.05", "--until-time", "6", "--quiet"]
+
+
+def test_a_signal_during_the_final_writes_waits_for_them(tmp_path, monkeypatch):
+    """SIGTERM while the outputs are written: they are all written, and summary and checkpoint agree."""
+    real = runner.write_run
+
+    def write_with_a_signal(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)  # the CLI's handler notes it; nothing stops
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "write_run", write_with_a_signal)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--out", str(out)])
+    assert_clean_outcome(result)
+    assert result.exit_code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    meta = checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)
+    assert (summary["stop_reason"], summary["steps"], summary["t"]) == (meta["stop_reason"], meta["step_count"], meta["t"])
+    assert (out / "pattern.png").exists() and (out / "breaks.csv").exists()
+
+
+def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, monkeypatch):
+    import bark_cli.plot
+
+    def slow_picture(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(30)  # a huge picture; the signal must cut it short
+        raise AssertionError("the drawing was not stopped")
+
+    monkeypatch.setattr(bark_cli.plot, "plot_pattern", slow_picture)
+    out = tmp_path / "out"
+    t0 = time.monotonic()
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--out", str(out)])
+    assert time.monotonic() - t0 < 20
+    assert_clean_outcome(result)
+    assert result.exit_code == 130
+    assert "pattern.png: not drawn" in result.stderr
+    assert {"summary.json", "breaks.csv", "state.npz", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
+    assert not (out / "pattern.png").exists()
