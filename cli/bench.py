@@ -162,6 +162,10 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
     scene.pop("run", None)  # the study sets dt, stepping, seed and stop itself
     from bark.folder import writable_folder
     from bark.scene import Scene, merge
+    from bark_cli.options import NAMER, Provenance
+
+    NAMER.set(Provenance(aliases={("run", "dt"): "--reference-dt", ("run", "until_time"): "--until-time",
+                                  (None, "out"): "--out"}).name)
 
     # before any work: the scene, the reference's step (below the stability limit) and the folder
     reference = merge(scene, {"integrator": {"name": "euler-cromer"},

@@ -13,7 +13,6 @@ option or scene key as the user gave it, and exit with status 2, before anything
 from __future__ import annotations
 
 import contextlib
-import contextvars
 import shlex
 import signal
 import sys
@@ -21,39 +20,32 @@ import threading
 
 import click
 
-from bark.errors import BarkError, Ref
+from bark.errors import BarkError
 from bark.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.strategies import KINDS
-from bark_cli.options import LazyHelpOption, Provenance, overrides_from, parameter_options
+from bark_cli.options import NAMER, LazyHelpOption, Provenance, name_ref, overrides_from, parameter_options
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
-_NAMER: contextvars.ContextVar = contextvars.ContextVar("namer", default=None)
-"""How the command being run names a scene setting in a message (its options, see Provenance)."""
-
-
-def _name(ref: Ref) -> str:
-    namer = _NAMER.get()
-    return namer(ref) if namer is not None else Provenance().name(ref)
 
 
 class BarkGroup(click.Group):
     """A click group whose failures are one line on stderr, never a traceback or a usage dump."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
-        token = _NAMER.set(None)
+        token = NAMER.set(None)
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.ClickException as err:
             click.echo(f"bark: error: {err.format_message()}", err=True)
             sys.exit(err.exit_code)
         except BarkError as err:
-            click.echo(f"bark: error: {err.render(_name)}", err=True)
+            click.echo(f"bark: error: {err.render(name_ref)}", err=True)
             sys.exit(2)
         except (click.Abort, KeyboardInterrupt):
             click.echo("bark: interrupted", err=True)
             sys.exit(130)
         finally:
-            _NAMER.reset(token)
+            NAMER.reset(token)
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
@@ -101,7 +93,7 @@ def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kw
     growth.G=0.05`` runs the linear law with G = 0.05 (a new strategy drops the parameters the scene
     file gave the old one, never those given here).  Errors from here on name settings as given."""
     prov = Provenance()
-    _NAMER.set(prov.name)
+    NAMER.set(prov.name)
     sets, prov.set_items = _parse_set(sets)
     names = {s: {"name": n} for s, n in strategies.items() if n is not None}
     for section, table in names.items():
@@ -289,7 +281,7 @@ def plan(scene_file):
     from bark.scene import available_memory
 
     prov = Provenance()
-    _NAMER.set(prov.name)
+    NAMER.set(prov.name)
     scene = Scene.from_dict(prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {})
     resolved = scene.effects
     parts = scene.components()  # what would be built, without building it

@@ -14,6 +14,7 @@ lists its choices.  An option left out is ``None`` and leaves the scene's value 
 from __future__ import annotations
 
 import ast
+import contextvars
 import functools
 import inspect
 import shlex
@@ -180,6 +181,9 @@ class Provenance:
     """``(source, tables)``: ``source`` is ``"file:PATH"``, ``"--set"``, ``"option"``."""
     set_items: dict[tuple[str, str], str] = attrs.field(factory=dict)
     """The text of each ``--set`` item, by (section, key)."""
+    aliases: dict[tuple[str | None, str], str] = attrs.field(factory=dict)
+    """Options of the command at hand that set a scene key under another name (``bark bench
+    accuracy --reference-dt`` sets ``[run] dt``)."""
 
     def add(self, source: str, tables: dict) -> dict:
         self.layers.append((source, tables))
@@ -202,9 +206,19 @@ class Provenance:
         if source == "--set":
             item = f"--set {self.set_items[(ref.section, ref.top_key)]}"
             return f"{ref.key} = {show(ref.value)} in {item}" if nested else item
-        option = option_for(ref.section, ref.top_key)
+        option = self.aliases.get((ref.section, ref.top_key)) or option_for(ref.section, ref.top_key)
         if option is None or nested:
             return str(ref)
         if not ref.given or ref.value is True:  # a missing setting, or a flag
             return option
         return f"{option} {_cli_value(ref.value)}"
+
+
+NAMER: contextvars.ContextVar = contextvars.ContextVar("namer", default=None)
+"""How the command being run names a scene setting in a message (a :class:`Provenance`'s ``name``)."""
+
+
+def name_ref(ref: Ref) -> str:
+    """``ref`` named for the command being run (its options; see :class:`Provenance`)."""
+    namer = NAMER.get()
+    return namer(ref) if namer is not None else Provenance().name(ref)
