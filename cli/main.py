@@ -42,7 +42,7 @@ class BarkGroup(click.Group):
             click.echo(f"bark: error: {err.render(name_ref)}", err=True)
             sys.exit(2)
         except (click.Abort, KeyboardInterrupt):
-            click.echo("bark: interrupted", err=True)
+            click.echo("bark: interrupted before the run began: nothing was run", err=True)
             sys.exit(130)
         finally:
             NAMER.reset(token)
@@ -111,23 +111,26 @@ def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kw
 class Signals:
     """SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``, schedulers) and SIGHUP stop a run between two
     steps: the handler only notes the signal, which the runner reads after each advance, so a step
-    and the final writes are never cut.  While a picture is drawn, a signal stops the drawing at once
-    (the data are already written)."""
+    and the final writes are never cut.  Before the first step (building a large scene) and while a
+    picture is drawn (the data are already written), a signal stops at once."""
 
     REASONS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated"}
 
     def __init__(self) -> None:
         self.received: int | None = None
         self.drawing = False
+        self.started = False
         self._previous: dict = {}
 
     def _handle(self, signum, frame) -> None:
         if self.received is None:
             self.received = signum
-        if self.drawing:
+        if self.drawing or not self.started:  # a picture, or a run not yet begun: nothing to lose
             raise KeyboardInterrupt
 
     def reason(self) -> str | None:
+        """The runner asks after every advance: from the first, a signal waits for the step to end."""
+        self.started = True
         return None if self.received is None else self.REASONS[self.received]
 
     @contextlib.contextmanager

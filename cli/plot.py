@@ -41,17 +41,18 @@ def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = N
     fig = Figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=150)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    springs = s.n_bases <= SPRINGS_UP_TO
-    if springs:
+    pad = 0.01 * height
+    if s.n_bases <= SPRINGS_UP_TO:
         p = s.pairs[s.intact]
         seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
         seg = seg[np.abs(seg[:, 0, 0] - seg[:, 1, 0]) < np.pi * r]  # drop springs across the seam
         ax.add_collection(LineCollection(seg, colors="0.15", alpha=0.6, linewidths=0.4))
-    # marker area (points²): a small dot between drawn springs; without them, dots that tile the surface
-    per_base = (72 * 7.0) ** 2 * shown / s.n_bases
-    ax.scatter(uv[:, 0], uv[:, 1], s=float(min(4.0, per_base * (0.04 if springs else 1.2))), c=colours, linewidths=0)
+        per_base = (72 * 7.0) ** 2 * shown / s.n_bases  # points² of figure per base: a small dot each
+        ax.scatter(uv[:, 0], uv[:, 1], s=float(min(4.0, 0.04 * per_base)), c=colours, linewidths=0)
+    else:
+        ax.imshow(raster(uv, colours, width, z_lo, z_hi), origin="lower", extent=(0, width, z_lo, z_hi),
+                  interpolation="nearest", aspect="auto")
     ax.set_xlim(0, width)
-    pad = 0.01 * height
     ax.set_ylim(z_lo - pad, z_hi + pad)
     ax.set_aspect(shown / aspect)
     ax.set_xlabel("arc length r·θ (length units; θ increases to the right seen from outside)")
@@ -60,6 +61,34 @@ def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = N
     buf = io.BytesIO()
     fig.savefig(buf, format="png", bbox_inches="tight")
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+
+
+RASTER_CELLS = 2_000_000
+"""Most cells of the raster a large pattern is drawn as (more than the figure has pixels)."""
+
+
+def raster(uv: np.ndarray, colours: np.ndarray, width: float, z_lo: float, z_hi: float) -> np.ndarray:
+    """The pattern as an RGBA image (uint8) of about one cell per base (at most ``RASTER_CELLS``):
+    each cell takes the colour of a base in it, and a cell with none that of the nearest base
+    (``scipy.ndimage.distance_transform_edt``).  What a scatter of millions of points would show,
+    in linear time."""
+    from scipy.ndimage import distance_transform_edt
+
+    n = uv.shape[0]
+    aspect = (z_hi - z_lo) / width or 1.0
+    cells = min(n, RASTER_CELLS)
+    nx = int(np.clip(np.sqrt(cells / aspect), 16, 8192))
+    ny = int(np.clip(cells / nx, 16, 8192))
+    ix = np.clip((uv[:, 0] / width * nx).astype(np.int64), 0, nx - 1)
+    iy = np.clip(((uv[:, 1] - z_lo) / ((z_hi - z_lo) or 1.0) * ny).astype(np.int64), 0, ny - 1)
+    image = np.zeros((ny, nx, 4), np.uint8)
+    image[iy, ix] = np.round(np.asarray(colours) * 255).astype(np.uint8)
+    empty = np.ones((ny, nx), bool)
+    empty[iy, ix] = False
+    if empty.any():
+        _, (jy, jx) = distance_transform_edt(empty, return_indices=True)
+        image = image[jy, jx]
+    return image
 
 
 def _tab20():
