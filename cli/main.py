@@ -41,8 +41,11 @@ class BarkGroup(click.Group):
         except BarkError as err:
             click.echo(f"bark: error: {err.render(name_ref)}", err=True)
             sys.exit(2)
+        except StoppedBeforeStart as stop:
+            click.echo(f"bark: {Signals.REASONS[stop.signum]} before the run began: nothing was run", err=True)
+            sys.exit(128 + int(stop.signum))
         except (click.Abort, KeyboardInterrupt):
-            click.echo("bark: interrupted before the run began: nothing was run", err=True)
+            click.echo("bark: interrupted", err=True)
             sys.exit(130)
         finally:
             NAMER.reset(token)
@@ -106,6 +109,14 @@ def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kw
                           ("option", overrides_from(kwargs))):
         data = merge(data, prov.add(source, layer))
     return Scene.from_dict(data)
+
+
+class StoppedBeforeStart(Exception):
+    """A signal came while the scene was still being built: exit 128 + signal, nothing run."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
 
 
 class Signals:
@@ -231,6 +242,8 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
                 outcome = runner.resume(resume, **hooks)
             else:
                 outcome = runner.run(scene, out, overwrite=overwrite, **hooks)
+        except KeyboardInterrupt:  # only raised before the first step (Signals): nothing ran, nothing to save
+            raise StoppedBeforeStart(signals.received or signal.SIGINT) from None
         finally:
             if bar is not None:
                 bar.close()

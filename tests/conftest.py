@@ -119,6 +119,6 @@ def assert_clean_outcome(result, out: Path | None = None) -> None:
     elif code == 1:
         assert any("NaN or infinite" in line or "could not be drawn" in line for line in lines), err
     elif code in (128 + signal.SIGTERM, 128 + signal.SIGINT):
-        assert "go on with: bark simulate --resume" in err or "not drawn" in err, err
+        assert "go on with: bark simulate --resume" in err or "not drawn" in err or "before the run began" in err, err
     else:
         raise AssertionError(f"exit status {code}: {err}")

@@ -143,3 +143,18 @@ def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, m
     assert "pattern.png: not drawn" in result.stderr
     assert {"summary.json", "breaks.csv", "state.npz", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
     assert not (out / "pattern.png").exists()
+
+
+def test_a_signal_while_a_large_scene_is_built_stops_at_once(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", "--n-bases", "1500000", "--until-time", "1",
+                             "--quiet", "--out", str(out)], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
+    time.sleep(2.0)  # imports done, building the lattice and its graph (about 20 s at this size)
+    proc.send_signal(signal.SIGTERM)
+    try:
+        code = proc.wait(timeout=10)  # not the whole build
+    finally:
+        proc.kill()
+    err = proc.stderr.read()
+    assert code == 143 and err == "bark: terminated before the run began: nothing was run\n", err
+    assert not out.exists()
