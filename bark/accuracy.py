@@ -32,6 +32,7 @@ from bark.analysis import orientation_hellinger, patch_statistics
 from bark.lattice import Lattice
 from bark.scene import Scene, merge
 from bark.simulation import Simulation, Stop
+from bark.stepping import Numerics
 
 __all__ = ["Method", "position_study", "pattern_study", "spread", "pareto_front", "fit_order"]
 
@@ -72,9 +73,8 @@ def _displaced(integrator: str, dt: float, n_bases: int, seed: int, backend: str
         integrator=registry.create("integrator", integrator),
         breakers=[registry.create("breaker", "threshold")],
         mechanics=attrs.evolve(Scene.from_dict({}).mechanics, f_max=1e9),
-        dt=dt,
+        numerics=Numerics(dt=dt, stepping="fixed", backend=backend),
         seed=seed,
-        backend=backend,
     )
     rng = np.random.default_rng(seed + 1)
     s = sim.state
@@ -101,7 +101,7 @@ def position_study(
         for model in {overdamped, False}:
             if model not in refs:
                 sim = _displaced(method.integrator, dts[0], n_bases, seed, backend)
-                refs[model] = solve_reference(sim.state, sim.radius, t_end, overdamped=model)
+                refs[model] = solve_reference(sim.state, sim.forces, sim.radius, t_end, overdamped=model)
         errors = []
         for dt in dts:
             _displaced(method.integrator, dt, n_bases, seed, backend).run(Stop(until_time=4 * dt))  # compile
@@ -128,15 +128,16 @@ def position_study(
 
 
 def _pattern_run(scene: dict, settings: dict, integrator: str, seed: int, until_time: float) -> dict:
+    """One run of ``scene`` with these numerics, through the library runner, in memory."""
+    from bark import runner
+
     data = merge(scene, {"integrator": {"name": integrator}, "run": {**settings, "seed": seed, "until_time": until_time}})
     sc = Scene.from_dict(data)
-    sim = sc.simulation()
-    t0 = time.perf_counter()
-    sim.run(sc.stop())
-    wall = time.perf_counter() - t0
+    outcome = runner.run(sc)
+    sim = outcome.sim
     rows = patch_statistics(sim.state.x, sim.patch_labels(), sc.run.min_patch_size)
     return {
-        "wall_s": wall, "steps": sim.step_count, "t": sim.state.t, "n_broken": sim.n_broken,
+        "wall_s": outcome.summary["wall_time_s"], "steps": sim.step_count, "t": sim.state.t, "n_broken": sim.n_broken,
         "n_patches": len(rows), "orientations": np.array([r["orientation_deg"] for r in rows]),
     }
 

@@ -3,14 +3,16 @@
 A checkpoint is one ``checkpoint.npz`` (numpy arrays, stored uncompressed so that writing one is
 fast; ``np.load(..., allow_pickle=False)`` reads it) holding:
 
-* the state: positions ``x``, velocities ``v``, ``anchor``, the ``intact`` mask, thresholds ``fmax``
-  and the spring ends ``pairs`` (a check that the scene rebuilds the same lattice);
+* the state, every field of it (``bark.state.BASE_FIELDS`` and ``SPRING_FIELDS``): positions,
+  velocities, anchors and their directions (the sites), birth times; the springs' ends, rest
+  lengths, thresholds and ``intact`` mask — the topology, so that a run whose bases joined along
+  the way is restored as it was, not rebuilt from the scene;
 * the break log so far (``breaks_*`` columns);
 * what was recorded along the way (``rec_series_*``: the statistics series; ``rec_frames_*``: the
   animation's frames), so that a resumed run's files are the whole run's;
 * ``meta``, a JSON text: checkpoint format, bark's version, the whole scene (every setting, as in
-  summary.json), the stop conditions, the clock (t, step count, tick count), adaptive stepping's
-  current level, the random generator's state, the events so far, why it was written
+  summary.json), the stop conditions, the clock (full step, tick count, adaptive stepping's current
+  level), the step count, the random generator's state, the events so far, why it was written
   (``periodic``, ``interrupted`` or ``end``), and a checksum of every array.
 
 **Trust.**  Nothing in a checkpoint is used before all of it is verified: every array against its
@@ -23,8 +25,7 @@ and only then moved into place; the one it replaces is kept as ``checkpoint.prev
 newest is damaged (a disk fault, a crash in the middle of the move), resuming falls back to the
 previous one, and says so.
 
-The leaf-base graph is not stored: it is rebuilt from the scene (same seed, same lattice) and the
-intact mask.
+The leaf-base graph is not stored: it is the state's bases and intact springs, made again from them.
 """
 
 from __future__ import annotations
@@ -41,20 +42,20 @@ import numpy as np
 
 from bark.errors import BarkError
 from bark.output import write_npz
+from bark.state import BASE_FIELDS, SPRING_FIELDS
 
 __all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "load", "read", "read_meta", "Damaged"]
 
-FORMAT = 2
+FORMAT = 3
 CHECKPOINT_NAME = "checkpoint.npz"
 PREVIOUS_NAME = "checkpoint.prev.npz"
 REASONS = ("periodic", "interrupted", "end")
 """Why a checkpoint was written: along the way, on a signal, or at the run's end."""
 
-STATE = {"x": ("float64", 2), "v": ("float64", 2), "anchor": ("float64", 2), "intact": ("bool", 1),
-         "fmax": ("float64", 1), "pairs": ("int64", 2)}
+STATE = {name: (dtype, 1 + len(shape)) for name, (shape, dtype) in {**BASE_FIELDS, **SPRING_FIELDS}.items()}
 BREAKS = {"spring": "int64", "i": "int64", "j": "int64", "step": "int64", "t": "float64", "tension": "float64"}
-META_KEYS = ("format", "bark_version", "reason", "scene", "stop", "t", "h_last", "h", "step_count", "ticks", "halvings",
-             "quiet_n", "events", "rng", "checksums")
+META_KEYS = ("format", "bark_version", "reason", "scene", "stop", "t", "h_last", "clock", "step_count", "events", "rng",
+             "checksums")
 
 
 class Damaged(BarkError):
@@ -166,13 +167,14 @@ def _check_parts(arrays: dict[str, np.ndarray], meta: dict, bad: Callable[[str],
         if a.dtype != np.dtype(dtype) or a.ndim != ndim:
             raise bad(f"array {name!r} is {a.dtype}{list(a.shape)}, expected {dtype} with {ndim} dimension(s)")
     n, m = arrays["x"].shape[0], arrays["pairs"].shape[0]
-    for name, shape in {"x": (n, 3), "v": (n, 3), "anchor": (n, 3), "pairs": (m, 2), "intact": (m,), "fmax": (m,)}.items():
-        if arrays[name].shape != shape:
-            raise bad(f"array {name!r} has shape {list(arrays[name].shape)}, expected {list(shape)}")
-    for name in ("x", "v", "anchor", "fmax"):
+    for name, (shape, _) in {**BASE_FIELDS, **SPRING_FIELDS}.items():
+        want = ((n if name in BASE_FIELDS else m), *shape)
+        if arrays[name].shape != want:
+            raise bad(f"array {name!r} has shape {list(arrays[name].shape)}, expected {list(want)}")
+    for name in ("x", "v", "anchor", "anchor_dir", "born", "rest", "fmax"):
         if not np.isfinite(arrays[name]).all():
             raise bad(f"array {name!r} holds NaN or infinite values")
-    if m and (arrays["pairs"].min() < 0 or arrays["pairs"].max() >= n):
+    if m and arrays["pairs"].max() >= n:
         raise bad("a spring joins a base that does not exist")
     lengths = {k: arrays[f"breaks_{k}"].shape[0] for k in BREAKS}
     if len(set(lengths.values())) != 1:
@@ -182,12 +184,20 @@ def _check_parts(arrays: dict[str, np.ndarray], meta: dict, bad: Callable[[str],
         raise bad("the break log names springs that are not broken, or one spring twice")
     if ids.size and ids.size != m - int(np.count_nonzero(arrays["intact"])):
         raise bad(f"the break log holds {ids.size} breaks but {m - int(np.count_nonzero(arrays['intact']))} springs are broken")
-    for key in ("step_count", "ticks", "halvings", "quiet_n"):
-        if isinstance(meta[key], bool) or not isinstance(meta[key], int) or meta[key] < 0:
-            raise bad(f"its {key} is {meta[key]!r}, not a count")
-    for key in ("t", "h", "h_last"):
-        if isinstance(meta[key], bool) or not isinstance(meta[key], (int, float)) or not np.isfinite(meta[key]) or meta[key] < 0:
-            raise bad(f"its {key} is {meta[key]!r}, not a time")
+    clock = meta["clock"]
+    if not isinstance(clock, dict) or set(clock) != {"h", "levels", "ticks", "halvings"}:
+        raise bad("its clock record has the wrong shape")
+    counts = {"step_count": meta["step_count"], **{k: clock[k] for k in ("levels", "ticks", "halvings")}}
+    for key, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise bad(f"its {key} is {value!r}, not a count")
+    if clock["halvings"] > clock["levels"] or clock["levels"] > 40:
+        raise bad(f"its clock's halvings ({clock['halvings']}) and levels ({clock['levels']}) disagree")
+    for key, value in {"t": meta["t"], "h_last": meta["h_last"], "h": clock["h"]}.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+            raise bad(f"its {key} is {value!r}, not a time")
+    if not clock["h"] > 0 or meta["t"] != clock["ticks"] * (clock["h"] / (1 << clock["levels"])):
+        raise bad("its time and its clock disagree")
     try:
         gen = np.random.Generator(np.random.PCG64())
         if not isinstance(meta["rng"], dict) or meta["rng"].get("bit_generator") != "PCG64":
@@ -234,8 +244,10 @@ def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
         stop = Stop(**meta["stop"])
     except (BarkError, TypeError) as err:
         raise Damaged(f"checkpoint {str(path)!r} is damaged: its scene is not valid ({err})") from None
-    sim = scene.simulation()
-    sim.restore(arrays, meta)
+    lattice, pairs = scene.lattice, arrays["pairs"].astype(np.int64)
+    if arrays["x"].shape[0] > lattice.n_bases or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its bases and springs do not fit its scene's lattice")
+    sim = scene.simulation().restore(arrays, meta)  # built from the checkpoint's state, not the scene's lattice
     recorded: dict[str, dict[str, np.ndarray]] = {}
     for key, a in arrays.items():
         if key.startswith("rec_"):

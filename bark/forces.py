@@ -8,31 +8,26 @@ Equations from the paper ("Fracture simulation"):
 * damping (eq. 3): ``f = −b v``.
 
 Tension of a spring is ``k (|d| − l)``: positive when stretched, negative when compressed; only
-tension can break a spring.  The kernels are pure functions of arrays (no state, no Python loop over
-bases or springs), so property tests can hit them directly.
+tension can break a spring.  Each expression is written once, in :mod:`bark.physics`; the backends
+evaluate it, and :class:`ForceField` gives integrators the forces.
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import attrs
 import numpy as np
-import scipy.sparse as sp
 
+from bark import physics
 from bark._validate import in_range, non_negative, optional, positive
 from bark.errors import BarkError, Ref
 
-__all__ = [
-    "Mechanics",
-    "spring_geometry",
-    "spring_forces",
-    "anchor_forces",
-    "damping_forces",
-    "tensions",
-    "scatter",
-    "incidence",
-]
+if TYPE_CHECKING:
+    import scipy.sparse as sp
+
+__all__ = ["Mechanics", "ForceField", "spring_geometry", "incidence", "stiffness_matvec"]
 
 
 @attrs.frozen(kw_only=True)
@@ -84,56 +79,57 @@ def spring_geometry(x: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def incidence(pairs: np.ndarray, n: int) -> sp.csr_matrix:
-    """The ``(n, m)`` matrix that sums per-spring forces onto bases: ``+1`` at ``(i, s)``, ``−1`` at
-    ``(j, s)`` for spring ``s = (i, j)``.  Build it once per topology; :func:`scatter` takes it."""
+    """The ``(n, m)`` matrix that sums per-spring vectors onto bases: ``+1`` at ``(i, s)``, ``−1`` at
+    ``(j, s)`` for spring ``s = (i, j)``.  (scipy.sparse is imported here, not with the module: a
+    run on the compiled backend never needs it.)"""
+    import scipy.sparse as sp
+
     m = pairs.shape[0]
     cols = np.concatenate([np.arange(m), np.arange(m)])
     vals = np.concatenate([np.ones(m), -np.ones(m)])
-    return sp.csr_matrix((vals, (pairs.T.ravel(), cols)), shape=(n, m))
+    return sp.csr_matrix((vals, (pairs.T.astype(np.int64).ravel(), cols)), shape=(n, m))
 
 
-def scatter(pairs: np.ndarray, f: np.ndarray, n: int, inc: sp.csr_matrix | None = None) -> np.ndarray:
-    """Sum per-spring forces onto the bases: ``+f`` on end ``i``, ``−f`` on end ``j``.
+@attrs.define(eq=False)
+class ForceField:
+    """The forces on the leaf-base layer, for integrators: the material constants and the backend that
+    evaluates them (the springs' sum; anchors and damping by :func:`bark.physics.base_force`)."""
 
-    ``inc`` is :func:`incidence` of ``pairs`` (built here when not given)."""
-    return np.asarray((incidence(pairs, n) if inc is None else inc) @ f)
+    mechanics: Mechanics
+    backend: object
+    _inc: tuple | None = attrs.field(default=None, init=False, repr=False)
 
+    def elastic(self, state, x: np.ndarray | None = None) -> np.ndarray:
+        """Spring (eq. 1) and anchor (eq. 2) forces at ``x`` (default: the state's positions)."""
+        x = state.x if x is None else x
+        fs = self.backend.spring_forces(state, self.mechanics, x)
+        return np.asfortranarray(physics.base_force(fs, x, state.anchor, 0.0, self.mechanics.c, 0.0))
 
-def tensions(x: np.ndarray, pairs: np.ndarray, rest: np.ndarray, k: float) -> np.ndarray:
-    """Tension ``k (|d| − l)`` of every spring (positive = stretched)."""
-    _, length = spring_geometry(x, pairs)
-    return k * (length - rest)
+    def total(self, state, x: np.ndarray | None = None, v: np.ndarray | None = None) -> np.ndarray:
+        """All forces (eq. 4): springs, anchors and damping, at ``x`` and ``v`` (default: the state's)."""
+        x = state.x if x is None else x
+        v = state.v if v is None else v
+        fs = self.backend.spring_forces(state, self.mechanics, x)
+        mech = self.mechanics
+        return np.asfortranarray(physics.base_force(fs, x, state.anchor, v, mech.c, mech.b))
 
+    def tension(self, state) -> np.ndarray:
+        """Every spring's tension now (broken ones included; mask with ``intact``)."""
+        out = np.empty(state.n_springs)
+        self.backend.measure(state, self.mechanics, out)
+        return out
 
-def spring_forces(
-    x: np.ndarray,
-    pairs: np.ndarray,
-    rest: np.ndarray,
-    k: float,
-    active: np.ndarray | None = None,
-    inc: sp.csr_matrix | None = None,
-) -> np.ndarray:
-    """Net neighbour-spring force on every base (eq. 1); springs with ``active == False`` are skipped.
+    def incidence(self, state) -> sp.csr_matrix:
+        key = (state.n_bases, state.n_springs)
+        if self._inc is None or self._inc[0] != key:
+            self._inc = (key, incidence(state.pairs, state.n_bases))
+        return self._inc[1]
 
-    A spring of zero length exerts no force (its direction is undefined), rather than a NaN.
-    ``inc`` is the :func:`incidence` matrix of ``pairs``, if the caller keeps one.
-    """
-    d, length = spring_geometry(x, pairs)
-    scale = k * (length - rest) / np.where(length > 0.0, length, np.inf)
-    if active is not None:
-        scale *= active
-    d *= scale[:, None]
-    return scatter(pairs, d, x.shape[0], inc)
-
-
-def anchor_forces(x: np.ndarray, anchor: np.ndarray, c: float) -> np.ndarray:
-    """Zero-rest-length anchor springs (eq. 2)."""
-    return -c * (x - anchor)
-
-
-def damping_forces(v: np.ndarray, b: float) -> np.ndarray:
-    """Linear damping (eq. 3)."""
-    return -b * v
+    def stiffness(self, state, x: np.ndarray | None = None):
+        """``(matvec, diagonal)`` of the stiffness ``K = −∂F/∂x`` at ``x`` (:func:`stiffness_matvec`)."""
+        mech = self.mechanics
+        return stiffness_matvec(state.x if x is None else x, state.pairs, state.rest, mech.k, state.intact, mech.c,
+                                self.incidence(state))
 
 
 def stiffness_matvec(
@@ -158,10 +154,11 @@ def stiffness_matvec(
     w = k * np.asarray(active, dtype=float)
     wa = w * alpha
     wl = w - wa  # weight of the longitudinal part e eᵀ
+    p0, p1 = pairs[:, 0], pairs[:, 1]
 
     def matvec(p: np.ndarray) -> np.ndarray:
         p = np.asarray(p).reshape(n, 3)
-        dp = np.take(p, pairs[:, 0], axis=0) - np.take(p, pairs[:, 1], axis=0)  # p_i − p_j
+        dp = np.take(p, p0, axis=0) - np.take(p, p1, axis=0)  # p_i − p_j
         f = dp * wa[:, None] + e * (wl * np.einsum("ij,ij->i", e, dp))[:, None]
         return (np.asarray(inc @ f) + c * p).ravel()
 

@@ -79,11 +79,29 @@ class Lattice:
         z = i * self.rise + noise[1] * sigma
         return theta, z
 
+    @property
+    def n_springs(self) -> int:
+        """Number of springs of the whole lattice."""
+        return sum(max(self.n_bases - o, 0) for o in self.offsets)
+
     def pairs(self) -> np.ndarray:
-        """Spring end points as an ``(m, 2)`` integer array, ordered by offset then by base index."""
-        blocks = [
-            np.column_stack([np.arange(self.n_bases - o), np.arange(o, self.n_bases)])
-            for o in self.offsets
-            if o < self.n_bases
-        ]
-        return np.concatenate(blocks).astype(np.int64) if blocks else np.empty((0, 2), np.int64)
+        """Spring end points of the whole lattice as an ``(m, 2)`` array, ordered by offset then by base."""
+        return self.new_pairs(np.arange(self.n_bases), range(self.n_bases))
+
+    def new_pairs(self, new: np.ndarray, present) -> np.ndarray:
+        """The springs bases ``new`` (ids in lattice order) make with the bases ``present`` (a
+        container of ids: the graph of record; it includes ``new``): ``(i, i + o)`` for each offset
+        ``o`` where one end is new and both are present.  Ordered by offset, then by base — for a
+        whole lattice, ``(i, i + o)`` for i = 0, 1, ... in each offset's block."""
+        new = np.asarray(new, dtype=np.int64)
+        fresh = set(new.tolist())
+        blocks = []
+        for o in self.offsets:
+            below = new - o  # springs down to a base that is present (new or not)
+            below = below[below >= 0]
+            below = below[np.fromiter((int(j) in present for j in below), bool, below.size)]
+            above = new + o  # springs up to a base that was there before
+            above = above[np.fromiter((int(j) in present and int(j) not in fresh for j in above), bool, above.size)]
+            ends = np.concatenate([below, above - o])
+            blocks.append(np.column_stack([np.sort(ends), np.sort(ends) + o]))
+        return np.concatenate(blocks).astype(np.uint32) if blocks else np.empty((0, 2), np.uint32)

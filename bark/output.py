@@ -165,8 +165,8 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
             "last finite state: the step after it made the state NaN or infinite"
             if stop_reason == "non-finite" else "the state at the stop"
         ),
-        "dt": sim.dt,
-        "h": sim.h,
+        "dt": sim.numerics.dt,
+        "h": sim.clock.h,
         "stability_limit": sim.stability_limit,
         "t": sim.state.t,
         "steps": sim.step_count,
@@ -206,7 +206,7 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
     if scene.has("state-snapshot"):
         write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases
             out / "state.npz", compress=False,
-            x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs, rest=s.rest, fmax=s.fmax, intact=s.intact,
+            x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs.astype(np.int64), rest=s.rest, fmax=s.fmax, intact=s.intact,
             labels=sim.patch_labels(), t=np.float64(s.t),
         )
     if scene.has("graphml"):
@@ -218,16 +218,20 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
 
 def write_graphml(path: str | Path, sim) -> Path:
     """The leaf-base graph of record (intact springs) as GraphML, for networkx, Gephi, ParaView …:
-    nodes carry their initial site (theta0, z0), position now (x, y, z) and patch id; edges their
-    spring id, rest length and threshold."""
+    nodes carry their site (theta0 in (−π, π], z0), birth time, position now (x, y, z) and patch id;
+    edges their spring id, rest length and threshold (all read from the state's arrays)."""
     import networkx as nx
 
-    g = sim.graph.copy()
     s, labels = sim.state, sim.patch_labels()
-    for node, data in g.nodes(data=True):
-        data.update(x=float(s.x[node, 0]), y=float(s.x[node, 1]), z=float(s.x[node, 2]), patch=int(labels[node]))
-    for _, _, data in g.edges(data=True):
-        data.update(rest=float(s.rest[data["spring"]]), fmax=float(s.fmax[data["spring"]]))
+    theta0 = np.arctan2(s.anchor_dir[:, 1], s.anchor_dir[:, 0])
+    g = nx.Graph()
+    g.add_nodes_from((int(q), {"theta0": float(theta0[q]), "z0": float(s.anchor[q, 2]), "born": float(s.born[q]),
+                                "x": float(s.x[q, 0]), "y": float(s.x[q, 1]), "z": float(s.x[q, 2]),
+                                "patch": int(labels[q])}) for q in sim.graph.nodes)
+    spring = {tuple(p): k for k, p in enumerate(s.pairs.tolist())}
+    g.add_edges_from((i, j, {"spring": spring[(i, j)], "rest": float(s.rest[spring[(i, j)]]),
+                             "fmax": float(s.fmax[spring[(i, j)]])})
+                     for i, j in (sorted(e) for e in sim.graph.edges))
 
     def write(fh):
         nx.write_graphml(g, fh)

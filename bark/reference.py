@@ -31,21 +31,20 @@ def from_cylinder(theta: np.ndarray, z: np.ndarray, radius: float) -> np.ndarray
     return np.column_stack([radius * np.cos(theta), radius * np.sin(theta), z])
 
 
-def cylinder_rhs(state, radius: float, overdamped: bool = False):
+def cylinder_rhs(state, forces, radius: float, overdamped: bool = False):
     """Right-hand side ``y' = f(t, y)`` of the constrained dynamics of ``state``'s springs and
-    anchors on a cylinder of ``radius`` (intact springs only; nothing breaks).
+    anchors (``forces``, the simulation's ``ForceField``) on a cylinder of ``radius`` (intact springs
+    only; nothing breaks).
 
     ``y`` is ``(θ, z, θ', z')`` (massive) or ``(θ, z)`` (overdamped), each block of length n.
     """
-    from bark.forces import anchor_forces, spring_forces
-
-    mech = state.mechanics
-    pairs, rest, intact, anchor = state.pairs, state.rest, state.intact.copy(), state.anchor.copy()
+    mech = forces.mechanics
+    fixed = state.copy()  # its springs and anchors, as they are now
     n = state.n_bases
 
     def elastic(theta, z):
-        x = from_cylinder(theta, z, radius)
-        f = spring_forces(x, pairs, rest, mech.k, intact, state.incidence) + anchor_forces(x, anchor, mech.c)
+        x = np.asfortranarray(from_cylinder(theta, z, radius))
+        f = forces.elastic(fixed, x)
         e_theta = np.column_stack([-np.sin(theta), np.cos(theta)])
         return np.einsum("ij,ij->i", f[:, :2], e_theta), f[:, 2]
 
@@ -67,7 +66,7 @@ def cylinder_rhs(state, radius: float, overdamped: bool = False):
     return rhs
 
 
-def solve_reference(state, radius: float, t_end: float, overdamped: bool = False, rtol: float = 1e-10) -> np.ndarray:
+def solve_reference(state, forces, radius: float, t_end: float, overdamped: bool = False, rtol: float = 1e-10) -> np.ndarray:
     """Positions at ``t_end`` (Cartesian, n × 3) from ``state``'s positions and velocities, by
     Radau at ``rtol`` (absolute tolerance ``rtol`` × the base spacing scale)."""
     theta, z = to_cylinder(state.x)
@@ -77,7 +76,7 @@ def solve_reference(state, radius: float, t_end: float, overdamped: bool = False
         e_theta = np.column_stack([-np.sin(theta), np.cos(theta)])
         w = np.einsum("ij,ij->i", state.v[:, :2], e_theta) / radius
         y0 = np.concatenate([theta, z, w, state.v[:, 2]])
-    sol = solve_ivp(cylinder_rhs(state, radius, overdamped), (0.0, t_end), y0, method="Radau",
+    sol = solve_ivp(cylinder_rhs(state, forces, radius, overdamped), (0.0, t_end), y0, method="Radau",
                     rtol=rtol, atol=rtol * 1e-2, dense_output=False)
     if not sol.success:
         raise RuntimeError(f"reference solve failed: {sol.message}")

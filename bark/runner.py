@@ -37,7 +37,7 @@ import attrs
 from bark import checkpoint
 from bark.errors import BarkError, NonFiniteStateError
 from bark.folder import OutputFolder
-from bark.output import Frames, StatisticsSeries, write_run
+from bark.output import Frames, StatisticsSeries, run_summary, write_run
 
 __all__ = ["Outcome", "run", "resume", "STOPPED_BY_SIGNAL"]
 
@@ -52,7 +52,7 @@ class Outcome:
     """What a run left: where, the simulation at its end, why it stopped, its summary, and the
     outputs that could not be written (one line each; empty when all were)."""
 
-    out: Path
+    out: Path | None
     scene: object
     sim: object
     stop_reason: str
@@ -65,16 +65,19 @@ class Outcome:
     """Whether a picture was left undrawn because a signal stopped the drawing."""
 
 
-def run(scene, out: str | Path, *, overwrite: bool = False, checkpoint_every: float = 60.0,
+def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkpoint_every: float = 60.0,
         observe: Callable | None = None, interrupted: Callable[[], str | None] | None = None,
         pictures: dict[str, Picture] | None = None, warn: Callable[[str], None] | None = None,
         notice: Callable[[str], None] | None = None) -> Outcome:
-    """Run ``scene`` into the folder ``out`` (see the module's docstring).  ``warn`` receives what a
+    """Run ``scene`` into the folder ``out`` (see the module's docstring; ``None``: in memory only,
+    for studies and sweeps that read the outcome, not files).  ``warn`` receives what a
     user must hear (a run with no time bound, a fallback to an older checkpoint), ``notice`` what is
     merely worth saying (an earlier run's files replaced)."""
     _check_every(checkpoint_every)
     sim, stop = scene.simulation(), scene.stop()
     sim.check(stop)
+    if out is None:  # in memory: nothing written, nothing drawn, no checkpoints
+        return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None)
     with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:
         if stop.until_time is None and warn is not None:
             conds = [f"radius {stop.until_radius:g}" if stop.until_radius is not None else None,
@@ -156,7 +159,7 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
         why = interrupted() if interrupted is not None else None
         if why is not None:
             s.stop_reason = why
-        elif keep and checkpoint_every and time.perf_counter() - last_save >= checkpoint_every:
+        elif keep and out is not None and checkpoint_every and time.perf_counter() - last_save >= checkpoint_every:
             wall = wall_before + time.perf_counter() - t0
             checkpoint.save(out, sim, scene, stop, "periodic", {"stop_reason": None, "wall_time_s": wall}, recorders)
             last_save = time.perf_counter()
@@ -170,8 +173,13 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
                    pictures)
 
 
-def _finish(scene, sim, stop, out: Path, recorders: list, reason: str, wall: float, resumed: bool, error,
+def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wall: float, resumed: bool, error,
             pictures, save: bool = True) -> Outcome:
+    if out is None:
+        for rec in recorders:
+            rec.record(sim)
+        summary = run_summary(sim, scene, sim.analyze(), reason, wall)
+        return Outcome(out=None, scene=scene, sim=sim, stop_reason=reason, summary=summary, error=error)
     (out / "summary.json").unlink(missing_ok=True)  # stale from here on: written again last
     if save and scene.has("checkpoints"):
         why = "interrupted" if reason in STOPPED_BY_SIGNAL else "end"

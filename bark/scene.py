@@ -28,54 +28,44 @@ import attrs
 import numpy as np
 
 from bark import effects, registry
-from bark._validate import MISSING, construct, in_range, int_in, one_of, optional, positive, positive_int
+from bark._validate import construct, positive
 from bark.errors import BarkError, Ref
 from bark.forces import Mechanics
-from bark.kernels import BACKENDS
 from bark.lattice import Lattice
-from bark.simulation import DEFAULT_DT, DEFAULT_OVERSHOOT_TOL, DEFAULT_STEPPING, Simulation, Stop
+from bark.simulation import Simulation, Stop
+from bark.stepping import Numerics
 
 __all__ = ["RunSettings", "Scene", "STRATEGY_SECTIONS", "DEFAULT_STRATEGIES"]
 
 
-@attrs.frozen(kw_only=True)
-class RunSettings:
-    """How a run is stepped and when it stops."""
+DEFAULT_STOP = {"until_time": 1000.0, "until_patches": 110}
+"""A scene's stop conditions when it gives none (the paper's Fig. 7A stops at 110 patches)."""
+RUN_FIELDS: dict[str, tuple[type, attrs.Attribute]] = {
+    a.name: (cls, a)
+    for cls, names in ((Numerics, None), (Stop, None), (Simulation, ("seed", "degenerate_fraction", "on_degenerate")))
+    for a in attrs.fields(cls) if a.init and (names is None or a.name in names)
+}
+"""The keys of a scene's ``[run]`` table: each the field of the class that declares it (its
+validator, default and docstring are that class's; only the stop conditions' defaults are the
+scene's, ``DEFAULT_STOP``)."""
 
-    dt: float = attrs.field(default=DEFAULT_DT, validator=positive)
-    """Time step, time units (1 = 88.5 days); with adaptive stepping the largest one.  The paper
-    used a fixed 0.01 (21 h): dt 0.01 with fixed stepping reproduces it."""
-    seed: int = attrs.field(default=0, validator=int_in(0, 2**63 - 1))
-    """Seed of the one random generator: same seed → identical run."""
-    until_time: float | None = attrs.field(default=1000.0, validator=optional(positive))
-    """Stop at this simulated time (time units; 1 = 88.5 days)."""
-    until_radius: float | None = attrs.field(default=None, validator=optional(positive))
-    """Stop when the mean trunk radius reaches this (length units; 1 = 0.3 m)."""
-    until_patches: int | None = attrs.field(default=110, validator=optional(positive_int))
-    """Stop when this many patches of ≥ min_patch_size bases exist (paper, Fig. 7A: 110)."""
-    min_patch_size: int = attrs.field(default=7, validator=positive_int)
-    """Smallest patch that counts, for the stop condition."""
-    degenerate_fraction: float = attrs.field(default=0.1, validator=in_range(0.0, 1.0, lo_open=True))
-    """A step breaking more than this share of all springs is reported as degenerate."""
-    on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
-    """``warn``: record the event and go on; ``stop``: end the run there."""
-    stepping: str = attrs.field(default=DEFAULT_STEPPING, validator=one_of("fixed", "auto", "adaptive"))
-    """``fixed``: refuse a dt above the integrator's stability limit; ``auto``: split it into
-    sub-steps; ``adaptive``: also halve steps around breaks to keep overshoot below overshoot_tol."""
-    overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
-    """Adaptive stepping: largest relative overshoot tension/fmax − 1 allowed at a break."""
-    max_halvings: int = attrs.field(default=10, validator=int_in(1, 40))
-    """Adaptive stepping: the smallest step is the full step / 2**max_halvings (at most 40)."""
-    backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
-    """Compute backend: ``numpy``, ``numba``, or ``auto`` (numba if installed, else numpy)."""
+
+class RunSettings(attrs.make_class(
+        "RunFields", {name: attrs.field(default=DEFAULT_STOP.get(name, a.default), validator=a.validator, kw_only=True)
+                      for name, (_, a) in RUN_FIELDS.items()}, frozen=True)):
+    """A scene's ``[run]`` table: how a run is stepped (:class:`~bark.stepping.Numerics`), when it stops
+    (:class:`~bark.simulation.Stop`), its seed and degenerate-event handling (:class:`Simulation`)."""
+
+    __slots__ = ()
+
+    def _part(self, cls) -> dict[str, Any]:
+        return {name: getattr(self, name) for name, (owner, _) in RUN_FIELDS.items() if owner is cls}
+
+    def numerics(self) -> Numerics:
+        return Numerics(**self._part(Numerics))
 
     def stop(self) -> Stop:
-        return Stop(
-            until_time=self.until_time,
-            until_radius=self.until_radius,
-            until_patches=self.until_patches,
-            min_patch_size=self.min_patch_size,
-        )
+        return Stop(**self._part(Stop))
 
 
 STOP_KEYS = ("until_time", "until_radius", "until_patches")
@@ -245,8 +235,7 @@ class Scene:
                 tables["run"].setdefault(k, None)
         parts = {s: _build(s, c, tables[s]) for s, c in PARAM_SECTIONS.items()}
         run = parts["run"]
-        if run.until_time is None and run.until_radius is None and run.until_patches is None:
-            raise BarkError("no stop condition: give {0}, {1} or {2}", *(Ref("run", k, MISSING) for k in STOP_KEYS))
+        _place("run", run.stop)  # at least one stop condition (Stop says so)
         eff = _build("effects", EffectSettings, dict(data.get("effects", {})))
         wanted = eff.want
         if wanted is None:  # no list: the default outputs, and the model the scene configures
@@ -302,14 +291,8 @@ class Scene:
             breakers=[self.strategies["breaker"]] if "fracture" in has else [],
             analyzers=[self.strategies["analyzer"]] if "patch-statistics" in has else [],
             record_breaks="break-log" in has,
-            dt=self.run.dt,
-            seed=self.run.seed,
-            degenerate_fraction=self.run.degenerate_fraction,
-            on_degenerate=self.run.on_degenerate,
-            stepping=self.run.stepping,
-            overshoot_tol=self.run.overshoot_tol,
-            max_halvings=self.run.max_halvings,
-            backend=self.run.backend,
+            numerics=self.run.numerics(),
+            **self.run._part(Simulation),
         )
 
     def memory_estimate(self) -> int:
@@ -338,7 +321,7 @@ class Scene:
         """Every setting, resolved (defaults filled in): the same shape as a scene file."""
         out: dict[str, Any] = {"scene": {"name": self.name, "description": self.description}}
         for section in PARAM_SECTIONS:
-            out[section] = attrs.asdict(getattr(self, section))
+            out[section] = {k: v for k, v in attrs.asdict(getattr(self, section)).items()}
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **_plain(strategy.params())}
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every}

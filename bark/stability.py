@@ -13,22 +13,22 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
-
-from bark.forces import stiffness_matvec
 
 __all__ = ["lambda_max", "explicit_h_max", "euler_cromer_h_max"]
 
 
-def lambda_max(state, method: str = "lanczos") -> float:
-    """Largest eigenvalue of the stiffness ``K`` of ``state`` (intact springs + anchors)."""
-    mech = state.mechanics
+def lambda_max(state, forces, method: str = "lanczos") -> float:
+    """Largest eigenvalue of the stiffness ``K`` of ``state`` (intact springs + anchors); ``forces``
+    is the simulation's ``ForceField``."""
+    mech = forces.mechanics
     if method == "gershgorin":
         degree = np.bincount(state.pairs[state.intact].ravel(), minlength=state.n_bases)
         return mech.c + 2.0 * mech.k * float(degree.max(initial=0))
     if method != "lanczos":
         raise ValueError(f"method = {method!r}: must be one of gershgorin, lanczos")
-    matvec, _ = stiffness_matvec(state.x, state.pairs, state.rest, mech.k, state.intact, mech.c, state.incidence)
+    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigsh
+
+    matvec, _ = forces.stiffness(state)
     size = 3 * state.n_bases
     op = LinearOperator((size, size), matvec=matvec, dtype=float)
     # a fixed pseudo-random start: deterministic, and (unlike a constant vector, which the anchors'
@@ -37,7 +37,7 @@ def lambda_max(state, method: str = "lanczos") -> float:
     try:
         top = eigsh(op, k=1, which="LA", v0=v0, tol=1e-8, maxiter=5000, return_eigenvectors=False)
     except (ArpackNoConvergence, ArpackError):
-        return lambda_max(state, "gershgorin")
+        return lambda_max(state, forces, "gershgorin")
     return float(top[0]) * (1.0 + 1e-6)  # the tolerance, on the safe side
 
 
@@ -49,7 +49,7 @@ def explicit_h_max(beta: float, omega2: float) -> float:
     return 4.0 / (math.sqrt(beta * beta + 4.0 * omega2) + beta)
 
 
-def euler_cromer_h_max(state, method: str = "lanczos") -> float:
+def euler_cromer_h_max(state, forces, method: str = "lanczos") -> float:
     """Largest stable Euler–Cromer step for ``state`` (docs/numerics.md)."""
-    m = state.mechanics.m
-    return explicit_h_max(state.mechanics.b / m, lambda_max(state, method) / m)
+    m = forces.mechanics.m
+    return explicit_h_max(forces.mechanics.b / m, lambda_max(state, forces, method) / m)

@@ -1,32 +1,44 @@
-"""The mechanical state the hot loop works on: arrays mirrored from the leaf-base graph.
+"""The mechanical state: arrays and time, nothing else (picklable; no backend, no buffers).
 
-The networkx graph held by :class:`bark.simulation.Simulation` is the topology of record (which
-bases exist, which springs are intact).  :class:`State` mirrors it as flat arrays so that one step is
-a handful of vectorised numpy operations.  Only ``Simulation.break_springs`` changes ``intact``,
-and it changes the graph in the same call, so the two never drift.
+The networkx graph held by :class:`bark.simulation.Simulation` is the topology of record (which bases
+exist, which springs are intact); :class:`State` mirrors it as flat arrays for the hot loop.  Only
+``Simulation.break_springs`` and ``Simulation.join`` change the topology, in both at once.
+
+**Fields are declared once** (after LAMMPS's atom styles): ``BASE_FIELDS`` and ``SPRING_FIELDS``
+list every per-base and per-spring array with its shape and type; growing, copying, checkpointing
+and restoring all walk these lists, so a new per-base quantity is one line.  Arrays are allocated
+with spare capacity and doubled when full, so bases and springs that join during a run cost no copy
+per addition; the public arrays are views of the first ``n_bases`` (``n_springs``) rows.
 
 Coordinates: Cartesian ``(x, y, z)`` with the trunk axis along ``z`` through the origin; a base at
-angle θ sits at ``(r cos θ, r sin θ, z)``.
-
-Layout: the per-base arrays (``x``, ``v``, ``anchor``, ``anchor_dir``) are ``(n, 3)`` (or ``(n, 2)``)
-arrays stored column by column (Fortran order), so that each coordinate is one contiguous vector:
-the compiled loops over the bases then run in SIMD lanes, and numpy's column operations are faster
-too (both measured with ``bark bench speed``).  Indexing is the same as for any ``(n, 3)`` array;
-assigning a C-ordered array to these fields converts it.
+angle θ sits at ``(r cos θ, r sin θ, z)``.  Per-base arrays are stored column by column (Fortran
+order), so each coordinate is one contiguous vector: the compiled loops over the bases run in SIMD
+lanes, and numpy's column operations are faster too.
 """
 
 from __future__ import annotations
 
-from types import ModuleType
+from typing import Any
 
 import attrs
 import numpy as np
 
-import scipy.sparse as sp
+__all__ = ["State", "BASE_FIELDS", "SPRING_FIELDS", "cylinder_points", "unit_xy"]
 
-from bark.forces import Mechanics, damping_forces, incidence
-
-__all__ = ["State", "project_to_surface", "cylinder_points", "columns"]
+BASE_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
+    "x": ((3,), "float64"),           # position
+    "v": ((3,), "float64"),           # velocity
+    "anchor": ((3,), "float64"),      # anchor point: (r(t, z0)·anchor_dir, z0), moved with the surface
+    "anchor_dir": ((2,), "float64"),  # unit horizontal direction of the base's site: fixed for good
+    "born": ((), "float64"),          # time the base joined the mechanics
+}
+SPRING_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
+    "pairs": ((2,), "uint32"),        # the two bases (i, j); d = x_j − x_i
+    "rest": ((), "float64"),          # rest length, taken when the spring was made
+    "fmax": ((), "float64"),          # breaking threshold, per spring (never per base)
+    "intact": ((), "bool"),           # changed only by Simulation.break_springs
+}
+MIN_CAPACITY = 64
 
 
 def cylinder_points(theta: np.ndarray, z: np.ndarray, radius) -> np.ndarray:
@@ -34,113 +46,132 @@ def cylinder_points(theta: np.ndarray, z: np.ndarray, radius) -> np.ndarray:
     return np.column_stack([radius * np.cos(theta), radius * np.sin(theta), z])
 
 
-def project_to_surface(points: np.ndarray, radius, velocities: np.ndarray | None = None) -> None:
-    """Surface constraint (eq. 9), in place: move each point radially onto the trunk surface.
-
-    ``radius`` is the trunk radius at each point's height (a scalar or one value per point).  When
-    ``velocities`` is given, their radial component is removed as well: a base constrained to the
-    surface has no velocity through it, and a radial velocity left in place would leak into the
-    tangential motion as the base moves round the trunk.
-    """
-    xy = points[:, :2]
-    radius = np.asarray(radius, dtype=float)
-    xy *= (radius / np.sqrt(np.einsum("ij,ij->i", xy, xy)))[:, None]
-    if velocities is not None:
-        vxy = velocities[:, :2]
-        vxy -= (np.einsum("ij,ij->i", vxy, xy) / (radius * radius))[:, None] * xy
-
-
-def _unit_xy(points: np.ndarray) -> np.ndarray:
+def unit_xy(points: np.ndarray) -> np.ndarray:
+    """Unit horizontal directions of ``points`` (``(1, 0)`` for a point on the axis)."""
     rho = np.hypot(points[:, 0], points[:, 1])
     safe = np.where(rho > 0.0, rho, 1.0)
     return np.where((rho > 0.0)[:, None], points[:, :2] / safe[:, None], [1.0, 0.0])
 
 
-def columns(a) -> np.ndarray:
-    """``a`` as a float array stored column by column (a view when it already is one)."""
-    return np.asfortranarray(a, dtype=float)
+def _alloc(capacity: int, shape: tuple[int, ...], dtype: str) -> np.ndarray:
+    return np.zeros((capacity, *shape), dtype=dtype, order="F")
 
 
-def _default_kernels() -> ModuleType:
-    from bark.kernels import load
+def _field(name: str, doc: str) -> property:
+    """A field's active rows (a view); assigning to it writes into them (``state.x += dx`` works)."""
 
-    return load("numpy")
+    def set_rows(self, value) -> None:
+        self._view(name)[...] = value
+
+    return property(lambda self: self._view(name), set_rows, doc=doc)
 
 
-@attrs.define(eq=False, kw_only=True)
+@attrs.define(eq=False)
 class State:
     """Positions, velocities and springs of the leaf-base layer at time ``t``.
 
-    Integrators change ``x`` and ``v`` (and only those); the simulation changes ``t``, projects onto
-    the surface and breaks springs.
+    ``x``, ``v``, ``anchor``, ``anchor_dir``, ``born`` (per base) and ``pairs``, ``rest``, ``fmax``,
+    ``intact`` (per spring) are views of the active rows; assigning into them (``state.x[:] = ...``)
+    writes the state.  Integrators change ``x`` and ``v``; the simulation changes ``t``, applies the
+    surface constraint, breaks springs and adds bases.
     """
 
-    x: np.ndarray = attrs.field(converter=columns)
-    """Positions of the bases, shape ``(n, 3)``."""
-    v: np.ndarray = attrs.field(converter=columns)
-    """Velocities of the bases, shape ``(n, 3)``."""
-    anchor: np.ndarray = attrs.field(converter=columns)
-    """Anchor points (each base's original site, moved with the trunk surface), ``(n, 3)``.
-    Anchors move only radially: ``anchor = (r(t, z0)·anchor_dir, z0)``, a function of t alone."""
-    anchor_dir: np.ndarray = attrs.field(
-        default=attrs.Factory(lambda self: _unit_xy(self.anchor), takes_self=True), converter=columns
-    )
-    """Unit horizontal direction of each anchor, ``(n, 2)``: fixed for the whole run (default: the
-    directions of ``anchor``)."""
-    pairs: np.ndarray
-    """Spring end points ``(i, j)``, shape ``(m, 2)``; row number = spring id."""
-    rest: np.ndarray
-    """Rest length of every spring, ``(m,)``."""
-    fmax: np.ndarray
-    """Breaking threshold of every spring (force units), ``(m,)``."""
-    intact: np.ndarray
-    """Whether each spring is still intact, ``(m,)`` bool.  Changed only by ``Simulation.break_springs``."""
-    mechanics: Mechanics
-    """Material constants (k, c, b, m)."""
+    n_bases: int = 0
+    n_springs: int = 0
     t: float = 0.0
     """Simulated time."""
     h: float = 0.0
-    """Length of the step that led to this state (set by the simulation; rate-based breakers use it)."""
-    kernels: ModuleType = attrs.field(factory=lambda: _default_kernels(), repr=False)
-    """The compute backend (a module of ``bark.kernels``); the simulation sets it."""
-    scratch: dict = attrs.field(factory=dict, init=False, repr=False)
-    """Work buffers a backend keeps between steps (derived; never part of the state proper)."""
-    _inc: tuple[np.ndarray, sp.csr_matrix] | None = attrs.field(default=None, init=False, repr=False)
+    """Length of the step that led to this state (rate-based breakers use it)."""
+    _store: dict[str, np.ndarray] = attrs.field(factory=dict, repr=False)
+
+    @classmethod
+    def empty(cls, bases: int = MIN_CAPACITY, springs: int = MIN_CAPACITY) -> "State":
+        """A state with no bases or springs yet, with room for ``bases`` and ``springs``."""
+        state = cls()
+        state._store = {name: _alloc(max(bases, 1), shape, dt) for name, (shape, dt) in BASE_FIELDS.items()}
+        state._store.update({name: _alloc(max(springs, 1), shape, dt) for name, (shape, dt) in SPRING_FIELDS.items()})
+        return state
+
+    # -- the arrays ----------------------------------------------------------------------------
+
+    def _view(self, name: str) -> np.ndarray:
+        n = self.n_bases if name in BASE_FIELDS else self.n_springs
+        return self._store[name][:n]
+
+    x = _field("x", "Positions of the bases, ``(n, 3)``.")
+    v = _field("v", "Velocities of the bases, ``(n, 3)``.")
+    anchor = _field("anchor", "Anchor points, ``(n, 3)``; a function of t alone.")
+    anchor_dir = _field("anchor_dir", "Unit horizontal direction of each site, ``(n, 2)``.")
+    born = _field("born", "Time each base joined, ``(n,)``.")
+    pairs = _field("pairs", "Spring ends ``(i, j)``, ``(m, 2)``; row = spring id.")
+    rest = _field("rest", "Rest length of every spring, ``(m,)``.")
+    fmax = _field("fmax", "Breaking threshold of every spring, ``(m,)``.")
+    intact = _field("intact", "Whether each spring is intact, ``(m,)`` bool.")
 
     @property
-    def incidence(self) -> sp.csr_matrix:
-        """Spring-to-base incidence of ``pairs`` (derived, rebuilt whenever ``pairs`` is replaced)."""
-        if self._inc is None or self._inc[0] is not self.pairs:
-            self._inc = (self.pairs, incidence(self.pairs, self.n_bases))
-        return self._inc[1]
+    def capacity(self) -> tuple[int, int]:
+        """Rows allocated for bases and springs (``n_bases`` and ``n_springs`` of them in use)."""
+        return self._store["x"].shape[0], self._store["pairs"].shape[0]
 
-    @property
-    def n_bases(self) -> int:
-        return self.x.shape[0]
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every field's active rows, by name (views)."""
+        return {name: self._view(name) for name in (*BASE_FIELDS, *SPRING_FIELDS)}
 
-    @property
-    def n_springs(self) -> int:
-        return self.pairs.shape[0]
+    # -- growing --------------------------------------------------------------------------------
 
-    def forces(self, x: np.ndarray | None = None, v: np.ndarray | None = None) -> np.ndarray:
-        """Total force on every base (eq. 4): intact neighbour springs + anchors + damping.
+    def _reserve(self, fields: dict, count: int, needed: int) -> None:
+        capacity = self._store[next(iter(fields))].shape[0]
+        if needed <= capacity:
+            return
+        size = max(needed, 2 * capacity, MIN_CAPACITY)
+        for name, (shape, dtype) in fields.items():
+            grown = _alloc(size, shape, dtype)
+            grown[:count] = self._store[name][:count]
+            self._store[name] = grown
 
-        ``x`` and ``v`` default to the state's own; integrators may evaluate at trial points.
-        """
-        f = self.elastic_forces(x)
-        if self.mechanics.b:
-            f += damping_forces(self.v if v is None else v, self.mechanics.b)
-        return f
+    def add_bases(self, **values: np.ndarray) -> np.ndarray:
+        """Append bases with the given fields (every one of ``BASE_FIELDS``); returns their ids."""
+        return self._append(BASE_FIELDS, "n_bases", values)
 
-    def elastic_forces(self, x: np.ndarray | None = None) -> np.ndarray:
-        """Spring and anchor forces only (no damping), at ``x`` (default: the state's own)."""
-        return self.kernels.elastic_forces(self, self.x if x is None else x)
+    def add_springs(self, **values: np.ndarray) -> np.ndarray:
+        """Append springs with the given fields (every one of ``SPRING_FIELDS``); returns their ids."""
+        return self._append(SPRING_FIELDS, "n_springs", values)
 
-    def tension(self) -> np.ndarray:
-        """Tension of every spring at the current positions (broken ones included; mask with ``intact``)."""
-        out = np.empty(self.n_springs)
-        self.kernels.measure(self, out)
-        return out
+    def _append(self, fields: dict, counter: str, values: dict[str, Any]) -> np.ndarray:
+        if set(values) != set(fields):
+            raise ValueError(f"give exactly {sorted(fields)}, not {sorted(values)}")
+        count = getattr(self, counter)
+        added = len(np.atleast_1d(values[next(iter(fields))]))
+        self._reserve(fields, count, count + added)
+        for name, value in values.items():
+            shape = fields[name][0]
+            self._store[name][count:count + added] = np.reshape(value, (added, *shape))
+        setattr(self, counter, count + added)
+        return np.arange(count, count + added)
+
+    # -- whole states ---------------------------------------------------------------------------
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], t: float = 0.0, h: float = 0.0) -> "State":
+        """A state holding copies of ``arrays`` (every field), e.g. from a checkpoint."""
+        n, m = len(arrays["x"]), len(arrays["pairs"])
+        state = cls.empty(n, m)
+        state.add_bases(**{k: arrays[k] for k in BASE_FIELDS})
+        state.add_springs(**{k: arrays[k] for k in SPRING_FIELDS})
+        state.t, state.h = float(t), float(h)
+        return state
+
+    def copy(self) -> "State":
+        return State.from_arrays(self.arrays(), self.t, self.h)
+
+    def __getstate__(self) -> dict:
+        """Pickles the active rows only (spare capacity is not data)."""
+        return {"arrays": {k: np.array(v) for k, v in self.arrays().items()}, "t": self.t, "h": self.h}
+
+    def __setstate__(self, data: dict) -> None:
+        restored = State.from_arrays(data["arrays"], data["t"], data["h"])
+        for a in attrs.fields(State):
+            object.__setattr__(self, a.name, getattr(restored, a.name))
 
     def is_finite(self) -> bool:
         return bool(np.isfinite(self.x).all() and np.isfinite(self.v).all())

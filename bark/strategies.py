@@ -6,28 +6,45 @@ it with ``@attrs.frozen(kw_only=True)``, declare every parameter as a validated 
 (``bark.growth``, ``bark.integrator``, ``bark.breaker``, ``bark.analyzer``).  The built-in strategies
 in ``bark_plugins`` are registered the same way.
 
-=============  ==============================  =======================================================
-kind           verb                            contract
-=============  ==============================  =======================================================
-Growth         ``radius(t, z) -> r``           trunk radius at time ``t`` for heights ``z`` (array, or
-                                               a scalar that broadcasts).  Pure: no state, no rng.
-Integrator     ``step(state, dt) -> None``     advance ``state.x`` and ``state.v`` by ``dt`` in place
-                                               using ``state.forces(x, v)``.  Touches nothing else: the
-                                               simulation advances ``t``, applies the surface
-                                               constraint and breaks springs.  Explicit methods also
-                                               override ``stability_limit(state)`` (largest stable dt).
-Breaker        ``select(state, tension, rng)`` ids (int array) of *intact* springs to break now.
-               ``-> ids``                      Must not change anything; ``rng`` is the simulation's
-                                               one seeded generator (draw from it only).
-Analyzer       ``analyze(points, patches)``    statistics of a pattern, returned as an
-               ``-> Analysis``                 :class:`Analysis` (summary dict + tables).  Reads only.
-=============  ==============================  =======================================================
+=============  ====================================  =================================================
+kind           verb                                  contract
+=============  ====================================  =================================================
+Growth         ``radius(t, z) -> r``                 trunk radius at time ``t`` for heights ``z`` (an
+                                                     array, or a scalar that broadcasts).  Pure.
+Integrator     ``step(state, dt, forces) -> None``   advance ``state.x`` and ``state.v`` by ``dt`` in
+                                                     place, with ``forces`` (a ``ForceField``).
+                                                     Touches nothing else: the simulation advances
+                                                     ``t``, applies the surface constraint and breaks
+                                                     springs.  Explicit methods also give
+                                                     ``stability_limit(state, forces)``.
+Breaker        ``select(state, tension, rng)``       ids (int array) of *intact* springs to break now.
+               ``-> ids``                            Changes nothing; draws from ``rng`` only.
+Analyzer       ``analyze(points, patches)``          statistics of a pattern, as an :class:`Analysis`.
+               ``-> Analysis``
+=============  ====================================  =================================================
+
+**Compiled forms: capabilities a strategy declares.**  A strategy whose work fits a pure,
+elementwise function may declare it; the engine then runs it inside its stepping kernel (compiled
+and inlined by the numba backend, on whole arrays by the numpy backend) instead of calling the
+strategy in Python once per step.  The function is the definition: the verb is derived from it.
+
+* ``Integrator.update(x, v, f, hm, h) -> (x, v)``: one axis of one base, ``hm = h/m`` (Euler–Cromer:
+  ``v ← v + f·hm; x ← x + v·h``).  ``step`` then follows from it.
+* ``Breaker.rule(tension, fmax) -> bool``: whether an intact spring breaks.  ``select`` then follows
+  from it.  A subclass that writes ``select`` again loses the inherited rule (and ``overload_only``)
+  unless it states them again: a compiled rule and a Python ``select`` can never disagree.
+* ``Growth.compiled(t, z, params) -> r`` with ``compiled_params()``, and ``uniform = True`` when
+  the radius does not depend on height; ``radius(t, z)`` then follows from it.
+
+The functions must be importable by name (module-level functions or static methods) to be cached
+on disk; others are compiled once per process.  Written with numpy ufuncs (``np.sqrt``), one
+function serves arrays and scalars alike.
 """
 
 from __future__ import annotations
 
 import abc
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
 import attrs
 import numpy as np
@@ -35,11 +52,43 @@ import numpy as np
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS"]
 
 
+_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "update": None, "rule": None, "overload_only": False}
+
+
+def _form_owner(strategy, form: str) -> type | None:
+    """The nearest class of ``strategy`` (itself first) that gives the compiled ``form``.  A verb
+    derived from a compiled form uses this, so that ``super().select(...)`` in a subclass that wrote
+    ``select`` again (and so lost the rule as its own) still means the parent's rule."""
+    return next((k for k in type(strategy).__mro__ if k.__dict__.get(form) is not None), None)
+
+
+def _form(strategy, form: str):
+    owner = _form_owner(strategy, form)
+    if owner is None:
+        raise NotImplementedError(f"{type(strategy).__name__} writes neither its verb nor a compiled form ({form})")
+    value = owner.__dict__[form]
+    return value.__get__(strategy, type(strategy)) if hasattr(value, "__get__") else value
+
+
 @attrs.frozen(kw_only=True)
 class Strategy(abc.ABC):
-    """Common base: parameters are attrs fields, so ``attrs.evolve(s, G=0.01)`` makes a variant."""
+    """Common base: parameters are attrs fields, so ``attrs.evolve(s, G=0.01)`` makes a variant.
+
+    A compiled form is the definition only for the verb it came with: a subclass that writes the
+    verb again (``select``, ``step``, ``radius``) and not the compiled form loses the inherited one,
+    so the engine never runs a rule its Python verb no longer follows.  (Likewise a breaker's
+    ``overload_only`` promise.)"""
 
     kind: ClassVar[str] = ""
+    _verb_and_form: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        verb, *forms = cls._verb_and_form or ("", )
+        if verb and verb in vars(cls):
+            for form in forms:
+                if form not in vars(cls):
+                    setattr(cls, form, _FORM_DEFAULTS[form])
 
     def params(self) -> dict[str, Any]:
         """Constructor keywords of this strategy, as given (for summaries and sweeps)."""
@@ -51,15 +100,25 @@ class Growth(Strategy):
     """Secondary growth: how the trunk radius changes with time (and, for bulges, with height)."""
 
     kind: ClassVar[str] = "growth"
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform")
+    compiled: ClassVar[Callable | None] = None
+    """Compiled form ``compiled(t, z, params) -> r`` (see the module's docstring), or ``None``."""
+    uniform: ClassVar[bool] = False
+    """Whether the radius is the same at every height (evaluated once per step, not per base)."""
 
-    @abc.abstractmethod
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
-        """Trunk radius at time ``t`` at heights ``z``."""
+        """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""
+        compiled, owner = _form(self, "compiled"), _form_owner(self, "compiled")
+        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, self.compiled_params())
+
+    def compiled_params(self) -> np.ndarray:
+        """The ``params`` array of the compiled form."""
+        return np.empty(0)
 
     def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
-        """Breaking thresholds of springs whose midpoints are at heights ``z`` (called once, when the
-        simulation is built).  The default leaves them as they are; a law with regions of their own
-        material (bulges) overrides it."""
+        """Breaking thresholds of springs whose midpoints are at heights ``z`` (called when springs
+        are made).  The default leaves them as they are; a law with regions of their own material
+        (bulges) overrides it."""
         return fmax
 
 
@@ -68,15 +127,19 @@ class Integrator(Strategy):
     """Time integration of the equations of motion (eqs. 5–8)."""
 
     kind: ClassVar[str] = "integrator"
-    quiet_kernel: ClassVar[str | None] = None
-    """Name of a backend function that takes many steps of this method in one compiled call (see
-    ``Simulation.advance``); ``None`` (the default) means one ``step`` per call, always correct."""
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("step", "update")
+    update: ClassVar[Callable | None] = None
+    """Compiled form ``update(x, v, f, hm, h) -> (x, v)`` (see the module's docstring), or ``None``."""
 
-    @abc.abstractmethod
-    def step(self, state, dt: float) -> None:
-        """Advance ``state.x`` and ``state.v`` by ``dt`` in place."""
+    def step(self, state, dt: float, forces) -> None:
+        """Advance ``state.x`` and ``state.v`` by ``dt`` in place (from the compiled form, when there is one)."""
+        update = _form(self, "update")
+        f = forces.total(state)
+        for axis in range(3):
+            state.x[:, axis], state.v[:, axis] = update(state.x[:, axis], state.v[:, axis], f[:, axis],
+                                                        dt / forces.mechanics.m, dt)
 
-    def stability_limit(self, state) -> float:
+    def stability_limit(self, state, forces) -> float:
         """Largest ``dt`` for which this method is stable on ``state``; ``inf`` if unconditionally stable.
 
         The simulation refuses (or, with automatic stepping, sub-steps) a ``dt`` above it."""
@@ -88,19 +151,18 @@ class Breaker(Strategy):
     """Which intact springs break now."""
 
     kind: ClassVar[str] = "breaker"
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("select", "rule", "overload_only")
+    rule: ClassVar[Callable | None] = None
+    """Compiled form ``rule(tension, fmax) -> bool`` (see the module's docstring), or ``None``."""
     overload_only: ClassVar[bool] = False
-    """Set ``True`` if ``select`` only ever picks springs whose tension exceeds their ``fmax``: the
-    simulation then skips the call while no intact spring is over its threshold."""
-    kernel_rule: ClassVar[str | None] = None
-    """Name of a compiled rule that picks exactly what ``select`` picks, so that a compiled kernel
-    may break springs itself and keep stepping (``Simulation.advance``).  The one rule the kernels
-    know is ``"over-threshold"``: every intact spring whose tension exceeds its ``fmax``.  It is
-    trusted only when the class that names it also defines ``select``: a subclass that overrides
-    ``select`` without naming a rule again gets ``select`` called, as every other breaker does."""
+    """Set ``True`` beside a ``select`` that only ever picks springs whose tension exceeds their
+    ``fmax``: the simulation then asks it only after a step that overloads a spring.  The promise
+    belongs to the ``select`` it is made with: a subclass that writes ``select`` again and does not
+    make the promise again does not have it."""
 
-    @abc.abstractmethod
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Ids of intact springs to break, given every spring's current ``tension``."""
+        return np.flatnonzero(state.intact & _form(self, "rule")(tension, state.fmax))
 
 
 @attrs.frozen(kw_only=True)

@@ -88,7 +88,7 @@ class Every(Trigger):
         return False
 
     def fires(self, sim) -> bool:
-        eps = 1e-9 * sim.h
+        eps = 1e-9 * sim.clock.h
         if sim.state.t < self._due() - eps:
             return False
         # once per crossing, even if a step jumped over several due times
@@ -108,7 +108,7 @@ class At(Trigger):
         return False
 
     def fires(self, sim) -> bool:
-        eps = 1e-9 * sim.h
+        eps = 1e-9 * sim.clock.h
         fired = False
         while self._i < len(self.times) and sim.state.t >= self.times[self._i] - eps:
             self._i += 1

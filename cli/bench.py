@@ -170,7 +170,7 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
     # before any work: the scene, the reference's step (below the stability limit) and the folder
     reference = merge(scene, {"integrator": {"name": "euler-cromer"},
                               "run": {"dt": reference_dt, "stepping": "fixed", "until_time": until_time}})
-    Scene.from_dict(reference).simulation()
+    Scene.from_dict(reference).simulation().build()
     out = writable_folder(out)
     position_methods, pattern_methods = _accuracy_methods(quick)
     log = (lambda m: console.print(f"[dim]{m}[/dim]"))

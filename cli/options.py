@@ -27,7 +27,7 @@ import click
 from bark.errors import Ref, show
 from bark.forces import Mechanics
 from bark.lattice import Lattice
-from bark.scene import STRATEGY_SECTIONS, RunSettings
+from bark.scene import RUN_FIELDS, STRATEGY_SECTIONS, RunSettings
 
 SECTIONS = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings}
 SHORTCUTS = {("growth", "r0"): "--r0", ("growth", "G"): "-G", (None, "out"): "--out", (None, "resume"): "--resume",
@@ -101,13 +101,13 @@ def _in_option_terms(doc: str, cls: type) -> str:
 class FieldOption(click.Option):
     """An option for one field of a parameter class; its help is the field's docstring, read lazily."""
 
-    def __init__(self, *args, field_cls: type, field: attrs.Attribute, **kwargs):
+    def __init__(self, *args, field_cls: type, field: attrs.Attribute, scene_default, **kwargs):
         super().__init__(*args, **kwargs)
-        self.field_cls, self.field = field_cls, field
+        self.field_cls, self.field, self.scene_default = field_cls, field, scene_default
 
     def get_help_record(self, ctx):
         if self.help is None:
-            default = self.field.default if not isinstance(self.field.default, attrs.Factory) else None
+            default = self.scene_default if not isinstance(self.scene_default, attrs.Factory) else None
             doc = _in_option_terms(field_docs(self.field_cls).get(self.field.name, ""), self.field_cls)
             shown = "none" if default is None else ",".join(map(str, default)) if isinstance(default, tuple) else f"{default:g}" if isinstance(default, float) else str(default)
             self.help = f"{doc} [default: {shown}]"
@@ -129,16 +129,19 @@ class LazyHelpOption(click.Option):
 
 
 def parameter_options(func):
-    """Decorate a click command with one option per model and run parameter."""
+    """Decorate a click command with one option per model and run parameter (its help from the
+    class that declares the field; its default the scene's)."""
     for section, cls in reversed(SECTIONS.items()):
         for field in reversed(attrs.fields(cls)):
+            owner, declared = RUN_FIELDS[field.name] if cls is RunSettings else (cls, field)
             func = click.option(
                 option_name(field.name),
                 f"{section}__{field.name}",
                 cls=FieldOption,
-                field_cls=cls,
-                field=field,
-                type=_click_type(field),
+                field_cls=owner,
+                field=declared,
+                scene_default=field.default,
+                type=_click_type(declared),
                 default=None,
             )(func)
     return func

@@ -7,6 +7,7 @@ from typing import ClassVar
 import attrs
 import numpy as np
 
+from bark import physics
 from bark._validate import non_negative, positive
 from bark.strategies import Breaker
 
@@ -16,13 +17,11 @@ __all__ = ["ThresholdBreaker", "ProbabilisticBreaker"]
 @attrs.frozen(kw_only=True)
 class ThresholdBreaker(Breaker):
     """The paper's rule: an intact spring breaks when its tension ``k(|d| − l)`` exceeds its own
-    threshold ``state.fmax`` (per spring, never collapsed to per base).  Deterministic."""
+    threshold ``state.fmax`` (per spring, never collapsed to per base).  Deterministic.  Its compiled
+    form is the rule itself (``bark.physics.over_threshold``): springs break inside the stepping
+    kernel, and ``select`` follows from the same function."""
 
-    overload_only: ClassVar[bool] = True
-    kernel_rule: ClassVar[str | None] = "over-threshold"
-
-    def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        return np.flatnonzero(state.intact & (tension > state.fmax))
+    rule: ClassVar = staticmethod(physics.over_threshold)
 
 
 @attrs.frozen(kw_only=True)

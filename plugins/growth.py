@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import math
+from typing import ClassVar
 
 import attrs
 import numpy as np
@@ -14,30 +14,42 @@ from bark.strategies import Growth
 __all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth"]
 
 
+def sqrt_radius(t, z, p):
+    """``r0 + G·√t`` with ``p = (r0, G)`` (eq. 9)."""
+    return p[0] + p[1] * np.sqrt(t)
+
+
+def linear_radius(t, z, p):
+    """``r0 + G·t`` with ``p = (r0, G)``."""
+    return p[0] + p[1] * t
+
+
 @attrs.frozen(kw_only=True)
 class SqrtGrowth(Growth):
     """``r(t) = r0 + G·√t`` — the paper's secondary growth (eq. 9)."""
+
+    compiled: ClassVar = staticmethod(sqrt_radius)
+    uniform: ClassVar[bool] = True
 
     r0: float = attrs.field(default=0.2, validator=positive)
     """Initial trunk radius r_i (Table 2: 0.2 = 6 cm)."""
     G: float = attrs.field(default=0.014, validator=non_negative)
     """Growth constant, length / time^½ (Table 2: 0.014 vertical, 0.011 reticulate, 0.007 diamond)."""
 
-    def radius(self, t: float, z: np.ndarray) -> float:
-        return self.r0 + self.G * math.sqrt(t)
+    def compiled_params(self) -> np.ndarray:
+        return np.array([self.r0, self.G])
 
 
 @attrs.frozen(kw_only=True)
-class LinearGrowth(Growth):
+class LinearGrowth(SqrtGrowth):
     """``r(t) = r0 + G·t`` — constant radial growth rate."""
+
+    compiled: ClassVar = staticmethod(linear_radius)
 
     r0: float = attrs.field(default=0.2, validator=positive)
     """Initial trunk radius."""
     G: float = attrs.field(default=0.014, validator=non_negative)
     """Growth rate, length / time."""
-
-    def radius(self, t: float, z: np.ndarray) -> float:
-        return self.r0 + self.G * t
 
 
 def _bulges(value):
@@ -66,6 +78,31 @@ def _base(value):
     raise BarkError("{0}: must be a growth strategy or a table like {{name = 'sqrt', G = 0.014}}", Ref(None, "base", value))
 
 
+def bump(z, center, half_width):
+    """The ``sin²`` profile of a bulge: 1 at ``center``, 0 with zero slope at ``center ± half_width``
+    and 0 beyond."""
+    u = (z - center) / half_width
+    return np.sin(0.5 * np.pi * (u + 1.0)) ** 2 * (np.abs(u) < 1.0)
+
+
+def bulge_radius(t, z, p):
+    """The compiled form of :class:`BulgeGrowth` over a sqrt (``p[0] = 0``) or linear (``1``) law:
+    ``p = (kind, r0, G, n, z_1, half_width_1, magnitude_1, decay_1, G_1 or NaN, ...)``."""
+    ft = np.sqrt(t) if p[0] == 0.0 else t * 1.0
+    base = p[1] + p[2] * ft
+    r = base
+    for b in range(int(p[3])):
+        o = 4 + 5 * b
+        extra = p[o + 2] * np.exp(-p[o + 3] * t)
+        if not np.isnan(p[o + 4]):
+            extra = extra + (p[1] + p[o + 4] * ft) - base
+        r = r + bump(z, p[o], p[o + 1]) * extra
+    return r
+
+
+_BASE_KINDS = {sqrt_radius: 0.0, linear_radius: 1.0}
+
+
 @attrs.frozen(kw_only=True)
 class Bulge:
     """One bulge: where it is, how far it reaches, how high it rises, and its own material."""
@@ -86,8 +123,7 @@ class Bulge:
 
     def profile(self, z: np.ndarray) -> np.ndarray:
         """``sin²`` bump: 1 at the peak, 0 with zero slope at ``peak ± half_width``, 0 outside."""
-        u = (np.asarray(z, dtype=float) - self.z) / self.half_width
-        return np.where(np.abs(u) < 1.0, np.sin(0.5 * np.pi * (u + 1.0)) ** 2, 0.0)
+        return bump(np.asarray(z, dtype=float), self.z, self.half_width)
 
 
 @attrs.frozen(kw_only=True)
@@ -106,16 +142,30 @@ class BulgeGrowth(Growth):
     bulges: tuple[Bulge, ...] = attrs.field(default=(), converter=_bulges)
     """The bulges (a scene gives them as an array of tables)."""
 
+    @property
+    def compiled(self):
+        """``bulge_radius`` when the base law is one it knows (sqrt or linear), else ``None``: the
+        radius is then evaluated in Python once per step."""
+        return bulge_radius if type(self.base).compiled in _BASE_KINDS else None
+
+    def compiled_params(self) -> np.ndarray:
+        """``(kind of the base law, r0, G, number of bulges, then z, half_width, magnitude, decay, G or
+        NaN for each bulge)``."""
+        base = self.base
+        rows = [[b.z, b.half_width, b.magnitude, b.decay, np.nan if b.G is None else b.G] for b in self.bulges]
+        return np.array([_BASE_KINDS[type(base).compiled], base.r0, base.G, len(rows), *np.ravel(rows)], dtype=float)
+
     def radius(self, t: float, z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, dtype=float)
+        if self.compiled is not None:
+            return np.broadcast_to(bulge_radius(t, z, self.compiled_params()), z.shape)
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:
-            s = b.profile(z)
             extra = b.magnitude * np.exp(-b.decay * t)
             if b.G is not None:
                 extra = extra + np.broadcast_to(attrs.evolve(self.base, G=b.G).radius(t, z), z.shape) - base
-            r += s * extra
+            r = r + b.profile(z) * extra
         return r
 
     def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:

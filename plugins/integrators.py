@@ -10,11 +10,16 @@ from scipy.sparse.linalg import LinearOperator, cg
 
 from bark._validate import one_of, positive, positive_int
 from bark.errors import BarkError, Ref
-from bark.forces import stiffness_matvec
 from bark.stability import euler_cromer_h_max
 from bark.strategies import Integrator
 
 __all__ = ["EulerCromer", "ImplicitOverdamped"]
+
+
+def euler_cromer_update(x, v, f, hm, h):
+    """One axis of one base (eqs. 7–8): the velocity first, then the position with the new velocity."""
+    v = v + f * hm
+    return x + v * h, v
 
 
 @attrs.frozen(kw_only=True)
@@ -25,21 +30,19 @@ class EulerCromer(Integrator):
         x ← x + v · dt
 
     First order; stable while ``dt`` is below ``h_max = (√(β² + 4ω²) − β)/ω²`` with ``β = b/m`` and
-    ``ω² = λ_max(K)/m`` (docs/numerics.md; ≈ 0.37 for Table 2's values).
+    ``ω² = λ_max(K)/m`` (docs/numerics.md; ≈ 0.36 for Table 2's values).  Its compiled form is
+    ``update``: the engine runs it inside its stepping kernel.
     """
 
-    quiet_kernel: ClassVar[str | None] = "euler_cromer_quiet"
+    update: ClassVar = staticmethod(euler_cromer_update)
 
     bound: str = attrs.field(default="gershgorin", validator=one_of("gershgorin", "lanczos"))
-    """How λ_max(K) is bounded for the stability guard: ``gershgorin`` (c + 2k·max degree; holds for
-    every state of the run, however stretched) or ``lanczos`` (the current state's exact value, a
+    """How λ_max(K) is bounded for the stability guard: gershgorin (c + 2k·max degree; holds for
+    every state of the run, however stretched) or lanczos (the current state's exact value, a
     little less conservative)."""
 
-    def step(self, state, dt: float) -> None:
-        state.kernels.euler_cromer_step(state, dt)  # fused forces → v → x on the state's backend
-
-    def stability_limit(self, state) -> float:
-        return euler_cromer_h_max(state, self.bound)
+    def stability_limit(self, state, forces) -> float:
+        return euler_cromer_h_max(state, forces, self.bound)
 
 
 @attrs.frozen(kw_only=True)
@@ -69,16 +72,16 @@ class ImplicitOverdamped(Integrator):
     maxiter: int = attrs.field(default=1000, validator=positive_int)
     """Most CG iterations per step."""
 
-    def stability_limit(self, state) -> float:
+    def stability_limit(self, state, forces) -> float:
         """Stable for any step — given damping, which the overdamped limit divides by."""
-        if state.mechanics.b <= 0:
+        if forces.mechanics.b <= 0:
             raise BarkError("{0}: the implicit-overdamped integrator needs damping > 0 (and the 'damping' effect)",
-                            Ref("mechanics", "b", state.mechanics.b))
+                            Ref("mechanics", "b", forces.mechanics.b))
         return float("inf")
 
-    def step(self, state, dt: float) -> None:
-        mech = state.mechanics
-        matvec, diag = stiffness_matvec(state.x, state.pairs, state.rest, mech.k, state.intact, mech.c, state.incidence)
+    def step(self, state, dt: float, forces) -> None:
+        mech = forces.mechanics
+        matvec, diag = forces.stiffness(state)
         size = diag.size
         e_r = state.x[:, :2] / np.hypot(state.x[:, 0], state.x[:, 1])[:, None]
 
@@ -96,7 +99,7 @@ class ImplicitOverdamped(Integrator):
         a = LinearOperator((size, size), matvec=apply, dtype=float)
         precond = 1.0 / (mech.b + dt * diag)
         m = LinearOperator((size, size), matvec=lambda r: precond * r, dtype=float)
-        rhs = tangential(dt * state.elastic_forces().ravel())
+        rhs = tangential(dt * np.ascontiguousarray(forces.elastic(state)).ravel())
         scale = float(np.max(np.abs(rhs)))  # solve for rhs/scale: tiny forces must not underflow in CG
         if scale > 0.0:
             dx, _ = cg(a, rhs / scale, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)

@@ -20,6 +20,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from bark import Lattice, Mechanics, Simulation
+from bark.stepping import Numerics
 from bark_plugins.breakers import ThresholdBreaker
 from bark_plugins.growth import SqrtGrowth
 from bark_plugins.integrators import EulerCromer
@@ -29,6 +30,9 @@ settings.register_profile("dev", max_examples=100, deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+NUMERICS = ("dt", "stepping", "overshoot_tol", "max_halvings", "backend")
 
 
 def build_sim(
@@ -42,16 +46,19 @@ def build_sim(
     seed: int = 0,
     **kwargs,
 ) -> Simulation:
-    """A small simulation: sqrt growth, Euler–Cromer, threshold breaker (Table 2 k, c, b, m)."""
+    """A small simulation: sqrt growth, Euler–Cromer, threshold breaker (Table 2 k, c, b, m); the
+    numerics (``dt``, ``stepping`` — fixed unless given —, ``overshoot_tol``, ``max_halvings``,
+    ``backend``) may be given as keywords."""
+    numerics = {"dt": dt, "stepping": "fixed", **{k: kwargs.pop(k) for k in NUMERICS if k in kwargs}}
     return Simulation(
         lattice=Lattice(n_bases=n_bases, jitter=jitter),
         mechanics=Mechanics(f_max=f_max, fmax_spread=fmax_spread),
-        growth=SqrtGrowth(G=G),
+        growth=kwargs.pop("growth", None) or SqrtGrowth(G=G),
         integrator=kwargs.pop("integrator", None) or EulerCromer(),
         breakers=kwargs.pop("breakers", None) or [ThresholdBreaker()],
-        dt=dt,
+        numerics=Numerics(**numerics),
         seed=seed,
-        **{"stepping": "fixed", **kwargs},
+        **kwargs,
     )
 
 

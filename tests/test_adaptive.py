@@ -92,10 +92,10 @@ def test_adaptive_numpy_and_numba_agree(make_sim):
 def test_adaptive_stepping_also_keeps_explicit_steps_stable(make_sim):
     """A largest step above the stability limit is split, as with stepping = auto."""
     sim = make_sim(n_bases=200, dt=2.0, stepping="adaptive")
-    assert sim.h <= 0.9 * sim.stability_limit
-    assert math.isclose(2.0 / sim.h, round(2.0 / sim.h))
+    assert sim.clock.h <= 0.9 * sim.stability_limit
+    assert math.isclose(2.0 / sim.clock.h, round(2.0 / sim.clock.h))
     with pytest.raises(BarkError):
-        make_sim(n_bases=200, dt=2.0, stepping="fixed")
+        make_sim(n_bases=200, dt=2.0, stepping="fixed").build()
 
 
 def test_adaptive_implicit_respects_the_tolerance(make_sim):

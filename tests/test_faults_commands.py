@@ -43,7 +43,7 @@ def test_plan_builds_nothing(tmp_path, monkeypatch):
     def no_build(*a, **k):
         raise AssertionError("bark plan built a simulation")
 
-    monkeypatch.setattr(simulation.Simulation, "__attrs_post_init__", no_build)
+    monkeypatch.setattr(simulation.Simulation, "build", no_build)
     scene = tmp_path / "huge.toml"
     scene.write_text("[lattice]\nn_bases = 5000000\n[run]\nuntil_time = 10\n[effects]\nwant = ['patch-statistics']\n")
     result = CliRunner().invoke(cli, ["plan", str(scene)])

@@ -1,4 +1,4 @@
-"""The pure force kernels of bark.forces (eqs. 1–3)."""
+"""The forces (eqs. 1–4), as both backends evaluate them from bark.physics, and the thresholds."""
 
 from __future__ import annotations
 
@@ -10,15 +10,33 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from bark.forces import (
-    Mechanics,
-    anchor_forces,
-    damping_forces,
-    scatter,
-    spring_forces,
-    spring_geometry,
-    tensions,
-)
+from bark import kernels, physics
+from bark.forces import Mechanics, incidence, spring_geometry
+from bark.state import State
+
+BACKENDS = ["numpy", "numba"]
+
+
+def _state(x, pairs, rest, active=None) -> State:
+    m = len(pairs)
+    return State.from_arrays({
+        "x": x, "v": np.zeros_like(x), "anchor": x, "anchor_dir": np.tile([1.0, 0.0], (len(x), 1)),
+        "born": np.zeros(len(x)), "pairs": pairs, "rest": rest, "fmax": np.ones(m),
+        "intact": np.ones(m, bool) if active is None else active,
+    })
+
+
+def spring_forces(x, pairs, rest, k, active=None, backend="numpy"):
+    """The intact springs' forces on every base, as ``backend`` evaluates them."""
+    state = _state(x, pairs, rest, active)
+    return np.asarray(kernels.load(backend).spring_forces(state, Mechanics(k=k), state.x))
+
+
+def tensions(x, pairs, rest, k, backend="numpy"):
+    state = _state(x, pairs, rest)
+    out = np.empty(len(pairs))
+    kernels.load(backend).measure(state, Mechanics(k=k), out)
+    return out
 
 coord = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False)
 
@@ -47,34 +65,38 @@ def _scale(x, pairs, rest, k) -> float:
     return float(k * np.sum(np.abs(length - rest)) + 1e-300)
 
 
-@given(spring_systems())
-def test_internal_spring_forces_sum_to_zero(system):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(system=spring_systems())
+def test_internal_spring_forces_sum_to_zero(system, backend):
     x, pairs, rest, k, active = system
-    f = spring_forces(x, pairs, rest, k, active)
+    f = spring_forces(x, pairs, rest, k, active, backend)
     assert f.shape == x.shape
     assert np.all(np.isfinite(f))
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * _scale(x, pairs, rest, k) + 1e-300)
 
 
-@given(spring_systems())
-def test_internal_spring_torques_about_origin_sum_to_zero(system):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(system=spring_systems())
+def test_internal_spring_torques_about_origin_sum_to_zero(system, backend):
     """Central forces: equal and opposite along the line of centres, so no net torque either."""
     x, pairs, rest, k, _ = system
-    f = spring_forces(x, pairs, rest, k)
+    f = spring_forces(x, pairs, rest, k, backend=backend)
     torque = np.cross(x, f).sum(axis=0)
     np.testing.assert_allclose(torque, 0.0, atol=1e-11 * _scale(x, pairs, rest, k) * (1 + np.abs(x).max()))
 
 
-@given(spring_systems())
-def test_springs_at_rest_length_exert_no_force(system):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(system=spring_systems())
+def test_springs_at_rest_length_exert_no_force(system, backend):
     x, pairs, _, k, _ = system
     _, length = spring_geometry(x, pairs)
-    f = spring_forces(x, pairs, length.copy(), k)
+    f = spring_forces(x, pairs, length.copy(), k, backend=backend)
     np.testing.assert_allclose(f, 0.0, atol=1e-12 * k * (1 + np.abs(x).max()))
 
 
-@given(spring_systems(), st.floats(-2 * math.pi, 2 * math.pi), st.floats(-5.0, 5.0))
-def test_forces_equivariant_under_rotation_about_trunk_axis(system, alpha, shift_z):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(system=spring_systems(), alpha=st.floats(-2 * math.pi, 2 * math.pi), shift_z=st.floats(-5.0, 5.0))
+def test_forces_equivariant_under_rotation_about_trunk_axis(system, alpha, shift_z, backend):
     """Rotating the positions about z (and shifting along z) rotates the forces the same way.
 
     Springs whose ends (nearly) coincide have no direction, and a shift can round their length to
@@ -84,8 +106,8 @@ def test_forces_equivariant_under_rotation_about_trunk_axis(system, alpha, shift
     assume(np.all((length == 0.0) | (length > 1e-6 * (1.0 + np.abs(x).max()))))
     R = _rot_z(alpha)
     x2 = x @ R.T + np.array([0.0, 0.0, shift_z])
-    f = spring_forces(x, pairs, rest, k, active)
-    f2 = spring_forces(x2, pairs, rest, k, active)
+    f = spring_forces(x, pairs, rest, k, active, backend)
+    f2 = spring_forces(x2, pairs, rest, k, active, backend)
     tol = 1e-9 * (_scale(x, pairs, rest, k) + k * (1 + np.abs(x).max()))
     np.testing.assert_allclose(f2, f @ R.T, atol=tol)
 
@@ -100,23 +122,21 @@ def test_rotation_equivariance_is_not_vacuous():
     np.testing.assert_allclose(spring_forces(x @ R.T, pairs, np.array([0.5]), 1.0), f @ R.T, atol=1e-14)
 
 
-@given(
-    hnp.arrays(np.float64, (3,), elements=coord),
-    st.floats(0.0, 5.0),
-    st.floats(0.01, 100.0),
-)
-def test_zero_length_spring_gives_finite_zero_force(point, rest, k):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(point=hnp.arrays(np.float64, (3,), elements=coord), rest=st.floats(0.0, 5.0), k=st.floats(0.01, 100.0))
+def test_zero_length_spring_gives_finite_zero_force(point, rest, k, backend):
     x = np.array([point, point, point + 1.0])
     pairs = np.array([[0, 1], [1, 0], [0, 0]])
-    f = spring_forces(x, pairs, np.full(3, rest), k)
+    f = spring_forces(x, pairs, np.full(3, rest), k, backend=backend)
     assert np.all(np.isfinite(f))
     np.testing.assert_array_equal(f, 0.0)
 
 
-def test_single_spring_matches_equation_1():
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_single_spring_matches_equation_1(backend):
     """Force on i from the spring to j is k(|d| − l) d/|d| with d = x_j − x_i."""
     x = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0]])
-    f = spring_forces(x, np.array([[0, 1]]), np.array([4.0]), 2.0)
+    f = spring_forces(x, np.array([[0, 1]]), np.array([4.0]), 2.0, backend=backend)
     # |d| = 5, stretch 1, k = 2 → |f| = 2 along d/|d| = (0.6, 0.8, 0) on base 0, opposite on base 1
     np.testing.assert_allclose(f, [[1.2, 1.6, 0.0], [-1.2, -1.6, 0.0]], rtol=1e-14)
 
@@ -133,11 +153,12 @@ def test_stretched_spring_pulls_compressed_spring_pushes(length, rest, k):
     assert f[0, 0] == pytest.approx(k * (length - rest))
 
 
-@given(spring_systems())
-def test_inactive_springs_are_skipped(system):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(system=spring_systems())
+def test_inactive_springs_are_skipped(system, backend):
     x, pairs, rest, k, active = system
-    f_masked = spring_forces(x, pairs, rest, k, active)
-    f_subset = spring_forces(x, pairs[active], rest[active], k)
+    f_masked = spring_forces(x, pairs, rest, k, active, backend)
+    f_subset = spring_forces(x, pairs[active], rest[active], k, backend=backend)
     np.testing.assert_allclose(f_masked, f_subset, atol=1e-12 * _scale(x, pairs, rest, k) + 1e-300)
 
 
@@ -148,12 +169,13 @@ def test_all_springs_inactive_gives_zero():
     np.testing.assert_array_equal(spring_forces(x, pairs, np.array([1.0]), 1.0, np.array([False])), 0.0)
 
 
-@given(spring_systems())
-def test_tension_sign(system):
+@pytest.mark.parametrize("backend", BACKENDS)
+@given(system=spring_systems())
+def test_tension_sign(system, backend):
     """Tension k(|d| − l): > 0 exactly when stretched, < 0 when compressed."""
     x, pairs, rest, k, _ = system
     _, length = spring_geometry(x, pairs)
-    t = tensions(x, pairs, rest, k)
+    t = tensions(x, pairs, rest, k, backend)
     np.testing.assert_allclose(t, k * (length - rest), rtol=1e-12, atol=1e-300)
     assert np.all((t > 0) == (length > rest))
     assert np.all((t < 0) == (length < rest))
@@ -172,30 +194,38 @@ def test_tension_of_stretched_and_compressed_springs():
     st.floats(0.0, 10.0),
 )
 def test_anchor_force_is_zero_rest_length_hooke(x, anchor, c):
-    f = anchor_forces(x, anchor, c)
+    f = physics.base_force(0.0, x, anchor, 0.0, c, 0.0)
     np.testing.assert_allclose(f, -c * (x - anchor), rtol=1e-15, atol=1e-300)
     # restoring: never pushes a base further from its anchor
     assert np.all(np.einsum("ij,ij->i", f, x - anchor) <= 0)
-    np.testing.assert_array_equal(anchor_forces(anchor, anchor, c), 0.0)
+    np.testing.assert_array_equal(physics.base_force(0.0, anchor, anchor, 0.0, c, 0.0), 0.0)
 
 
 def test_anchor_force_example():
-    f = anchor_forces(np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 0.0, 1.0]]), 0.1)
+    f = physics.base_force(0.0, np.array([[1.0, 2.0, 3.0]]), np.array([[1.0, 0.0, 1.0]]), 0.0, 0.1, 0.0)
     np.testing.assert_allclose(f, [[0.0, -0.2, -0.2]])
 
 
 @given(hnp.arrays(np.float64, (6, 3), elements=coord), st.floats(0.0, 10.0))
 def test_damping_opposes_velocity(v, b):
-    f = damping_forces(v, b)
+    f = physics.base_force(0.0, 0.0, 0.0, v, 0.0, b)
     np.testing.assert_allclose(f, -b * v, rtol=1e-15, atol=1e-300)
     assert np.all(np.einsum("ij,ij->i", f, v) <= 0)
 
 
-def test_scatter_puts_plus_on_first_end_minus_on_second():
+def test_incidence_puts_plus_on_first_end_minus_on_second():
     pairs = np.array([[0, 2], [2, 1]])
     f = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    out = scatter(pairs, f, 4)
+    out = incidence(pairs, 4) @ f
     np.testing.assert_array_equal(out, [[1, 0, 0], [0, -1, 0], [-1, 1, 0], [0, 0, 0]])
+
+
+@given(hnp.arrays(np.float64, (20, 3), elements=coord), st.floats(0.01, 10.0))
+def test_backends_give_the_same_forces_to_round_off(x, k):
+    pairs = np.array([[i, (i + o) % 20] for o in (3, 7) for i in range(20)])
+    rest = np.full(len(pairs), 0.5)
+    a, b = spring_forces(x, pairs, rest, k, backend="numpy"), spring_forces(x, pairs, rest, k, backend="numba")
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * k * (1 + np.abs(x).max()))
 
 
 @given(st.integers(1, 500), st.floats(0.001, 0.01), st.floats(0.0, 0.3), st.integers(0, 2**32 - 1))

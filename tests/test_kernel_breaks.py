@@ -12,7 +12,6 @@ import pytest
 
 from bark import Stop
 from bark.errors import NonFiniteStateError
-from bark.simulation import _trusted_rule
 from bark.triggers import At, Every, OnEvent, Periodic
 from bark_plugins.breakers import ProbabilisticBreaker, ThresholdBreaker
 from bark_plugins.growth import SqrtGrowth
@@ -92,7 +91,8 @@ def test_degenerate_events_match_with_the_exact_lattice(make_sim):
 
 
 def test_a_subclass_that_changes_select_is_asked(make_sim):
-    """A breaker that inherits the rule's name but overrides ``select`` gets ``select`` called."""
+    """A breaker that inherits a rule but writes ``select`` again loses the rule (and the
+    overload-only promise) unless it states them again: its ``select`` is always the one asked."""
     calls = []
 
     class EveryOther(ThresholdBreaker):
@@ -100,16 +100,27 @@ def test_a_subclass_that_changes_select_is_asked(make_sim):
             calls.append(1)
             return super().select(state, tension, rng)[::2]
 
-    class Restated(EveryOther):
-        kernel_rule = "over-threshold"  # names the rule, but its select is EveryOther's: not trusted
+    class Lower(ThresholdBreaker):  # the trap: breaks below the threshold, inherits the promise
+        def select(self, state, tension, rng):
+            return np.flatnonzero(state.intact & (tension > 0.5 * state.fmax))
 
-    assert _trusted_rule(ThresholdBreaker()) == "over-threshold"
-    assert _trusted_rule(EveryOther()) is None
-    assert _trusted_rule(Restated()) is None
-    assert _trusted_rule(ProbabilisticBreaker()) is None
+    class Promised(EveryOther):
+        overload_only = True
+
+    assert ThresholdBreaker.rule is not None
+    assert EveryOther.rule is None and not EveryOther.overload_only
+    assert Lower.rule is None and not Lower.overload_only
+    assert Promised.rule is None and Promised.overload_only
+    assert ProbabilisticBreaker.rule is None
     sim = make_sim(n_bases=300, backend="numba", breakers=[EveryOther()])
     sim.run(Stop(until_time=4.0))
     assert calls and sim.n_broken > 0
+    first = {}
+    for breaker in (Lower(), ThresholdBreaker()):
+        sim = make_sim(n_bases=300, backend="numba", breakers=[breaker])
+        sim.run(Stop(until_time=10.0), lambda s: s.n_broken and s.__setattr__("stop_reason", "broke"))
+        first[type(breaker).__name__] = sim.breaks.arrays()["t"][0]
+    assert first["Lower"] < first["ThresholdBreaker"]  # it never waits for a spring to reach 100 %
 
 
 @pytest.mark.parametrize("trigger", [Periodic(7), Every(0.4), At([1.0, 2.5])])
@@ -130,7 +141,7 @@ class _SqrtThenNaN(SqrtGrowth):
 def test_nan_in_a_call_that_broke_springs_keeps_them_broken():
     """A call that breaks springs and then meets a NaN radius: the state goes back to the last
     finite step, and exactly the springs broken up to it are broken, in graph, arrays and log."""
-    dt, bad_step = 0.05, 97  # inside the fifth call (8, 16, 32, 64, ...): past the first breaks
+    dt, bad_step = 0.05, 97  # inside a call, past the first breaks
 
     ref = build_sim(n_bases=400, seed=2, dt=dt, backend="numba")  # G = 0.05
     sim = attrs.evolve(ref, growth=_SqrtThenNaN(G=0.05, t_bad=(bad_step - 0.5) * dt))

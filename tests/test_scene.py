@@ -57,7 +57,7 @@ def test_scene_builds_the_simulation_it_describes():
     sim = s.simulation()
     assert sim.lattice is s.lattice and sim.mechanics is s.mechanics
     assert sim.growth is s.strategies["growth"]
-    assert sim.dt == 0.02 and sim.seed == 9
+    assert sim.numerics.dt == 0.02 and sim.seed == 9
     assert sim.state.n_bases == 300
     assert list(sim.breakers) == [s.strategies["breaker"]]
 

@@ -1,37 +1,114 @@
-"""Compute backends for the hot loop: the same functions, in numpy or compiled with numba.
+"""Compute backends for the hot loop: one interface, chosen once per simulation (after OpenMM's
+platforms).  The Simulation never knows which runs.
 
-=======================================  ========================================================
-function                                 does
-=======================================  ========================================================
-``elastic_forces(state, x) -> f``        spring (eq. 1) + anchor (eq. 2) forces at ``x``
-``euler_cromer_step(state, h)``          eqs. 4, 7, 8 in place: forces, then ``v``, then ``x``
-``measure(state, out) -> max_load``      tension ``k(|d| − l)`` of every spring into ``out``; returns
-                                         the largest ``tension / fmax`` over intact springs (NaN if
-                                         any tension is not finite)
-``constrain_measure(state, r_x, r_a,     eq. 9 in place on the bases (radial velocity removed) and
-out) -> max_load``                       anchors (radius × fixed direction), then ``measure``
-``patch_labels(state) -> labels``        connected components of the intact springs, numbered in
-                                         order of each component's smallest base (as scipy does)
-=======================================  ========================================================
+=============================================  ====================================================
+method                                          does
+=============================================  ====================================================
+``spring_forces(state, mech, x) -> f``          the intact springs' forces (eq. 1) on every base at ``x``
+``measure(state, mech, out) -> load``           every spring's tension ``k(|d| − l)`` into ``out``;
+                                                returns the largest ``tension / fmax`` over intact
+                                                springs (NaN if any tension is not finite)
+``constrain(state, r_x, r_anchor)``             eq. 9 on the bases (radial velocity removed) and
+                                                the anchors (radius × fixed direction)
+``steps(state, mech, plan, tension) -> Steps``  up to ``len(plan.times)`` whole steps of an integrator
+                                                with a compiled form (``Integrator.update``): forces,
+                                                update, surface, tensions, and the breaking rule if
+                                                the plan carries one (``Breaker.rule``); the per-step
+                                                and the many-step paths are this one call
+``patch_labels(state) -> labels``               connected components of the intact springs, numbered
+                                                in order of each component's smallest base
+=============================================  ====================================================
 
-numba also has ``euler_cromer_quiet``, many Euler–Cromer steps in one compiled call (the quiet path
-of ``Simulation.advance``, named by ``EulerCromer.quiet_kernel``), which can also break springs by
-the ``over-threshold`` rule inside the call; a backend without it steps one by one.
-
-``numpy`` is always there; ``numba`` is used when importable.  ``auto`` picks numba if it imports,
-else numpy.  Both give the same results to round-off (summation order differs).
+Both backends evaluate the physics of :mod:`bark.physics` and the plugins' compiled forms, the
+same functions; they differ only in the order sums are taken (results agree to round-off).
+``numpy`` is always there; ``numba`` (compiled, cached on disk) is used when importable.  A backend
+holds its own work buffers (derived data, rebuilt when the topology grows); the state is only data.
 """
 
 from __future__ import annotations
 
 import importlib
-from types import ModuleType
+import math
+from typing import Callable
 
-from bark.errors import BarkError
+import attrs
+import numpy as np
 
-__all__ = ["BACKENDS", "resolve", "load"]
+from bark.errors import BarkError, Ref
+
+__all__ = ["BACKENDS", "Backend", "Plan", "Steps", "resolve", "load"]
 
 BACKENDS = ("auto", "numpy", "numba")
+
+
+@attrs.frozen(kw_only=True)
+class Plan:
+    """What one call of :meth:`Backend.steps` may do."""
+
+    h: float
+    """Length of every step of the call."""
+    times: np.ndarray
+    """Time at the end of each step (from the integer clock: exact, whatever the split into calls)."""
+    update: Callable | None
+    """The integrator's compiled form: ``update(x, v, f, h/m, h) -> (x, v)`` along one axis."""
+    radius: Callable | None
+    """The growth law's compiled form: ``radius(t, z, params) -> r``."""
+    params: np.ndarray
+    """Its parameters."""
+    uniform: bool
+    """The radius does not depend on height: evaluated once per step, not per base."""
+    rule: Callable
+    """A breaking rule ``rule(tension, fmax) -> bool`` (``bark.physics.no_breaking``: none)."""
+    breaking: bool = True
+    """Springs the rule picks break inside the call, which goes on.  ``False``: nothing breaks inside;
+    the call ends after the first step in which the rule picks a spring, for the breakers to judge
+    in Python."""
+    accept_load: float = math.inf
+    """A step whose load exceeds this is undone and the call ends (adaptive stepping halves it)."""
+    return_on_break: bool = False
+    """End the call after a step in which the rule broke springs (Python must see every break)."""
+    max_batch: float = math.inf
+    """End the call after a step that breaks more springs than this (a degenerate event)."""
+    compiled: bool = True
+    """Whether the integrator and the growth law have compiled forms (else one step in Python)."""
+
+
+@attrs.frozen
+class Steps:
+    """What one call of :meth:`Backend.steps` did."""
+
+    done: int
+    """Steps taken and kept (a step undone for ``accept_load`` or a non-finite state is not counted)."""
+    load: float
+    """Largest tension / threshold over intact springs after the last step tried; NaN if that step
+    went non-finite (it was undone)."""
+    broken: np.ndarray
+    """Springs the rule broke, in order of step then id (the caller applies them: ``break_springs``)."""
+    step: np.ndarray
+    """The step of the call (from 1) each broke in."""
+    tension: np.ndarray
+    """Each one's tension when it broke."""
+
+
+class Backend:
+    """The hot loop's operations (see the module's docstring)."""
+
+    name = ""
+
+    def spring_forces(self, state, mech, x: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def measure(self, state, mech, out: np.ndarray) -> float:
+        raise NotImplementedError
+
+    def constrain(self, state, r_x, r_anchor) -> None:
+        raise NotImplementedError
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        raise NotImplementedError
+
+    def patch_labels(self, state) -> np.ndarray:
+        raise NotImplementedError
 
 
 def _numba_available() -> bool:
@@ -45,14 +122,17 @@ def _numba_available() -> bool:
 def resolve(name: str) -> str:
     """The concrete backend ``name`` stands for (``auto`` → ``numba`` if importable, else ``numpy``)."""
     if name not in BACKENDS:
-        raise BarkError(f"backend = {name!r}: must be one of {', '.join(BACKENDS)}")
+        raise BarkError("{0}: must be one of " + ", ".join(BACKENDS), Ref("run", "backend", name))
     if name == "auto":
         return "numba" if _numba_available() else "numpy"
     if name == "numba" and not _numba_available():
-        raise BarkError("backend = 'numba' but numba is not installed: pip install numba, or use backend = 'numpy'")
+        raise BarkError("{0} but numba is not installed: pip install numba, or use the numpy backend",
+                        Ref("run", "backend", name))
     return name
 
 
-def load(name: str) -> ModuleType:
-    """The kernel module of backend ``name`` (imported only when asked for)."""
-    return importlib.import_module(f"bark.kernels.{resolve(name)}_backend")
+def load(name: str) -> Backend:
+    """A new instance of the backend ``name`` stands for (its module imported only when asked for;
+    its compiled code is shared, its work buffers are this instance's: one per simulation)."""
+    module = importlib.import_module(f"bark.kernels.{resolve(name)}_backend")
+    return module.BACKEND_CLASS()

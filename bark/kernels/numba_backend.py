@@ -1,159 +1,325 @@
-"""The numba backend: each kernel is one compiled pass over the springs and/or the bases.
+"""The numba backend: the physics of :mod:`bark.physics` and the plugins' compiled forms, compiled.
 
-Compiled on first use and cached on disk (``cache=True``).  Loops run serially: on the 2-core
-machines bark targets, the spring scatter is memory-bound and threads buy little.
+**One stepping kernel.**  ``_steps_kernel`` is written once, with the integrator's update, the
+breaking rule and the growth law's radius as parameters.  Each combination gets a tiny wrapper,
+generated into a file of its own (``specialized``), that passes those functions in: numba inlines
+them into the loop (as fast as writing them out, measured) and caches the wrapper on disk like any
+other function, so a plugin's compiled form costs a compilation once, not per run.  The per-step and
+the many-step paths are calls of this one kernel, so their bits agree by construction.
+
+Each piece of physics is :mod:`bark.physics`'s function, inlined (``inline="always"``).  No
+fastmath: every expression is evaluated as written, so a run does not depend on where its compiled
+calls begin and end (what makes a resumed run end bit-identical).  Loops run serially: on the
+2-core machines bark targets, the spring scatter is memory-bound and threads buy little.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
+import inspect
 import math
+import os
+import sys
+import tempfile
+from pathlib import Path
 
 import numba
+import numba.extending
 import numpy as np
+
+from bark import physics
+from bark.kernels import Backend, Plan, Steps
 
 NAME = "numba"
 
-# error_model="numpy": no Python-style zero-division branches.  No fastmath: each expression is
-# evaluated exactly as written, so the same expression in the per-step and the quiet kernels gives
-# the same bits, and a run's result does not depend on where its compiled calls begin and end
-# (what makes a resumed run end bit-identical to an uninterrupted one).
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+inline = numba.njit(inline="always", error_model="numpy")
+
+_tension = inline(physics.tension)
+_force_scale = inline(physics.spring_force_scale)
+_base_force = inline(physics.base_force)
+_surface_scale = inline(physics.surface_scale)
+_radial_speed = inline(physics.radial_speed)
+_no_breaking = inline(physics.no_breaking)
 
 
-@_jit
-def _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2, fmax, log_id, log_step, log_t, n_log, step):
-    """Add every intact spring's force (eq. 1) into ``f``; return the largest ``tension·inv_fmax``
-    over them (skipped when ``inv_fmax`` is empty), whether all their tensions are finite, and the
-    new length of the break log.
-
-    With a break log (``log_id`` not empty) this pass also applies the threshold rule, as
-    ``ThresholdBreaker.select`` does: an intact spring whose tension exceeds its ``fmax`` is marked
-    broken in ``intact`` (the kernel's working copy), its force is left out of ``f`` (so ``f`` is
-    what a fresh pass after the break would give, to the bit) and ``(spring, step, tension)`` is
-    appended to the log at row ``n_log``.
-
-    The one place a spring's force is written in this backend: the per-step and the quiet kernels
-    both call it, so they give the same bits whatever the split of a run into calls.
-    """
-    loads = inv_fmax.shape[0] > 0
-    breaking = log_id.shape[0] > 0
+@inline
+def _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2, tension, loads, breaking, rule,
+                 log_id, log_step, log_t, n_log, step):
+    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also write its tension,
+    find the largest tension / threshold, and apply the rule: with ``breaking``, a spring it picks is
+    marked broken in ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after
+    the break gives, to the bit) and logged; without, it is only noted.  Returns ``(largest load,
+    all tensions finite, log length, whether the rule picked a spring)``."""
     top = -np.inf
     finite = True
+    picked = False
     for s in range(pi.shape[0]):
-        if not intact[s]:
+        if not live[s]:
             continue
         i = pi[s]
         j = pj[s]
         d0 = x0[j] - x0[i]
         d1 = x1[j] - x1[i]
         d2 = x2[j] - x2[i]
-        length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        t = k * (length - rest[s])
-        if not abs(t) < np.inf:
-            finite = False
+        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        t = _tension(length, rest[s], k)
         if loads:
-            load = t * inv_fmax[s]
+            if not abs(t) < np.inf:
+                finite = False
+            tension[s] = t
+            load = t / fmax[s]
             if load > top:
                 top = load
-        if breaking and t > fmax[s]:
-            intact[s] = False
-            log_id[n_log] = s
-            log_step[n_log] = step
-            log_t[n_log] = t
-            n_log += 1
-            continue
+            if rule(t, fmax[s]):
+                if breaking:
+                    live[s] = False
+                    log_id[n_log] = s
+                    log_step[n_log] = step
+                    log_t[n_log] = t
+                    n_log += 1
+                    continue
+                picked = True
         if length > 0.0:
-            g = t / length
+            g = _force_scale(t, length)
             f0[i] += g * d0
             f1[i] += g * d1
             f2[i] += g * d2
             f0[j] -= g * d0
             f1[j] -= g * d1
             f2[j] -= g * d2
-    return top, finite, n_log
+    return top, finite, n_log, picked
 
 
-@_jit
-def _none():
-    """Empty (float, int) arrays for the optional arguments of :func:`_spring_pass` (made here: a
-    global array is read-only inside numba)."""
-    return np.empty(0), np.empty(0, dtype=np.int64)
+@inline
+def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_uniform):
+    """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
+    (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
+    velocity removed), the anchors moved with the surface.  Returns whether every coordinate stayed
+    finite.  One coordinate per vector: this loop runs in SIMD lanes."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    bad = 0
+    for q in range(x0.shape[0]):
+        g0 = _base_force(f0[q], x0[q], ax[q], v0[q], c, b)
+        g1 = _base_force(f1[q], x1[q], ay[q], v1[q], c, b)
+        g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
+        f0[q] = 0.0
+        f1[q] = 0.0
+        f2[q] = 0.0
+        px, u0 = update(x0[q], v0[q], g0, hm, h)
+        py, u1 = update(x1[q], v1[q], g1, hm, h)
+        pz, u2 = update(x2[q], v2[q], g2, hm, h)
+        r = r_uniform if uniform else radius(t, pz, params)
+        scale = _surface_scale(px, py, r)
+        px *= scale
+        py *= scale
+        x0[q] = px
+        x1[q] = py
+        x2[q] = pz
+        bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
+        vr = _radial_speed(u0, u1, px, py, 1.0 / (r * r))
+        v0[q] = u0 - vr * px
+        v1[q] = u1 - vr * py
+        v2[q] = u2
+        ra = r_uniform if uniform else radius(t, az[q], params)
+        ax[q] = ra * dx[q]
+        ay[q] = ra * dy[q]
+    return bad == 0
 
 
-@_jit
-def _spring_forces(x0, x1, x2, pi, pj, rest, k, intact, f0, f1, f2):
-    """``f`` = the intact springs' forces alone: :func:`_spring_pass` with no loads and no breaking."""
+@inline
+def _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log, update, rule, radius):
+    """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
+    load of the last step, length of the break log)``, the load NaN if that step went non-finite.
+
+    The spring pass that finds a step's loads also accumulates the next step's spring forces into
+    ``f`` (first same as last), through the same function as the fresh pass at the start of the
+    call, so the result does not depend on where calls begin and end."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    pi, pj = ends
+    k, c, b, m, h, accept_load, max_batch = constants
+    uniform, breaking, return_on_break = flags
+    log_id, log_step, log_t = log
+    hm = h / m
     f0[:] = 0.0
     f1[:] = 0.0
     f2[:] = 0.0
-    no_f, no_i = _none()
-    _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, no_f, f0, f1, f2, no_f, no_i, no_i, no_f, 0, 0)
+    _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2, tension, False, False, rule,
+                 log_id, log_step, log_t, 0, 0)
+    top = -np.inf
+    finite = True
+    done = 0
+    n_log = 0
+    for step in range(times.shape[0]):
+        t = times[step]
+        r_uniform = radius(t, 0.0, params) if uniform else 0.0
+        finite = _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_uniform)
+        before = n_log
+        top, springs_finite, n_log, picked = _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2,
+                                                          tension, True, breaking, rule, log_id, log_step, log_t,
+                                                          n_log, step + 1)
+        finite = finite and springs_finite
+        done = step + 1
+        if not finite or top > accept_load or picked:
+            break
+        if n_log > before and (return_on_break or n_log - before > max_batch):
+            break
+    return done, (top if finite else np.nan), n_log
 
 
-@_jit
-def _elastic(x, anchor, pi, pj, rest, k, c, intact, f):
-    _spring_forces(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, f[:, 0], f[:, 1], f[:, 2])
-    if c != 0.0:
-        for a in range(3):
-            xa, aa, fa = x[:, a], anchor[:, a], f[:, a]
-            for q in range(xa.shape[0]):
-                fa[q] -= c * (xa[q] - aa[q])
+# -- one wrapper per combination of compiled forms, generated and cached ---------------------------
+
+_WRAPPER = '''"""Generated by bark: its stepping kernel specialised for {names}.  Safe to delete."""
+import numba
+from bark.kernels.numba_backend import _steps_kernel, inline
+{imports}
+_update = inline({update})
+_rule = inline({rule})
+_radius = inline({radius})
 
 
-@_jit
-def _euler_cromer(x, v, anchor, pi, pj, rest, k, c, b, m, h, intact, f):
-    _spring_forces(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, f[:, 0], f[:, 1], f[:, 2])
-    hm = h / m
-    for a in range(3):
-        xa, va, aa, fa = x[:, a], v[:, a], anchor[:, a], f[:, a]
-        for q in range(xa.shape[0]):
-            force = fa[q] - c * (xa[q] - aa[q]) - b * va[q]
-            va[q] += force * hm
-            xa[q] += va[q] * h
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def steps(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log):
+    return _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log,
+                         _update, _rule, _radius)
+'''
+_SPECIALIZED: dict[tuple, object] = {}
 
 
-@_jit
-def _project(points, radius, velocities):
-    """Eq. 9 on the bases: radially onto the surface, radial velocity removed (as the quiet kernel)."""
-    uniform = radius.shape[0] == 1
-    px_, py_, vx_, vy_ = points[:, 0], points[:, 1], velocities[:, 0], velocities[:, 1]
-    for q in range(px_.shape[0]):
-        r = radius[0] if uniform else radius[q]
-        px, py = px_[q], py_[q]
-        scale = r / math.sqrt(px * px + py * py)
-        px *= scale
-        py *= scale
-        px_[q] = px
-        py_[q] = py
-        vr = (vx_[q] * px + vy_[q] * py) * (1.0 / (r * r))
-        vx_[q] -= vr * px
-        vy_[q] -= vr * py
+def _importable(fn) -> tuple[str, str] | None:
+    """``(module, qualname)`` by which ``fn`` can be imported, or ``None`` (a lambda, a local function)."""
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", "")
+    if not module or "<" in qualname or module == "__main__":
+        return None
+    return module, qualname
 
 
-@_jit
-def _place_anchors(anchor, anchor_dir, radius):
-    uniform = radius.shape[0] == 1
-    ax, ay, dx, dy = anchor[:, 0], anchor[:, 1], anchor_dir[:, 0], anchor_dir[:, 1]
-    for q in range(ax.shape[0]):
-        r = radius[0] if uniform else radius[q]
-        ax[q] = r * dx[q]
-        ay[q] = r * dy[q]
+def _source(fn) -> str:
+    try:
+        return inspect.getsource(fn)
+    except (OSError, TypeError):
+        return repr(fn)
 
 
-@_jit
+def cache_dir() -> Path:
+    """Where generated kernels live: ``$BARK_CACHE_DIR``, else ``$XDG_CACHE_HOME/bark``, else
+    ``~/.cache/bark`` (numba caches their compiled code beside them)."""
+    base = os.environ.get("BARK_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "bark")
+    return Path(base) / "kernels"
+
+
+_JITABLE: set = set()
+
+
+def _helpers(fn, seen=None) -> list:
+    """``fn`` and the plain Python functions it calls through its module's globals, transitively:
+    what numba must be able to compile inside it."""
+    seen = [] if seen is None else seen
+    if fn in seen:
+        return seen
+    seen.append(fn)
+    code, scope = getattr(fn, "__code__", None), getattr(fn, "__globals__", {})
+    for name in code.co_names if code is not None else ():
+        obj = scope.get(name)
+        if inspect.isfunction(obj) and not isinstance(obj, numba.core.dispatcher.Dispatcher):
+            _helpers(obj, seen)
+    return seen
+
+
+def _make_jitable(functions) -> None:
+    """Let compiled code call these plain functions (``register_jitable``): a plugin's compiled form
+    may call its own helpers without importing numba."""
+    for fn in functions:
+        if fn not in _JITABLE:
+            numba.extending.register_jitable(fn)
+            _JITABLE.add(fn)
+
+
+def specialized(update, rule, radius):
+    """The stepping kernel with ``update``, ``rule`` and ``radius`` inlined (compiled once per
+    combination and kept on disk; see the module's docstring).  Functions that cannot be imported by
+    name (lambdas, local functions) get a wrapper compiled in this process only."""
+    key = (update, rule, radius)
+    if key in _SPECIALIZED:
+        return _SPECIALIZED[key]
+    helpers = [h for fn in key for h in _helpers(fn)[1:]]
+    _make_jitable(helpers)
+    names = [_importable(fn) for fn in key]
+    if None in names:
+        u, r, g = (inline(fn) for fn in key)
+
+        @numba.njit(nogil=True, error_model="numpy")
+        def steps(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log):
+            return _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log, u, r, g)
+
+        _SPECIALIZED[key] = steps
+        return steps
+    digest = hashlib.sha256()
+    for part in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in key),
+                 *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names)):
+        digest.update(part.encode())
+    imports, refs = [], []
+    for i, (module, qualname) in enumerate(names):
+        head, _, rest = qualname.partition(".")
+        imports.append(f"from {module} import {head} as _f{i}")
+        refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
+    text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
+                           update=refs[0], rule=refs[1], radius=refs[2])
+    name = f"bark_steps_{digest.hexdigest()[:20]}"
+    path = _write_once(name, text)
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    _SPECIALIZED[key] = module.steps
+    return module.steps
+
+
+def _write_once(name: str, text: str) -> Path:
+    """The generated file ``name``.py, written (atomically) if it is not there yet; in a temporary
+    folder when the cache folder cannot be written (then compiled once per process)."""
+    for folder in (cache_dir(), Path(tempfile.gettempdir()) / f"bark-kernels-{os.getuid() if hasattr(os, 'getuid') else 0}"):
+        path = folder / f"{name}.py"
+        if path.exists():
+            return path
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+            with os.fdopen(fd, "w") as fh:
+                fh.write(text)
+            os.replace(tmp, path)
+            return path
+        except OSError:
+            continue
+    raise OSError("no folder to write bark's generated kernels to: set BARK_CACHE_DIR")
+
+
+# -- per-step operations (integrators without a compiled form, growth laws without one) ---------
+
+
+@jit
+def _spring_forces(x, pi, pj, rest, k, intact, f):
+    f[:] = 0.0
+    no = np.empty(0)
+    no_i = np.empty(0, dtype=np.int64)
+    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, rest, f[:, 0], f[:, 1], f[:, 2], no, False, False,
+                 _no_breaking, no_i, no_i, no, 0, 0)
+
+
+@jit
 def _measure(x, pi, pj, rest, k, fmax, intact, out):
     x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
     top = -np.inf
     finite = True
     for s in range(pi.shape[0]):
-        i = pi[s]
-        j = pj[s]
-        d0 = x0[j] - x0[i]
-        d1 = x1[j] - x1[i]
-        d2 = x2[j] - x2[i]
-        t = k * (math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - rest[s])
+        d0 = x0[pj[s]] - x0[pi[s]]
+        d1 = x1[pj[s]] - x1[pi[s]]
+        d2 = x2[pj[s]] - x2[pi[s]]
+        t = _tension(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), rest[s], k)
         out[s] = t
-        if not math.isfinite(t):
+        if not abs(t) < np.inf:
             finite = False
         elif intact[s]:
             load = t / fmax[s]
@@ -162,213 +328,34 @@ def _measure(x, pi, pj, rest, k, fmax, intact, out):
     return top if finite else np.nan
 
 
-def _ends(state) -> tuple[np.ndarray, np.ndarray]:
-    """Spring ends as two unsigned 32-bit vectors (cached while ``state.pairs`` is the same array):
-    unsigned indices spare numba's negative-index wrap-around, and half-width ones memory traffic."""
-    sc = state.scratch
-    if sc.get("ends_of") is not state.pairs:
-        p = state.pairs.astype(np.uint32)
-        sc["ends_of"], sc["ends"] = state.pairs, (np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1]))
-    return sc["ends"]
-
-
-def _scratch(state, name: str, like: np.ndarray, dtype=None) -> np.ndarray:
-    """A work buffer shaped and laid out like ``like`` (of ``dtype``, default ``like``'s), kept in
-    ``state.scratch`` between calls."""
-    dtype = like.dtype if dtype is None else np.dtype(dtype)
-    buf = state.scratch.get(name)
-    if (buf is None or buf.shape != like.shape or buf.dtype != dtype
-            or buf.flags.f_contiguous != like.flags.f_contiguous):
-        buf = state.scratch[name] = np.empty_like(like, dtype=dtype)
-    return buf
-
-
-def elastic_forces(state, x: np.ndarray) -> np.ndarray:
-    mech = state.mechanics
-    f = np.empty_like(x, order="F")
-    _elastic(x, state.anchor, *_ends(state), state.rest, mech.k, mech.c, state.intact, f)
-    return f
-
-
-def euler_cromer_step(state, h: float) -> None:
-    mech = state.mechanics
-    _euler_cromer(state.x, state.v, state.anchor, *_ends(state), state.rest, mech.k, mech.c, mech.b, mech.m, h,
-                  state.intact, _scratch(state, "f", state.x))
-
-
-@_jit
-def _constrain_measure(x, v, anchor, anchor_dir, r_x, r_anchor, pi, pj, rest, k, fmax, intact, out):
-    _project(x, r_x, v)
-    _place_anchors(anchor, anchor_dir, r_anchor)
-    return _measure(x, pi, pj, rest, k, fmax, intact, out)
-
-
-def _radii(r) -> np.ndarray:
-    """A uniform radius travels as one value; a per-base one as its array."""
-    r = np.asarray(r, dtype=float)
-    if r.ndim == 0 or r.strides == (0,):  # a scalar, or np.broadcast_to of one
-        return np.array([r.flat[0]])
-    return np.ascontiguousarray(r)
-
-
-def measure(state, out: np.ndarray) -> float:
-    return float(_measure(state.x, *_ends(state), state.rest, state.mechanics.k, state.fmax, state.intact, out))
-
-
-def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
-    return float(_constrain_measure(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor),
-                                    *_ends(state), state.rest, state.mechanics.k, state.fmax, state.intact, out))
-
-
-@_jit
-def _ec_bases(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, ra, from_dir, r, c, b, hm, h):
-    """One Euler–Cromer step of every base (eqs. 4, 7, 8) on the spring forces in ``f``, then the
-    surface constraint at uniform radius ``r`` (eq. 9, as :func:`_project`); ``f`` is zeroed as it is
-    consumed.  The anchors are ``(ra·d, az)`` if ``from_dir``, else as stored (the very expression
-    :func:`_place_anchors` writes, so the bits do not depend on where calls end).  Returns whether
-    every coordinate stayed finite.  One coordinate per vector: this loop runs in SIMD lanes."""
-    bad = 0
-    inv_r2 = 1.0 / (r * r)
-    for q in range(x0.shape[0]):
-        if from_dir:
-            anchor_x = ra * dx[q]
-            anchor_y = ra * dy[q]
-        else:
-            anchor_x = ax[q]
-            anchor_y = ay[q]
-        g0 = f0[q] - c * (x0[q] - anchor_x) - b * v0[q]
-        g1 = f1[q] - c * (x1[q] - anchor_y) - b * v1[q]
-        g2 = f2[q] - c * (x2[q] - az[q]) - b * v2[q]
-        f0[q] = 0.0
-        f1[q] = 0.0
-        f2[q] = 0.0
-        u0 = v0[q] + g0 * hm
-        u1 = v1[q] + g1 * hm
-        u2 = v2[q] + g2 * hm
-        px = x0[q] + u0 * h
-        py = x1[q] + u1 * h
-        pz = x2[q] + u2 * h
-        scale = r / math.sqrt(px * px + py * py)
+@jit
+def _constrain(x, v, anchor, anchor_dir, r_x, r_anchor):
+    uniform_x, uniform_a = r_x.shape[0] == 1, r_anchor.shape[0] == 1
+    for q in range(x.shape[0]):
+        r = r_x[0] if uniform_x else r_x[q]
+        px, py = x[q, 0], x[q, 1]
+        scale = _surface_scale(px, py, r)
         px *= scale
         py *= scale
-        x0[q] = px
-        x1[q] = py
-        x2[q] = pz
-        bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
-        vr = (u0 * px + u1 * py) * inv_r2
-        v0[q] = u0 - vr * px
-        v1[q] = u1 - vr * py
-        v2[q] = u2
-    return bad == 0
+        x[q, 0] = px
+        x[q, 1] = py
+        vr = _radial_speed(v[q, 0], v[q, 1], px, py, 1.0 / (r * r))
+        v[q, 0] -= vr * px
+        v[q, 1] -= vr * py
+        ra = r_anchor[0] if uniform_a else r_anchor[q]
+        anchor[q, 0] = ra * anchor_dir[q, 0]
+        anchor[q, 1] = ra * anchor_dir[q, 1]
 
 
-@_jit
-def _euler_cromer_quiet(x, v, anchor, anchor_dir, pi, pj, rest, k, c, b, m, h, intact, inv_fmax, fmax, radii, f,
-                        accept_load, log_id, log_step, log_t, return_on_break, max_batch):
-    """Up to ``len(radii)`` whole steps (integrate, constrain, measure) at uniform radii ``radii``, in
-    one call.  Returns ``(steps taken, max load of the last step, length of the break log)``, the load
-    NaN if that step went non-finite (any coordinate of any base, or any intact tension).
-
-    Without a break log it stops after the first step whose max load exceeds 1 (a spring for the
-    breakers to judge).  With one, springs over their threshold break inside the call (see
-    :func:`_spring_pass`; ``intact`` is then the caller's working copy) and it goes on, unless
-    ``return_on_break`` or a step breaks more than ``max_batch`` springs (a degenerate event).  It
-    also stops after a step whose load exceeds ``accept_load`` (the caller undoes that step).
-
-    The spring pass that finds the load also accumulates the next step's spring forces into ``f``
-    (first same as last), through :func:`_spring_pass` as the per-step kernels do, so the result
-    does not depend on where calls begin and end.  Anchors (radius × fixed direction) are written
-    back once, at the end; the caller fills the tensions, if it needs them, for the last step.
-    """
-    hm = h / m
-    x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
-    v0, v1, v2 = v[:, 0], v[:, 1], v[:, 2]
-    f0, f1, f2 = f[:, 0], f[:, 1], f[:, 2]
-    ax, ay, az = anchor[:, 0], anchor[:, 1], anchor[:, 2]
-    dx, dy = anchor_dir[:, 0], anchor_dir[:, 1]
-    breaking = log_id.shape[0] > 0
-    _spring_forces(x0, x1, x2, pi, pj, rest, k, intact, f0, f1, f2)
-    top = -np.inf
-    finite = True
-    done = 0
-    n_log = 0
-    for step in range(radii.shape[0]):
-        ra = radii[step - 1] if step > 0 else 0.0
-        finite = _ec_bases(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, ra, step > 0, radii[step], c, b, hm, h)
-        before = n_log
-        top, springs_finite, n_log = _spring_pass(x0, x1, x2, pi, pj, rest, k, intact, inv_fmax, f0, f1, f2,
-                                                  fmax, log_id, log_step, log_t, n_log, step)
-        finite = finite and springs_finite
-        done = step + 1
-        if not finite or top > accept_load:
-            break
-        if not breaking:
-            if top > 1.0:
-                break
-        elif n_log > before and (return_on_break or n_log - before > max_batch):
-            break
-    _place_anchors(anchor, anchor_dir, radii[done - 1 : done])  # the anchors at the last step's radius
-    return done, (top if finite else np.nan), n_log
-
-
-def euler_cromer_quiet(state, h: float, radii: np.ndarray, tension: np.ndarray, accept_load: float = math.inf,
-                       break_rule: str | None = None, return_on_break: bool = True, max_batch: float = math.inf):
-    """Euler–Cromer steps at the uniform trunk radii ``radii`` (one per step); see
-    :func:`_euler_cromer_quiet`.  Returns ``(accepted steps, max load of the last step tried,
-    breaks)``, ``breaks`` being ``(spring ids, step within the call counted from 1, tensions)`` of
-    the springs broken inside the call (empty unless ``break_rule`` is ``"over-threshold"``).  The
-    state's ``intact`` is not touched: the caller applies ``breaks`` (``Simulation.break_springs``).
-
-    If the last step tried went non-finite, or its load exceeds ``accept_load``, it is undone: the
-    state is put back to the one before it by replaying the call's steps up to there from its start
-    (breaks included: the replay is exact), and it is not counted.  Without a break rule,
-    ``tension`` is filled when the returned step overloads a spring (load > 1): only then is it read."""
-    if break_rule not in (None, "over-threshold"):
-        raise ValueError(f"break_rule = {break_rule!r}: this backend knows only 'over-threshold'")
-    mech = state.mechanics
-    pi, pj = _ends(state)
-    now = (state.x, state.v, state.anchor)
-    start = [_scratch(state, f"start{i}", a) for i, a in enumerate(now)]
-    for keep, a in zip(start, now):
-        np.copyto(keep, a)
-    inv_fmax = np.divide(1.0, state.fmax, out=_scratch(state, "inv_fmax", state.fmax))
-    radii = np.ascontiguousarray(radii, dtype=float)
-    if break_rule is None:
-        no_f, no_i = _none()
-        live, log = state.intact, (no_i, no_i, no_f)
-    else:
-        live = _scratch(state, "live", state.intact)
-        log = (_scratch(state, "log_id", state.intact, np.int64), _scratch(state, "log_step", state.intact, np.int64),
-               _scratch(state, "log_t", state.intact, float))
-
-    def call(r):
-        if live is not state.intact:
-            np.copyto(live, state.intact)
-        return _euler_cromer_quiet(state.x, state.v, state.anchor, state.anchor_dir, pi, pj, state.rest, mech.k,
-                                   mech.c, mech.b, mech.m, h, live, inv_fmax, state.fmax, r,
-                                   _scratch(state, "f", state.x), accept_load, *log, return_on_break, max_batch)
-
-    done, load, n_log = call(radii)
-    if math.isnan(load) or load > accept_load:
-        for keep, a in zip(start, now):
-            np.copyto(a, keep)
-        n_log = call(radii[: done - 1])[2] if done > 1 else 0
-        done -= 1
-    elif load > 1.0 and break_rule is None:  # springs to break: the breakers need every tension of this state
-        _measure(state.x, pi, pj, state.rest, mech.k, state.fmax, state.intact, tension)
-    breaks = (log[0][:n_log].copy(), log[1][:n_log] + 1, log[2][:n_log].copy())
-    return int(done), float(load), breaks
-
-
-@_jit
-def _components(n, pairs, intact, labels):
+@jit
+def _components(n, pi, pj, intact, labels):
     """Connected components of the intact springs by union-find; labels numbered in order of each
     component's smallest base, as scipy.sparse.csgraph.connected_components numbers them."""
     parent = np.arange(n)
-    for s in range(pairs.shape[0]):
+    for s in range(pi.shape[0]):
         if not intact[s]:
             continue
-        a, b = pairs[s, 0], pairs[s, 1]
+        a, b = np.int64(pi[s]), np.int64(pj[s])
         while parent[a] != a:  # find, halving the path as we go
             parent[a] = parent[parent[a]]
             a = parent[a]
@@ -393,7 +380,76 @@ def _components(n, pairs, intact, labels):
     return count
 
 
-def patch_labels(state) -> np.ndarray:
-    labels = np.empty(state.n_bases, dtype=np.int32)
-    _components(state.n_bases, state.pairs, state.intact, labels)
-    return labels
+def _radii(r) -> np.ndarray:
+    """A uniform radius travels as one value; a per-base one as its array."""
+    r = np.asarray(r, dtype=float)
+    if r.ndim == 0 or r.strides == (0,):  # a scalar, or np.broadcast_to of one
+        return np.array([r.flat[0]])
+    return np.ascontiguousarray(r)
+
+
+class NumbaBackend(Backend):
+    name = NAME
+
+    def __init__(self) -> None:
+        self._buffers: dict[str, np.ndarray] = {}
+
+    def _buffer(self, name: str, like: np.ndarray, dtype=None) -> np.ndarray:
+        """A work buffer shaped and laid out like ``like``, kept between calls (derived data)."""
+        dtype = like.dtype if dtype is None else np.dtype(dtype)
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape != like.shape or buf.dtype != dtype:
+            buf = self._buffers[name] = np.empty_like(like, dtype=dtype, order="F" if like.ndim > 1 else "C")
+        return buf
+
+    def spring_forces(self, state, mech, x) -> np.ndarray:
+        f = np.empty_like(x, order="F")
+        _spring_forces(x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, state.intact, f)
+        return f
+
+    def measure(self, state, mech, out: np.ndarray) -> float:
+        return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, state.fmax,
+                              state.intact, out))
+
+    def constrain(self, state, r_x, r_anchor) -> None:
+        _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        kernel = specialized(plan.update, plan.rule, plan.radius)
+        now = (state.x, state.v, state.anchor)
+        start = [self._buffer(f"start{i}", a) for i, a in enumerate(now)]
+        for keep, a in zip(start, now):
+            np.copyto(keep, a)
+        live = self._buffer("live", state.intact)
+        log = (self._buffer("log_id", state.intact, np.int64), self._buffer("log_step", state.intact, np.int64),
+               self._buffer("log_t", state.intact, float))
+        x, v, a, d, f = state.x, state.v, state.anchor, state.anchor_dir, self._buffer("f", state.x)
+        bases = (x[:, 0], x[:, 1], x[:, 2], v[:, 0], v[:, 1], v[:, 2], f[:, 0], f[:, 1], f[:, 2],
+                 a[:, 0], a[:, 1], a[:, 2], d[:, 0], d[:, 1])
+        ends = (state.pairs[:, 0], state.pairs[:, 1])
+        constants = (float(mech.k), float(mech.c), float(mech.b), float(mech.m), float(plan.h),
+                     float(plan.accept_load), float(plan.max_batch))
+        flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break))
+        params = np.ascontiguousarray(plan.params, dtype=float)
+
+        def call(times):
+            np.copyto(live, state.intact)
+            return kernel(bases, ends, state.rest, state.fmax, live, tension, constants, times, params, flags, log)
+
+        times = np.ascontiguousarray(plan.times, dtype=float)
+        done, load, n_log = call(times)
+        if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
+            for keep, arr in zip(start, now):
+                np.copyto(arr, keep)
+            n_log = call(times[: done - 1])[2] if done > 1 else 0
+            done -= 1
+        return Steps(done=int(done), load=float(load), broken=log[0][:n_log].copy(), step=log[1][:n_log].copy(),
+                     tension=log[2][:n_log].copy())
+
+    def patch_labels(self, state) -> np.ndarray:
+        labels = np.empty(state.n_bases, dtype=np.int32)
+        _components(state.n_bases, state.pairs[:, 0], state.pairs[:, 1], state.intact, labels)
+        return labels
+
+
+BACKEND_CLASS = NumbaBackend

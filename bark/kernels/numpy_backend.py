@@ -1,47 +1,124 @@
-"""The numpy backend: vectorised array operations, no compiled code (the reference)."""
+"""The numpy backend: the physics of :mod:`bark.physics` and the plugins' compiled forms on whole
+arrays at once; no compiled code.  The reference, and the baseline every speed-up is quoted against
+(``bark bench speed`` also measures it against a plain vectorised numpy step)."""
 
 from __future__ import annotations
 
-import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+import math
 
-from bark.forces import anchor_forces, spring_forces, tensions
-from bark.state import project_to_surface
+import numpy as np
+import scipy.sparse as sp
+
+from bark import physics
+from bark.forces import incidence
+from bark.kernels import Backend, Plan, Steps
 
 NAME = "numpy"
 
 
-def elastic_forces(state, x: np.ndarray) -> np.ndarray:
-    mech = state.mechanics
-    f = spring_forces(x, state.pairs, state.rest, mech.k, state.intact, state.incidence)
-    if mech.c:
-        f += anchor_forces(x, state.anchor, mech.c)
-    return f
+class NumpyBackend(Backend):
+    name = NAME
+
+    def __init__(self) -> None:
+        self._inc_key = None
+        self._inc = None
+
+    def incidence(self, state) -> sp.csr_matrix:
+        """Spring-to-base incidence of the state's springs (derived; rebuilt when the topology grows).
+        A sparse product sums spring forces onto bases 2.5× faster than ``bincount`` at 70 000 bases."""
+        key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
+        if key != self._inc_key:
+            self._inc, self._inc_key = incidence(state.pairs, state.n_bases), key
+        return self._inc
+
+    def _geometry(self, state, x):
+        p = state.pairs
+        d = np.take(x, p[:, 1], axis=0) - np.take(x, p[:, 0], axis=0)
+        return d, np.sqrt(np.einsum("ij,ij->i", d, d))
+
+    def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
+        d, length = self._geometry(state, x)
+        t = physics.tension(length, state.rest, mech.k)
+        g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
+        return np.asarray(self.incidence(state) @ (d * g[:, None]))
+
+    def spring_forces(self, state, mech, x) -> np.ndarray:
+        return self._spring_forces(state, mech, x, state.intact)
+
+    def measure(self, state, mech, out: np.ndarray) -> float:
+        _, length = self._geometry(state, state.x)
+        out[:] = physics.tension(length, state.rest, mech.k)
+        if not np.isfinite(out).all():
+            return math.nan
+        live = state.intact
+        return float(np.max(out[live] / state.fmax[live])) if live.any() else -math.inf
+
+    def constrain(self, state, r_x, r_anchor) -> None:
+        x, v = state.x, state.v
+        r = np.asarray(r_x, dtype=float)
+        scale = physics.surface_scale(x[:, 0], x[:, 1], r)
+        x[:, 0] *= scale
+        x[:, 1] *= scale
+        vr = physics.radial_speed(v[:, 0], v[:, 1], x[:, 0], x[:, 1], 1.0 / (r * r))
+        v[:, 0] -= vr * x[:, 0]
+        v[:, 1] -= vr * x[:, 1]
+        state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+        done, load, live, log = self._run(state, mech, plan, plan.times, tension)
+        if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
+            for keep, arr in zip(start, (state.x, state.v, state.anchor)):
+                arr[...] = keep
+            _, _, live, log = self._run(state, mech, plan, plan.times[:done], tension)
+        broke = [b for b, _, _ in log]
+        return Steps(done=done, load=load,
+                     broken=np.concatenate(broke) if log else np.empty(0, np.int64),
+                     step=np.concatenate([np.full(b.size, s, np.int64) for b, s, _ in log]) if log else np.empty(0, np.int64),
+                     tension=np.concatenate([t for _, _, t in log]) if log else np.empty(0))
+
+    def _run(self, state, mech, plan: Plan, times: np.ndarray, tension: np.ndarray):
+        """Steps at ``times``; stops after a step that ends the call (see ``Plan``).  Returns the steps
+        kept (a failed last step is not counted, but the state holds it: the caller replays), the
+        last load, the working intact mask and the breaks."""
+        live = state.intact.copy()
+        log: list[tuple[np.ndarray, int, np.ndarray]] = []
+        fs = self._spring_forces(state, mech, state.x, live)
+        hm = plan.h / mech.m
+        z0 = state.anchor[:, 2]
+        done, load = 0, -math.inf
+        for step, t in enumerate(times.tolist(), start=1):
+            x, v, a = state.x, state.v, state.anchor
+            for axis in range(3):
+                g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
+                x[:, axis], v[:, axis] = plan.update(x[:, axis], v[:, axis], g, hm, plan.h)
+            r_x = plan.radius(t, 0.0, plan.params) if plan.uniform else plan.radius(t, x[:, 2], plan.params)
+            self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, plan.params))
+            _, length = self._geometry(state, x)
+            t_all = physics.tension(length, state.rest, mech.k)
+            if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()):
+                return done, math.nan, live, log
+            load = float(np.max(t_all[live] / state.fmax[live])) if live.any() else -math.inf
+            if load > plan.accept_load:
+                return done, load, live, log
+            tension[:] = t_all
+            done = step
+            picked = np.flatnonzero(live & plan.rule(t_all, state.fmax))
+            if plan.breaking and picked.size:
+                live[picked] = False
+                log.append((picked, step, t_all[picked]))
+            fs = self._spring_forces(state, mech, x, live)
+            if picked.size and (not plan.breaking or plan.return_on_break or picked.size > plan.max_batch):
+                break
+        return done, load, live, log
+
+    def patch_labels(self, state) -> np.ndarray:
+        """Connected components of the intact springs (scipy.sparse.csgraph)."""
+        from scipy.sparse.csgraph import connected_components
+
+        p = state.pairs[state.intact].astype(np.int64)
+        adj = sp.coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(state.n_bases, state.n_bases))
+        return connected_components(adj, directed=False)[1].astype(np.int32)
 
 
-def euler_cromer_step(state, h: float) -> None:
-    state.v += state.forces() * (h / state.mechanics.m)
-    state.x += state.v * h
-
-
-def measure(state, out: np.ndarray) -> float:
-    out[:] = tensions(state.x, state.pairs, state.rest, state.mechanics.k)
-    if not np.isfinite(out).all():
-        return float("nan")
-    if not state.intact.any():
-        return float("-inf")
-    return float(np.max(out[state.intact] / state.fmax[state.intact]))
-
-
-def constrain_measure(state, r_x, r_anchor, out: np.ndarray) -> float:
-    project_to_surface(state.x, r_x, state.v)
-    state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
-    return measure(state, out)
-
-
-def patch_labels(state) -> np.ndarray:
-    """Connected components of the intact springs (scipy.sparse.csgraph)."""
-    p = state.pairs[state.intact]
-    adj = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(state.n_bases, state.n_bases))
-    return connected_components(adj, directed=False)[1].astype(np.int32)
+BACKEND_CLASS = NumpyBackend

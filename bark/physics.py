@@ -1,0 +1,56 @@
+"""The model's physics, each piece written once (paper, "Fracture simulation", eqs. 1–9).
+
+Every function here is elementwise arithmetic: called with numpy arrays it computes a whole lattice
+at once (the numpy backend), called with floats inside compiled code it is inlined per base or per
+spring (the numba backend compiles these very functions with ``inline="always"``).  So the two
+backends evaluate the same expressions in the same order, and adding a force term is one edit here.
+
+Conventions: Cartesian ``(x, y, z)``, trunk axis along ``z`` through the origin; tension positive
+when a spring is stretched.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold", "no_breaking"]
+
+
+def tension(length, rest, k):
+    """Tension of a spring of rest length ``rest`` stretched to ``length`` (eq. 1): ``k (|d| − l)``."""
+    return k * (length - rest)
+
+
+def spring_force_scale(t, length):
+    """The factor ``g`` with ``g · d`` the force on a spring's first end (``d = x_j − x_i``): a
+    stretched spring pulls its ends together.  Only called for ``length > 0`` (a spring of zero
+    length has no direction, and exerts no force)."""
+    return t / length
+
+
+def base_force(spring_force, x, anchor, v, c, b):
+    """Total force on a base along one axis (eq. 4): its springs' sum, its anchor spring of zero
+    rest length (eq. 2) and damping (eq. 3)."""
+    return spring_force - c * (x - anchor) - b * v
+
+
+def surface_scale(px, py, r):
+    """The factor that moves a point radially onto the trunk surface of radius ``r`` (eq. 9)."""
+    return r / np.sqrt(px * px + py * py)
+
+
+def radial_speed(vx, vy, px, py, inv_r2):
+    """The radial component of a velocity at a point on the surface, over the radius (``inv_r2 =
+    1/r²``): ``(v·p)/r²``; subtracting it times ``p`` leaves the velocity tangential."""
+    return (vx * px + vy * py) * inv_r2
+
+
+def over_threshold(t, fmax):
+    """The paper's breaking rule: a spring breaks when its tension exceeds its threshold
+    (compression never breaks a spring)."""
+    return t > fmax
+
+
+def no_breaking(t, fmax):
+    """The rule of a layer without fracture: nothing breaks."""
+    return False

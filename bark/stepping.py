@@ -1,0 +1,199 @@
+"""How a run steps: the numerical settings, the clock, and the plan of each call of the kernel.
+
+* :class:`Numerics` — the settings (dt, stepping mode, overshoot tolerance, halvings, backend),
+  declared once: a scene's ``[run]`` table and the command line take them from here.
+* :class:`Clock` — step control.  Time is an integer count of the smallest step
+  (``t = ticks × h / 2**levels``), never a running sum, so variable steps stay exact and stop times
+  are hit exactly.  Adaptive stepping halves the step around breaks and doubles it back on its grid.
+* :func:`plan` — the fast-path policy: how many steps the next call takes and what may happen inside
+  it, from what the parts declare (compiled forms, breaking rules) and what must be seen from Python
+  (stop conditions, triggers, adaptive halving).
+* :func:`python_step` — one step for parts without a compiled form (an integrator that solves a
+  linear system, a growth law given only as ``radius``), with the same result as a kernel call.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from bark import physics
+from bark._validate import int_in, one_of, positive
+from bark.kernels import BACKENDS, Plan, Steps
+
+__all__ = ["Numerics", "Clock", "plan", "python_step", "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
+
+DEFAULT_DT = 0.3
+"""Default (largest) time step.  With adaptive stepping and ``DEFAULT_OVERSHOOT_TOL`` this setting
+was measured by ``bark bench accuracy`` to give pattern statistics within the seed-to-seed spread of
+a fine dt = 0.005 reference, in the vertical and the diamond regime, faster than the paper's fixed
+dt = 0.01 (which ``dt = 0.01, stepping = "fixed"`` reproduces): 4.9× in the vertical regime as last
+measured (``bark bench accuracy`` prints the current figure)."""
+DEFAULT_STEPPING = "adaptive"
+DEFAULT_OVERSHOOT_TOL = 0.002
+SAFETY = 0.9
+"""Automatic stepping keeps sub-steps at or below this fraction of the stability limit."""
+CHUNK = 128
+"""Most steps in one kernel call (progress, signals and periodic checkpoints are seen between calls)."""
+CHUNK_WORK = 20_000_000
+"""Most base-steps in one call (about 0.2 s), so that a very large scene still answers promptly."""
+
+
+@attrs.frozen(kw_only=True)
+class Numerics:
+    """How a run is stepped."""
+
+    dt: float = attrs.field(default=DEFAULT_DT, validator=positive)
+    """Time step, time units (1 = 88.5 days); with adaptive stepping the largest one.  The paper
+    used a fixed 0.01 (21 h): dt 0.01 with fixed stepping reproduces it."""
+    stepping: str = attrs.field(default=DEFAULT_STEPPING, validator=one_of("fixed", "auto", "adaptive"))
+    """fixed: refuse a dt above the integrator's stability limit; auto: split it into sub-steps;
+    adaptive: also halve steps around breaks to keep overshoot below overshoot_tol."""
+    overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
+    """Adaptive stepping: largest relative overshoot tension/fmax − 1 allowed at a break."""
+    max_halvings: int = attrs.field(default=10, validator=int_in(1, 40))
+    """Adaptive stepping: the smallest step is the full step / 2**max_halvings (at most 40)."""
+    backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
+    """Compute backend: numpy, numba, or auto (numba if installed, else numpy)."""
+
+
+@attrs.define
+class Clock:
+    """Step control: the full step ``h``, the current halving, and time as integer ticks."""
+
+    h: float
+    """The full step: dt, or dt split into sub-steps below the stability limit."""
+    levels: int = 0
+    """Halvings allowed (adaptive stepping), so the smallest step is ``h / 2**levels``."""
+    ticks: int = 0
+    halvings: int = 0
+    """The current step is ``h / 2**halvings``."""
+
+    @property
+    def h_min(self) -> float:
+        return self.h / (1 << self.levels)
+
+    @property
+    def t(self) -> float:
+        return self.ticks * self.h_min
+
+    @property
+    def size(self) -> int:
+        """The current step, in ticks."""
+        return 1 << (self.levels - self.halvings)
+
+    @property
+    def step(self) -> float:
+        return self.size * self.h_min
+
+    def times(self, n: int) -> np.ndarray:
+        """Time at the end of each of the next ``n`` steps of the current size."""
+        return (self.ticks + (np.arange(n) + 1.0) * self.size) * self.h_min
+
+    def advance(self, steps: int) -> None:
+        self.ticks += steps * self.size
+
+    def can_halve(self) -> bool:
+        return self.halvings < self.levels
+
+    def halve(self) -> None:
+        self.halvings += 1
+
+    def relax(self, load: float) -> None:
+        """Quiet again (no spring over its threshold): double the step, staying on the coarser grid."""
+        if self.halvings and load <= 1.0 and self.ticks % (self.size << 1) == 0:
+            self.halvings -= 1
+
+    def fit(self, until_time: float) -> None:
+        """Shrink ``h`` a little so that ``until_time`` is a whole number of steps (a fresh run with
+        automatic or adaptive stepping then ends exactly there)."""
+        steps = max(1, math.ceil(until_time / self.h - 1e-9))
+        self.h = until_time / steps
+
+
+def _first(flags: np.ndarray) -> int:
+    """Index of the first True in ``flags``, or ``len(flags)`` if none."""
+    return int(np.argmax(flags)) if flags.any() else len(flags)
+
+
+def plan(sim, stop, most: int | None = None) -> Plan:
+    """The next call: how many steps of what size, and what may happen inside it.
+
+    Many steps go in one call when the integrator and the growth law have compiled forms, the step is
+    full size, and the breakers can be watched by one rule; the call then ends where a stop condition
+    can next hold or a trigger is next due.  Springs break inside the call when every breaker has the
+    same rule and stepping is not adaptive (undoing a long call of breaks would cost a replay);
+    otherwise the call ends after the first step in which the rule picks a spring, and the breakers
+    select in Python (an ``overload_only`` breaker is watched by the threshold rule)."""
+    clock = sim.clock
+    adaptive = clock.levels > 0
+    rule, breaking = _rule(sim.breakers)
+    breaking = breaking and not (adaptive and sim.breakers)
+    compiled = sim.integrator.update is not None and sim.growth.compiled is not None
+    n = 1
+    if compiled and clock.halvings == 0 and rule is not None:
+        n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases, 1), most or CHUNK))
+        n = _bounded(sim, stop, clock.times(n), n)
+    must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
+    return Plan(
+        h=clock.step, times=clock.times(n), update=sim.integrator.update, radius=sim.growth.compiled,
+        params=sim.growth.compiled_params() if compiled else np.empty(0), uniform=sim.growth.uniform,
+        rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
+        accept_load=1.0 + sim.numerics.overshoot_tol if adaptive and clock.can_halve() else math.inf,
+        return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
+    )
+
+
+def _rule(breakers) -> tuple:
+    """``(rule, breaking)``: the one rule that says which springs the breakers would pick — and
+    whether it is exactly what they break (their shared compiled rule), or only when to ask them (the
+    threshold, for breakers that break only over it).  ``(None, False)`` when no rule says it."""
+    if not breakers:
+        return physics.no_breaking, True
+    rules = {b.rule for b in breakers}
+    if len(rules) == 1 and None not in rules:
+        return rules.pop(), True
+    if all(b.rule is not None or b.overload_only for b in breakers) and rules <= {None, physics.over_threshold}:
+        return physics.over_threshold, False
+    return None, False
+
+
+def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
+    """``n`` cut to end where a trigger is next due or a time or radius stop can next hold."""
+    for trigger, _ in sim.actions:
+        step, due = trigger.next_step(sim), trigger.next_time(sim)
+        if step is not None:
+            n = min(n, max(1, step - sim.step_count))
+        if due is not None:
+            n = min(n, _first(times >= due - 1e-9 * sim.clock.h) + 1)
+    if stop is not None and stop.until_time is not None:
+        n = min(n, _first(times >= stop.until_time - 1e-9 * sim.clock.h) + 1)
+    if stop is not None and stop.until_radius is not None:
+        z = sim.state.anchor[:, 2]
+        radii = np.array([np.mean(np.broadcast_to(sim.growth.radius(t, z), z.shape)) for t in times[:n].tolist()])
+        n = min(n, _first(radii >= stop.until_radius) + 1)
+    return max(n, 1)
+
+
+def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+    """One step with the integrator's ``step`` and the growth law's ``radius`` in Python, then the
+    backend's surface constraint and tensions: a kernel call's result, for parts without compiled
+    forms.  A step that goes non-finite or over ``plan.accept_load`` is undone."""
+    keep = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+    sim.integrator.step(state, plan.h, sim.forces)
+    t = float(plan.times[0])
+    r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))
+    r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
+    sim.backend.constrain(state, r_x, r_a)
+    load = sim.backend.measure(state, mech, tension)
+    if not state.is_finite():
+        load = math.nan
+    done = 1
+    if math.isnan(load) or load > plan.accept_load:
+        for saved, arr in zip(keep, (state.x, state.v, state.anchor)):
+            arr[...] = saved
+        done = 0
+    empty = np.empty(0, np.int64)
+    return Steps(done=done, load=load, broken=empty, step=empty, tension=np.empty(0))
