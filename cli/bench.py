@@ -22,9 +22,9 @@ def _phase_sim(n: int, backend: str, start_t: float):
     that a step is the same work whatever the backend), compiled and run up to ``start_t``."""
     from bark.scene import Scene
 
-    run = {"backend": backend, "dt": 0.01, "stepping": "fixed"}
+    run = {"backend": backend, "dt": 0.01, "stepping": "fixed", "until_time": 1e6}  # the bench stops it itself
     sim = Scene.from_dict({"lattice": {"n_bases": n}, "run": run}).simulation()
-    sim.run(Stop(until_time=max(start_t, 2 * sim.h)))  # also compiles the kernels, outside the timing
+    sim.run(Stop(until_time=max(start_t, 2 * sim.clock.h)))  # also compiles the kernels, outside the timing
     return sim
 
 
@@ -38,7 +38,7 @@ def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int
     for _ in range(repeats):
         for b, sim in sims.items():
             s0, t0 = sim.step_count, time.perf_counter()
-            sim.run(Stop(until_time=sim.state.t + steps * sim.h))
+            sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
             rates[b].append((sim.step_count - s0) / (time.perf_counter() - t0))
     return {b: float(np.median(r)) for b, r in rates.items()}
 
@@ -48,7 +48,7 @@ def _peak_memory(n: int, backend: str, start_t: float, steps: int) -> float:
     simulation and running it through the phase; measured apart from the timing, which tracing slows."""
     tracemalloc.start()
     sim = _phase_sim(n, backend, start_t)
-    sim.run(Stop(until_time=sim.state.t + steps * sim.h))
+    sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return peak / 2**20
@@ -83,7 +83,7 @@ def speed(sizes, backends, phases, steps, repeats, csv_path):
     from bark.scene import Scene
 
     for n in sizes:  # every size is a valid scene that fits in memory, before any work
-        Scene.from_dict({"lattice": {"n_bases": n}}).memory_estimate()
+        Scene.from_dict({"lattice": {"n_bases": n}, "run": {"until_time": 1e6}}).memory_estimate()
     rows = []
     for n in sizes:
         for phase in phases:

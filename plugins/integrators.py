@@ -6,7 +6,6 @@ from typing import ClassVar
 
 import attrs
 import numpy as np
-from scipy.sparse.linalg import LinearOperator, cg
 
 from bark._validate import one_of, positive, positive_int
 from bark.errors import BarkError, Ref
@@ -80,6 +79,8 @@ class ImplicitOverdamped(Integrator):
         return float("inf")
 
     def step(self, state, dt: float, forces) -> None:
+        from scipy.sparse.linalg import LinearOperator, cg  # here, not at import: a run without it never pays for it
+
         mech = forces.mechanics
         matvec, diag = forces.stiffness(state)
         size = diag.size

@@ -305,3 +305,20 @@ def test_standard_error_difference_is_eq_15_and_asymmetric():
     assert standard_error_difference(10.0, 2.0, 16.0) == pytest.approx(3.0)
     assert standard_error_difference(16.0, 0.5, 10.0) == pytest.approx(12.0)
     assert standard_error_difference(178.0, 2.0, 4.0, axial=True) == pytest.approx(3.0)  # 6° apart as axes
+
+
+@given(
+    centre=st.floats(0.0, 180.0),
+    spread=st.floats(0.01, 40.0),  # wider, and the mean axis of a few samples is ill-conditioned
+    n=st.integers(2, 60),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_axial_statistics_are_scipys(centre, spread, n, seed):
+    """bark computes the doubled-angle mean and SD itself (importing scipy.stats costs every run
+    0.8 s); they are scipy.stats.circmean/circstd with low=0, high=180, also near the 0°/180° wrap."""
+    from scipy import stats
+
+    deg = np.random.default_rng(seed).normal(centre, spread, n) % 180.0
+    mean, ref = axial_mean(deg), float(stats.circmean(deg, high=180.0, low=0.0)) % 180.0
+    assert min(abs(mean - ref), 180.0 - abs(mean - ref)) < 1e-9
+    assert axial_sd(deg) == pytest.approx(float(stats.circstd(deg, high=180.0, low=0.0)), rel=1e-9, abs=1e-7)  # √(−2 ln R) cancels as R → 1

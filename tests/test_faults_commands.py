@@ -78,3 +78,12 @@ def test_no_message_a_user_sees_cites_a_file_they_do_not_have():
                *REPO_ROOT.glob("examples/**/*.toml"), REPO_ROOT / "README.md", REPO_ROOT / "ARCHITECTURE.md"]
     assert not [p.name for p in shipped if "NOTES.md" in p.read_text()]
     assert (REPO_ROOT / "docs" / "numerics.md").is_file()  # what messages cite instead
+
+
+def test_bench_speed_runs_small(tmp_path):
+    """The benchmark itself runs (tiny sizes: a smoke test, never a timing)."""
+    out = tmp_path / "speed.csv"
+    result = CliRunner().invoke(cli, ["bench", "speed", "--n-bases", "200", "--steps", "5", "--repeats", "1",
+                                      "--phase", "quiet", "--csv", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "speed_vs_numpy" in out.read_text()

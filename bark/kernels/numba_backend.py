@@ -45,10 +45,10 @@ _no_breaking = inline(physics.no_breaking)
 
 
 @inline
-def _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2, tension, loads, breaking, rule,
+def _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, inv_fmax, f0, f1, f2, loads, breaking, rule,
                  log_id, log_step, log_t, n_log, step):
-    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also write its tension,
-    find the largest tension / threshold, and apply the rule: with ``breaking``, a spring it picks is
+    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also find the largest
+    tension / threshold (``t · 1/fmax``) and apply the rule: with ``breaking``, a spring it picks is
     marked broken in ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after
     the break gives, to the bit) and logged; without, it is only noted.  Returns ``(largest load,
     all tensions finite, log length, whether the rule picked a spring)``."""
@@ -68,8 +68,7 @@ def _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2, tension, l
         if loads:
             if not abs(t) < np.inf:
                 finite = False
-            tension[s] = t
-            load = t / fmax[s]
+            load = t * inv_fmax[s]
             if load > top:
                 top = load
             if rule(t, fmax[s]):
@@ -93,16 +92,21 @@ def _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2, tension, l
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_uniform):
+def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before, from_radius):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
-    velocity removed), the anchors moved with the surface.  Returns whether every coordinate stayed
-    finite.  One coordinate per vector: this loop runs in SIMD lanes."""
+    velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
+    step the anchors are ``r_before · direction`` (the last step's radius; written back once, at the end
+    of the call — the very products, so the bits do not depend on where calls end); else each is placed
+    at its own radius, every step.  Returns whether every coordinate stayed finite.
+    One coordinate per vector: this loop runs in SIMD lanes."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     bad = 0
     for q in range(x0.shape[0]):
-        g0 = _base_force(f0[q], x0[q], ax[q], v0[q], c, b)
-        g1 = _base_force(f1[q], x1[q], ay[q], v1[q], c, b)
+        anchor_x = r_before * dx[q] if from_radius else ax[q]
+        anchor_y = r_before * dy[q] if from_radius else ay[q]
+        g0 = _base_force(f0[q], x0[q], anchor_x, v0[q], c, b)
+        g1 = _base_force(f1[q], x1[q], anchor_y, v1[q], c, b)
         g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
         f0[q] = 0.0
         f1[q] = 0.0
@@ -110,7 +114,7 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_uniform
         px, u0 = update(x0[q], v0[q], g0, hm, h)
         py, u1 = update(x1[q], v1[q], g1, hm, h)
         pz, u2 = update(x2[q], v2[q], g2, hm, h)
-        r = r_uniform if uniform else radius(t, pz, params)
+        r = r_now if uniform else radius(t, pz, params)
         scale = _surface_scale(px, py, r)
         px *= scale
         py *= scale
@@ -122,14 +126,15 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_uniform
         v0[q] = u0 - vr * px
         v1[q] = u1 - vr * py
         v2[q] = u2
-        ra = r_uniform if uniform else radius(t, az[q], params)
-        ax[q] = ra * dx[q]
-        ay[q] = ra * dy[q]
+        if not uniform:
+            ra = radius(t, az[q], params)
+            ax[q] = ra * dx[q]
+            ay[q] = ra * dy[q]
     return bad == 0
 
 
 @inline
-def _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log, update, rule, radius):
+def _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log, update, rule, radius):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
@@ -145,26 +150,33 @@ def _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, para
     f0[:] = 0.0
     f1[:] = 0.0
     f2[:] = 0.0
-    _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2, tension, False, False, rule,
+    _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, inv_fmax, f0, f1, f2, False, False, rule,
                  log_id, log_step, log_t, 0, 0)
     top = -np.inf
     finite = True
     done = 0
     n_log = 0
+    r_before = 0.0
     for step in range(times.shape[0]):
         t = times[step]
-        r_uniform = radius(t, 0.0, params) if uniform else 0.0
-        finite = _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_uniform)
+        r_now = radius(t, 0.0, params) if uniform else 0.0
+        finite = _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before,
+                            uniform and step > 0)
+        r_before = r_now
         before = n_log
-        top, springs_finite, n_log, picked = _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, f0, f1, f2,
-                                                          tension, True, breaking, rule, log_id, log_step, log_t,
-                                                          n_log, step + 1)
+        top, springs_finite, n_log, picked = _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, inv_fmax,
+                                                          f0, f1, f2, True, breaking, rule, log_id, log_step,
+                                                          log_t, n_log, step + 1)
         finite = finite and springs_finite
         done = step + 1
         if not finite or top > accept_load or picked:
             break
         if n_log > before and (return_on_break or n_log - before > max_batch):
             break
+    if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
+        for q in range(ax.shape[0]):
+            ax[q] = r_before * dx[q]
+            ay[q] = r_before * dy[q]
     return done, (top if finite else np.nan), n_log
 
 
@@ -180,8 +192,8 @@ _radius = inline({radius})
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def steps(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log):
-    return _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log,
+def steps(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
+    return _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
                          _update, _rule, _radius)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
@@ -251,8 +263,8 @@ def specialized(update, rule, radius):
         u, r, g = (inline(fn) for fn in key)
 
         @numba.njit(nogil=True, error_model="numpy")
-        def steps(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log):
-            return _steps_kernel(bases, ends, rest, fmax, live, tension, constants, times, params, flags, log, u, r, g)
+        def steps(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
+            return _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log, u, r, g)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -304,12 +316,12 @@ def _spring_forces(x, pi, pj, rest, k, intact, f):
     f[:] = 0.0
     no = np.empty(0)
     no_i = np.empty(0, dtype=np.int64)
-    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, rest, f[:, 0], f[:, 1], f[:, 2], no, False, False,
+    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, rest, rest, f[:, 0], f[:, 1], f[:, 2], False, False,
                  _no_breaking, no_i, no_i, no, 0, 0)
 
 
 @jit
-def _measure(x, pi, pj, rest, k, fmax, intact, out):
+def _measure(x, pi, pj, rest, k, inv_fmax, intact, out):
     x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
     top = -np.inf
     finite = True
@@ -322,7 +334,7 @@ def _measure(x, pi, pj, rest, k, fmax, intact, out):
         if not abs(t) < np.inf:
             finite = False
         elif intact[s]:
-            load = t / fmax[s]
+            load = t * inv_fmax[s]
             if load > top:
                 top = load
     return top if finite else np.nan
@@ -408,8 +420,12 @@ class NumbaBackend(Backend):
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> float:
-        return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, state.fmax,
-                              state.intact, out))
+        return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
+                              self._inv_fmax(state), state.intact, out))
+
+    def _inv_fmax(self, state) -> np.ndarray:
+        """``1 / fmax`` of every spring (derived, each call: loads are ``tension · 1/fmax``)."""
+        return np.divide(1.0, state.fmax, out=self._buffer("inv_fmax", state.fmax))
 
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
@@ -427,14 +443,15 @@ class NumbaBackend(Backend):
         bases = (x[:, 0], x[:, 1], x[:, 2], v[:, 0], v[:, 1], v[:, 2], f[:, 0], f[:, 1], f[:, 2],
                  a[:, 0], a[:, 1], a[:, 2], d[:, 0], d[:, 1])
         ends = (state.pairs[:, 0], state.pairs[:, 1])
+        params = np.ascontiguousarray(plan.params, dtype=float)
         constants = (float(mech.k), float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                      float(plan.accept_load), float(plan.max_batch))
         flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break))
-        params = np.ascontiguousarray(plan.params, dtype=float)
+        inv_fmax = self._inv_fmax(state)
 
         def call(times):
             np.copyto(live, state.intact)
-            return kernel(bases, ends, state.rest, state.fmax, live, tension, constants, times, params, flags, log)
+            return kernel(bases, ends, state.rest, state.fmax, inv_fmax, live, constants, times, params, flags, log)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         done, load, n_log = call(times)
@@ -443,6 +460,8 @@ class NumbaBackend(Backend):
                 np.copyto(arr, keep)
             n_log = call(times[: done - 1])[2] if done > 1 else 0
             done -= 1
+        if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
+            _measure(state.x, *ends, state.rest, mech.k, inv_fmax, state.intact, tension)
         return Steps(done=int(done), load=float(load), broken=log[0][:n_log].copy(), step=log[1][:n_log].copy(),
                      tension=log[2][:n_log].copy())
 

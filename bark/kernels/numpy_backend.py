@@ -29,12 +29,13 @@ class NumpyBackend(Backend):
         key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
         if key != self._inc_key:
             self._inc, self._inc_key = incidence(state.pairs, state.n_bases), key
+            self._inc.sort_indices()  # each base's sum runs over its springs in id order, as the compiled pass adds them
         return self._inc
 
     def _geometry(self, state, x):
         p = state.pairs
         d = np.take(x, p[:, 1], axis=0) - np.take(x, p[:, 0], axis=0)
-        return d, np.sqrt(np.einsum("ij,ij->i", d, d))
+        return d, np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])  # in the kernels' order
 
     def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
         d, length = self._geometry(state, x)
@@ -51,7 +52,7 @@ class NumpyBackend(Backend):
         if not np.isfinite(out).all():
             return math.nan
         live = state.intact
-        return float(np.max(out[live] / state.fmax[live])) if live.any() else -math.inf
+        return float(np.max(out[live] * (1.0 / state.fmax[live]))) if live.any() else -math.inf
 
     def constrain(self, state, r_x, r_anchor) -> None:
         x, v = state.x, state.v
@@ -98,7 +99,7 @@ class NumpyBackend(Backend):
             t_all = physics.tension(length, state.rest, mech.k)
             if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()):
                 return done, math.nan, live, log
-            load = float(np.max(t_all[live] / state.fmax[live])) if live.any() else -math.inf
+            load = float(np.max(t_all[live] * (1.0 / state.fmax[live]))) if live.any() else -math.inf
             if load > plan.accept_load:
                 return done, load, live, log
             tension[:] = t_all
