@@ -86,4 +86,4 @@ def test_bench_speed_runs_small(tmp_path):
     result = CliRunner().invoke(cli, ["bench", "speed", "--n-bases", "200", "--steps", "5", "--repeats", "1",
                                       "--phase", "quiet", "--csv", str(out)])
     assert result.exit_code == 0, result.output
-    assert "speed_vs_numpy" in out.read_text()
+    assert "speed_vs_plain_numpy" in out.read_text() and "plain numpy" in out.read_text()

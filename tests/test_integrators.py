@@ -657,3 +657,20 @@ def test_the_backends_agree_to_the_bit(stepping, dt, extra):
     la, lb = a.breaks.arrays(), b.breaks.arrays()
     for key in la:
         assert np.array_equal(la[key], lb[key]), key
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_the_benchmarks_plain_numpy_step_is_the_same_model(backend):
+    """The baseline every speed-up is quoted against computes what bark computes (to round-off: it
+    sums forces with bincount), so the ratios compare like with like."""
+    from bark_cli.bench import PlainNumpy
+
+    sim = build_sim(n_bases=400, G=0.05, dt=0.05, seed=2, backend=backend, fmax_spread=0.05)
+    sim.run(Stop(until_time=1.0))
+    plain = PlainNumpy(sim)
+    sim.run(Stop(until_time=4.0))
+    for _ in range(60):
+        plain.step()
+    assert sim.n_broken > 20
+    np.testing.assert_allclose(plain.x, sim.state.x, rtol=0, atol=1e-10)
+    np.testing.assert_array_equal(plain.intact, sim.state.intact)

@@ -45,50 +45,87 @@ _no_breaking = inline(physics.no_breaking)
 
 
 @inline
-def _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, inv_fmax, f0, f1, f2, loads, breaking, rule,
+def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, breaking, rule,
                  log_id, log_step, log_t, n_log, step):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also find the largest
     tension / threshold (``t · 1/fmax``) and apply the rule: with ``breaking``, a spring it picks is
     marked broken in ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after
     the break gives, to the bit) and logged; without, it is only noted.  Returns ``(largest load,
-    all tensions finite, log length, whether the rule picked a spring)``."""
+    all tensions finite, log length, whether the rule picked a spring)``.
+
+    Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
+    ``spring_runs``), each done on contiguous slices so the loops run in SIMD lanes: the springs'
+    tensions and force vectors; their loads and the rule (a spring by itself only where the rule picks
+    one); then the forces, added to the second ends first and the first ends second, so that every
+    base receives its springs' forces in spring-id order — the order, and the bits, of a pass one
+    spring at a time."""
+    x0, x1, x2 = x
+    f0, f1, f2 = f
+    w0, w1, w2, wt = work
+    r_start, r_len, r_i, r_o = runs
     top = -np.inf
     finite = True
     picked = False
-    for s in range(pi.shape[0]):
-        if not live[s]:
-            continue
-        i = pi[s]
-        j = pj[s]
-        d0 = x0[j] - x0[i]
-        d1 = x1[j] - x1[i]
-        d2 = x2[j] - x2[i]
-        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        t = _tension(length, rest[s], k)
-        if loads:
-            if not abs(t) < np.inf:
-                finite = False
-            load = t * inv_fmax[s]
-            if load > top:
-                top = load
-            if rule(t, fmax[s]):
-                if breaking:
-                    live[s] = False
-                    log_id[n_log] = s
-                    log_step[n_log] = step
-                    log_t[n_log] = t
-                    n_log += 1
-                    continue
-                picked = True
-        if length > 0.0:
+    for r in range(r_start.shape[0]):
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        a0, a1, a2 = x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n]
+        b0, b1, b2 = x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n], x2[i0 + o:i0 + o + n]
+        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
+        for q in range(n):
+            d0 = b0[q] - a0[q]
+            d1 = b1[q] - a1[q]
+            d2 = b2[q] - a2[q]
+            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            t = _tension(length, rr[q], k)
             g = _force_scale(t, length)
-            f0[i] += g * d0
-            f1[i] += g * d1
-            f2[i] += g * d2
-            f0[j] -= g * d0
-            f1[j] -= g * d1
-            f2[j] -= g * d2
+            g = g if (length > 0.0) & lv[q] else 0.0  # a spring of zero length has no direction
+            wt[q] = t
+            w0[q] = g * d0
+            w1[q] = g * d1
+            w2[q] = g * d2
+        if loads:
+            fm, iv = fmax[s0:s0 + n], inv_fmax[s0:s0 + n]
+            hit = False
+            for q in range(n):
+                t = wt[q]
+                on = lv[q]
+                finite = finite & ((abs(t) < np.inf) | (not on))
+                load = t * iv[q]
+                top = load if on & (load > top) else top
+                hit = hit | (on & rule(t, fm[q]))
+            if hit:
+                for q in range(n):
+                    if lv[q] and rule(wt[q], fm[q]):
+                        if breaking:
+                            lv[q] = False
+                            log_id[n_log] = s0 + q
+                            log_step[n_log] = step
+                            log_t[n_log] = wt[q]
+                            n_log += 1
+                            w0[q] = 0.0
+                            w1[q] = 0.0
+                            w2[q] = 0.0
+                        else:
+                            picked = True
+        for u, w in ((f0, w0), (f1, w1), (f2, w2)):
+            ends = u[i0 + o:i0 + o + n]
+            for q in range(n):
+                ends[q] -= w[q]
+            ends = u[i0:i0 + n]
+            for q in range(n):
+                ends[q] += w[q]
     return top, finite, n_log, picked
+
+
+def spring_runs(pairs: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The springs as runs ``(first id, length, first i, offset o)`` of consecutive springs
+    ``(i, i + o), (i + 1, i + 1 + o), ...`` with ``o > 0``; any other spring is a run of its own."""
+    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    o = j - i
+    joins = (o[1:] == o[:-1]) & (i[1:] == i[:-1] + 1) & (o[1:] > 0)
+    starts = np.flatnonzero(np.concatenate([[True], ~joins])) if len(pairs) else np.empty(0, np.int64)
+    lengths = np.diff(np.append(starts, len(pairs)))
+    return starts.astype(np.int64), lengths.astype(np.int64), i[starts], o[starts]
 
 
 @inline
@@ -134,7 +171,8 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
 
 
 @inline
-def _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log, update, rule, radius):
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log, update, rule,
+                  radius):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
@@ -142,7 +180,7 @@ def _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, par
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
     call, so the result does not depend on where calls begin and end."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
-    pi, pj = ends
+    f = (f0, f1, f2)
     k, c, b, m, h, accept_load, max_batch = constants
     uniform, breaking, return_on_break = flags
     log_id, log_step, log_t = log
@@ -150,7 +188,7 @@ def _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, par
     f0[:] = 0.0
     f1[:] = 0.0
     f2[:] = 0.0
-    _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, inv_fmax, f0, f1, f2, False, False, rule,
+    _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, rule,
                  log_id, log_step, log_t, 0, 0)
     top = -np.inf
     finite = True
@@ -164,9 +202,9 @@ def _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, par
                             uniform and step > 0)
         r_before = r_now
         before = n_log
-        top, springs_finite, n_log, picked = _spring_pass(x0, x1, x2, pi, pj, rest, k, live, fmax, inv_fmax,
-                                                          f0, f1, f2, True, breaking, rule, log_id, log_step,
-                                                          log_t, n_log, step + 1)
+        top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work,
+                                                          True, breaking, rule, log_id, log_step, log_t, n_log,
+                                                          step + 1)
         finite = finite and springs_finite
         done = step + 1
         if not finite or top > accept_load or picked:
@@ -192,8 +230,8 @@ _radius = inline({radius})
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def steps(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
-    return _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
                          _update, _rule, _radius)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
@@ -263,8 +301,9 @@ def specialized(update, rule, radius):
         u, r, g = (inline(fn) for fn in key)
 
         @numba.njit(nogil=True, error_model="numpy")
-        def steps(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
-            return _steps_kernel(bases, ends, rest, fmax, inv_fmax, live, constants, times, params, flags, log, u, r, g)
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
+                                 u, r, g)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -312,12 +351,12 @@ def _write_once(name: str, text: str) -> Path:
 
 
 @jit
-def _spring_forces(x, pi, pj, rest, k, intact, f):
+def _spring_forces(x, runs, work, rest, k, intact, f):
     f[:] = 0.0
     no = np.empty(0)
     no_i = np.empty(0, dtype=np.int64)
-    _spring_pass(x[:, 0], x[:, 1], x[:, 2], pi, pj, rest, k, intact, rest, rest, f[:, 0], f[:, 1], f[:, 2], False, False,
-                 _no_breaking, no_i, no_i, no, 0, 0)
+    _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, (f[:, 0], f[:, 1], f[:, 2]), work,
+                 False, False, _no_breaking, no_i, no_i, no, 0, 0)
 
 
 @jit
@@ -410,14 +449,25 @@ class NumbaBackend(Backend):
         """A work buffer shaped and laid out like ``like``, kept between calls (derived data)."""
         dtype = like.dtype if dtype is None else np.dtype(dtype)
         buf = self._buffers.get(name)
-        if buf is None or buf.shape != like.shape or buf.dtype != dtype:
+        if buf is None or not isinstance(buf, np.ndarray) or buf.shape != like.shape or buf.dtype != dtype:
             buf = self._buffers[name] = np.empty_like(like, dtype=dtype, order="F" if like.ndim > 1 else "C")
         return buf
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         f = np.empty_like(x, order="F")
-        _spring_forces(x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, state.intact, f)
+        _spring_forces(x, *self._runs(state), state.rest, mech.k, state.intact, f)
         return f
+
+    def _runs(self, state) -> tuple:
+        """The springs' runs (``spring_runs``) and work space for the longest (derived; rebuilt when
+        the topology grows)."""
+        key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
+        if self._buffers.get("runs_of") != key:
+            runs = spring_runs(state.pairs)
+            longest = int(runs[1].max(initial=1))
+            self._buffers["runs_of"] = key
+            self._buffers["runs"] = (runs, tuple(np.empty(longest) for _ in range(4)))
+        return self._buffers["runs"]
 
     def measure(self, state, mech, out: np.ndarray) -> float:
         return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
@@ -442,7 +492,7 @@ class NumbaBackend(Backend):
         x, v, a, d, f = state.x, state.v, state.anchor, state.anchor_dir, self._buffer("f", state.x)
         bases = (x[:, 0], x[:, 1], x[:, 2], v[:, 0], v[:, 1], v[:, 2], f[:, 0], f[:, 1], f[:, 2],
                  a[:, 0], a[:, 1], a[:, 2], d[:, 0], d[:, 1])
-        ends = (state.pairs[:, 0], state.pairs[:, 1])
+        runs, work = self._runs(state)
         params = np.ascontiguousarray(plan.params, dtype=float)
         constants = (float(mech.k), float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                      float(plan.accept_load), float(plan.max_batch))
@@ -451,7 +501,7 @@ class NumbaBackend(Backend):
 
         def call(times):
             np.copyto(live, state.intact)
-            return kernel(bases, ends, state.rest, state.fmax, inv_fmax, live, constants, times, params, flags, log)
+            return kernel(bases, runs, work, state.rest, state.fmax, inv_fmax, live, constants, times, params, flags, log)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         done, load, n_log = call(times)
@@ -461,7 +511,7 @@ class NumbaBackend(Backend):
             n_log = call(times[: done - 1])[2] if done > 1 else 0
             done -= 1
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
-            _measure(state.x, *ends, state.rest, mech.k, inv_fmax, state.intact, tension)
+            _measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, inv_fmax, state.intact, tension)
         return Steps(done=int(done), load=float(load), broken=log[0][:n_log].copy(), step=log[1][:n_log].copy(),
                      tension=log[2][:n_log].copy())
 
