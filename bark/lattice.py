@@ -17,7 +17,7 @@ import math
 import attrs
 import numpy as np
 
-from bark._validate import INT_MAX, in_range, non_negative, positive, positive_int
+from bark._validate import INT_MAX, in_range, non_negative, optional, positive, positive_int
 from bark.errors import BarkError, Ref
 
 __all__ = ["GOLDEN_ANGLE_DEG", "Lattice"]
@@ -61,19 +61,58 @@ class Lattice:
     jitter: float = attrs.field(default=0.05, validator=non_negative)
     """Standard deviation of the Gaussian jitter of each base's initial angle and height, as a
     fraction of the base spacing √(2π r h).  0 gives the exact (degenerate) lattice."""
+    n_start: int | None = attrs.field(default=None, validator=optional(positive_int))
+    """Bases on the trunk at t = 0 (none: all n_bases).  The others join during the run, at the top
+    (primary growth), at join_rate."""
+    join_rate: float = attrs.field(default=0.0, validator=non_negative)
+    """Bases joining per time unit after t = 0, continuing the phyllotactic order up the trunk (needed
+    when n_start is below n_bases)."""
+    join_every: float = attrs.field(default=1.0, validator=positive)
+    """Time between two joinings: the bases due by then join together (time units)."""
+
+    def __attrs_post_init__(self) -> None:
+        if self.n_start is not None and self.n_start > self.n_bases:
+            raise BarkError("{0} is more than {1}", Ref(None, "n_start", self.n_start), Ref(None, "n_bases", self.n_bases))
+        if self.initial < self.n_bases and not self.join_rate > 0:
+            raise BarkError("{0} below {1} needs {2} > 0: the other bases never join",
+                            Ref(None, "n_start", self.n_start), Ref(None, "n_bases", self.n_bases),
+                            Ref(None, "join_rate", self.join_rate))
+
+    @property
+    def initial(self) -> int:
+        """Bases on the trunk at t = 0."""
+        return self.n_bases if self.n_start is None else self.n_start
+
+    def bases_at(self, t: float) -> int:
+        """How many bases the trunk has at time ``t`` (joins happen at multiples of join_every)."""
+        if self.initial >= self.n_bases:
+            return self.n_bases
+        joined_until = math.floor(t / self.join_every + 1e-9) * self.join_every
+        return min(self.n_bases, self.initial + int(math.floor(self.join_rate * joined_until + 1e-9)))
+
+    def next_join(self, t: float, present: int) -> float | None:
+        """When bases next join after time ``t`` (``present`` on the trunk), or ``None``: all are there."""
+        if present >= self.n_bases:
+            return None
+        k = math.floor(t / self.join_every + 1e-9) + 1
+        while self.bases_at(k * self.join_every) <= present:
+            k += 1
+        return k * self.join_every
 
     def spacing(self, radius: float) -> float:
         """Typical distance between neighbouring bases: the side of the area 2πr·h one base covers."""
         return math.sqrt(2.0 * math.pi * radius * self.rise)
 
-    def sites(self, radius: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Initial angle θ (radians) and height z of every base on a cylinder of ``radius``.
+    def sites(self, radius: float, rng: np.random.Generator, first: int = 0, count: int | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Angle θ (radians) and height z of bases ``first`` .. ``first + count − 1`` (default: the
+        initial ones) on a cylinder of ``radius``: base i at ``i·φ`` and ``i·h``, jittered.
 
         The jitter is drawn from ``rng`` (the simulation's one seeded generator) even when it is
-        zero, so that the generator's later draws do not depend on whether jitter is on.
-        """
-        i = np.arange(self.n_bases, dtype=float)
-        noise = rng.standard_normal((2, self.n_bases))
+        zero, so that the generator's later draws do not depend on whether jitter is on."""
+        count = self.initial if count is None else count
+        i = np.arange(first, first + count, dtype=float)
+        noise = rng.standard_normal((2, count))
         sigma = self.jitter * self.spacing(radius)
         theta = i * math.radians(self.divergence_deg) + noise[0] * (sigma / radius)
         z = i * self.rise + noise[1] * sigma

@@ -169,10 +169,9 @@ class Simulation:
         self.forces = ForceField(self.mechanics, self.backend)
         self.graph = LeafBaseGraph()
         if state is None:
-            self.state = State.empty(self.lattice.n_bases, self.lattice.n_springs)
+            self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases)
             self._built = True
-            theta, z = self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng)
-            self.join(theta, z)
+            self.join(*self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng))
         else:
             self.state, self._built = state, True
             self.graph.add_nodes_from(range(state.n_bases))
@@ -182,8 +181,13 @@ class Simulation:
         return self
 
     def _guard(self, clock: Clock | None) -> None:
-        """Refuse, or split into sub-steps, a ``dt`` above the integrator's stability limit."""
-        limit = self.stability_limit = float(self.integrator.stability_limit(self.state, self.forces))
+        """Refuse, or split into sub-steps, a ``dt`` above the integrator's stability limit — that of
+        the lattice as it will be, when bases are still to join."""
+        limit = float(self.integrator.stability_limit(self.state, self.forces))
+        if self.lattice.initial < self.lattice.n_bases:
+            whole = attrs.evolve(self, lattice=attrs.evolve(self.lattice, n_start=None, join_rate=0.0)).build()
+            limit = min(limit, whole.stability_limit)
+        self.stability_limit = limit
         numerics, h = self.numerics, self.numerics.dt
         if h > limit:
             if numerics.stepping == "fixed":
@@ -231,6 +235,7 @@ class Simulation:
                 if the breakers act in Python: break_springs(union of breaker.select(state, tension, rng))
                 if a step broke more than degenerate_fraction of the springs: record a degenerate event
                 if quiet again (adaptive): double h, staying on its grid
+                join(the bases due by now)          # new bases and springs at rest; graph and arrays
                 call the actions whose triggers fire; observe(sim)
 
         Every spring its rule picks at the end of a step breaks in that step, all at once;
@@ -286,6 +291,9 @@ class Simulation:
         if not plan.breaking:
             self._break_selected(result.load)
         self.clock.relax(result.load)
+        due = self.lattice.bases_at(self.state.t) - self.state.n_bases
+        if due > 0:  # primary growth has made room at the top: the next bases of the lattice join
+            self.join(*self.lattice.sites(self.radius, self.rng, self.state.n_bases, due))
         return result.done
 
     def step(self) -> None:
