@@ -177,39 +177,9 @@ class Simulation:
             self.graph.add_nodes_from(range(state.n_bases))
             self.graph.add_edges_from(state.pairs[state.intact].tolist())
             self._tension = np.zeros(state.n_springs)
-        self._guard(clock)
+        self.stability_limit, h = stepping.stable_step(self)
+        self.clock = clock or Clock(h=h, levels=self.numerics.max_halvings if self.numerics.stepping == "adaptive" else 0)
         return self
-
-    def _guard(self, clock: Clock | None) -> None:
-        """Refuse, or split into sub-steps, a ``dt`` above the integrator's stability limit — that of
-        the lattice as it will be, when bases are still to join."""
-        limit = float(self.integrator.stability_limit(self.state, self.forces))
-        if self.lattice.initial < self.lattice.n_bases:
-            whole = attrs.evolve(self, lattice=attrs.evolve(self.lattice, n_start=None, join_rate=0.0)).build()
-            limit = min(limit, whole.stability_limit)
-        self.stability_limit = limit
-        numerics, h = self.numerics, self.numerics.dt
-        if h > limit:
-            if numerics.stepping == "fixed":
-                raise BarkError(
-                    f"{{0}} is above {type(self.integrator).__name__}'s stability limit h_max = {limit:.4g} for this "
-                    f"scene: use a step of at most {_round_down(limit)}, or {{1}} for sub-steps, or {{2}} "
-                    "(docs/numerics.md)", Ref("run", "dt", h), Ref("run", "stepping", "auto"),
-                    Ref("integrator", "name", "implicit-overdamped"))
-            h = h / math.ceil(h / (stepping.SAFETY * limit))
-        self.clock = clock or Clock(h=h, levels=numerics.max_halvings if numerics.stepping == "adaptive" else 0)
-
-    def check(self, stop: Stop) -> None:
-        """Refuse, before a run starts, a stop time that the clock cannot count: time is kept as an
-        integer number of the smallest step, exact only below 2**53 of them."""
-        self.build()
-        ticks = stop.until_time / self.clock.h_min if stop.until_time is not None else 0.0
-        if not ticks < 2.0**53:
-            raise BarkError(
-                f"{{0}} is {ticks:.3g} of the smallest step (the step {self.clock.h:.3g} / 2^{self.clock.levels}), more "
-                "than the 2^53 that time can be counted in exactly: lower {1} or {2}, or stop earlier",
-                Ref("run", "until_time", stop.until_time), Ref("run", "dt", self.numerics.dt),
-                Ref("run", "max_halvings", self.numerics.max_halvings))
 
     # -- the loop ---------------------------------------------------------------------------------
 
@@ -404,28 +374,7 @@ class Simulation:
         labels = self.patch_labels()
         return {type(a).__name__: a.analyze(self.state.x, labels) for a in self.analyzers}
 
-    # -- checkpoints and pickling ---------------------------------------------------------------
-
-    def snapshot(self) -> tuple[dict[str, np.ndarray], dict]:
-        """Everything needed to go on from here exactly: the state's arrays (every field: the
-        topology too, so nothing is rebuilt from the scene), the break log, and (JSON-able) the clock,
-        the random generator's state, the events."""
-        arrays = {**self.state.arrays(), **{f"breaks_{k}": v for k, v in self.breaks.arrays().items()}}
-        meta = {"t": self.state.t, "h_last": self.state.h, "clock": attrs.asdict(self.clock),
-                "step_count": self.step_count, "events": self.events, "rng": self.rng.bit_generator.state}
-        return arrays, meta
-
-    def restore(self, arrays: dict[str, np.ndarray], meta: dict) -> "Simulation":
-        """This (unbuilt) simulation, put in the state ``snapshot`` recorded."""
-        self.rng = np.random.default_rng(self.seed)
-        self.rng.bit_generator.state = meta["rng"]
-        self.build(State.from_arrays(arrays, meta["t"], meta["h_last"]), Clock(**meta["clock"]))
-        names = ("spring", "i", "j", "step", "t", "tension")
-        log = tuple(np.asarray(arrays[f"breaks_{k}"]) for k in names)
-        self.breaks = BreakLog([log] if log[0].size else [])
-        self.step_count = int(meta["step_count"])
-        self.events = list(meta["events"])
-        return self
+    # -- pickling -------------------------------------------------------------------------------
 
     def __getstate__(self) -> dict:
         """A simulation pickles as its parts, its state and its records; the backend (work buffers)
@@ -444,11 +393,3 @@ class Simulation:
 
 
 _MADE_BY_BUILD = ("state", "graph", "clock", "backend", "forces", "stability_limit")
-
-
-def _round_down(x: float) -> str:
-    """``x`` rounded down to two significant digits, as text (for suggestions)."""
-    if not x > 0:
-        return f"{x:g}"
-    exp = math.floor(math.log10(x)) - 1
-    return f"{math.floor(x / 10**exp) * 10**exp:.{max(0, -exp)}f}"

@@ -21,9 +21,11 @@ import numpy as np
 
 from bark import physics
 from bark._validate import int_in, one_of, positive
+from bark.errors import BarkError, Ref
 from bark.kernels import BACKENDS, Plan, Steps
 
-__all__ = ["Numerics", "Clock", "plan", "python_step", "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
+__all__ = ["Numerics", "Clock", "plan", "python_step", "stable_step", "check_countable", "DEFAULT_DT", "DEFAULT_STEPPING",
+           "DEFAULT_OVERSHOOT_TOL"]
 
 DEFAULT_DT = 0.3
 """Default (largest) time step.  With adaptive stepping and ``DEFAULT_OVERSHOOT_TOL`` this setting
@@ -111,6 +113,46 @@ class Clock:
         automatic or adaptive stepping then ends exactly there)."""
         steps = max(1, math.ceil(until_time / self.h - 1e-9))
         self.h = until_time / steps
+
+
+def stable_step(sim) -> tuple[float, float]:
+    """``(stability limit, full step)``: the integrator's limit — of the lattice as it will be, when
+    bases are still to join — and the step, ``dt`` or ``dt`` split into equal sub-steps below the
+    limit (``auto``, ``adaptive``).  A ``dt`` above the limit with ``fixed`` stepping is refused."""
+    limit = float(sim.integrator.stability_limit(sim.state, sim.forces))
+    if sim.lattice.initial < sim.lattice.n_bases:
+        whole = attrs.evolve(sim, lattice=attrs.evolve(sim.lattice, n_start=None, join_rate=0.0)).build()
+        limit = min(limit, whole.stability_limit)
+    h = sim.numerics.dt
+    if h <= limit:
+        return limit, h
+    if sim.numerics.stepping == "fixed":
+        raise BarkError(
+            f"{{0}} is above {type(sim.integrator).__name__}'s stability limit h_max = {limit:.4g} for this scene: "
+            f"use a step of at most {_round_down(limit)}, or {{1}} for sub-steps, or {{2}} (docs/numerics.md)",
+            Ref("run", "dt", h), Ref("run", "stepping", "auto"), Ref("integrator", "name", "implicit-overdamped"))
+    return limit, h / math.ceil(h / (SAFETY * limit))
+
+
+def check_countable(sim, stop) -> None:
+    """Refuse, before a run starts, a stop time the clock cannot count: time is kept as an integer
+    number of the smallest step, exact only below 2**53 of them."""
+    clock = sim.clock
+    ticks = stop.until_time / clock.h_min if stop.until_time is not None else 0.0
+    if not ticks < 2.0**53:
+        raise BarkError(
+            f"{{0}} is {ticks:.3g} of the smallest step (the step {clock.h:.3g} / 2^{clock.levels}), more than the "
+            "2^53 that time can be counted in exactly: lower {1} or {2}, or stop earlier",
+            Ref("run", "until_time", stop.until_time), Ref("run", "dt", sim.numerics.dt),
+            Ref("run", "max_halvings", sim.numerics.max_halvings))
+
+
+def _round_down(x: float) -> str:
+    """``x`` rounded down to two significant digits, as text (for suggestions)."""
+    if not x > 0:
+        return f"{x:g}"
+    exp = math.floor(math.log10(x)) - 1
+    return f"{math.floor(x / 10**exp) * 10**exp:.{max(0, -exp)}f}"
 
 
 def _first(flags: np.ndarray) -> int:
