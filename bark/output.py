@@ -165,6 +165,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
             "last finite state: the step after it made the state NaN or infinite"
             if stop_reason == "non-finite" else "the state at the stop"
         ),
+        "backend": sim.backend.name,
         "dt": sim.numerics.dt,
         "h": sim.clock.h,
         "stability_limit": sim.stability_limit,

@@ -34,7 +34,7 @@ from typing import Callable
 
 import attrs
 
-from bark import checkpoint, stepping
+from bark import checkpoint
 from bark.errors import BarkError, NonFiniteStateError
 from bark.folder import OutputFolder
 from bark.output import Frames, StatisticsSeries, run_summary, write_run
@@ -75,7 +75,7 @@ def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkp
     merely worth saying (an earlier run's files replaced)."""
     _check_every(checkpoint_every)
     sim, stop = scene.simulation(), scene.stop()
-    stepping.check_countable(sim.build(), stop)
+    sim.prepare(stop)
     if out is None:  # in memory: nothing written, nothing drawn, no checkpoints
         return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None)
     with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:

@@ -128,6 +128,9 @@ class Simulation:
     """warn: record the event and go on; stop: end the run there."""
     record_breaks: bool = True
     """Keep the break log; off when a scene does not ask for the ``break-log`` effect."""
+    horizon: float | None = None
+    """How long the run is expected to last (time units), if known: lets ``auto`` take the faster
+    backend for it (``run`` sets it from the stop condition when it builds)."""
 
     rng: np.random.Generator = attrs.field(init=False, default=None)
     state: State = attrs.field(init=False)
@@ -165,7 +168,7 @@ class Simulation:
             return self
         if self.rng is None:
             self.rng = np.random.default_rng(self.seed)
-        self.backend = kernels.load(self.numerics.backend)
+        self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
         self.forces = ForceField(self.mechanics, self.backend)
         self.graph = LeafBaseGraph()
         if state is None:
@@ -216,9 +219,17 @@ class Simulation:
                 observe(self)
         return self.stop_reason
 
+    def prepare(self, stop: Stop) -> "Simulation":
+        """Build for a run to ``stop`` (its time, if any, guides ``auto``'s backend) and refuse a stop
+        time the clock cannot count."""
+        if not self._built and self.horizon is None:
+            self.horizon = stop.until_time
+        stepping.check_countable(self.build(), stop)
+        return self
+
     def irun(self, stop: Stop) -> Iterator["Simulation"]:
         """The loop of :meth:`run` as a generator that yields after every :meth:`advance` (and its actions)."""
-        self.build()
+        self.prepare(stop)
         self.stop_reason = None
         if self.numerics.stepping != "fixed" and not self.clock.ticks and stop.until_time is not None:
             self.clock.fit(stop.until_time)

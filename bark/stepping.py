@@ -134,6 +134,20 @@ def stable_step(sim) -> tuple[float, float]:
     return limit, h / math.ceil(h / (SAFETY * limit))
 
 
+def expected_work(sim) -> float | None:
+    """Base-steps the run is expected to take (for ``auto``'s choice of backend): its bases times its
+    horizon over the step, the step bounded by the Gershgorin stability limit of the lattice (cheap,
+    before anything is built); ``None`` with no time bound."""
+    if sim.horizon is None:
+        return None
+    mech = sim.mechanics
+    from bark.stability import explicit_h_max
+
+    lam = mech.c + 4.0 * mech.k * len(sim.lattice.offsets)
+    h = min(sim.numerics.dt, SAFETY * explicit_h_max(mech.b / mech.m, lam / mech.m))
+    return sim.lattice.n_bases * sim.horizon / h
+
+
 def check_countable(sim, stop) -> None:
     """Refuse, before a run starts, a stop time the clock cannot count: time is kept as an integer
     number of the smallest step, exact only below 2**53 of them."""

@@ -163,22 +163,39 @@ class Signals:
             signal.signal(sig, handler)
 
 
-def _pictures(signals: Signals) -> dict:
-    """The runner's picture writers; matplotlib is imported only when a scene asks for a picture."""
+def _pictures(signals: Signals, painter) -> dict:
+    """The runner's picture writers, drawn by ``painter`` (``bark_cli.pictures``: matplotlib is
+    imported only when a scene asks for a picture, and then beside the run, not after it)."""
+    from bark_cli.pictures import PatternData
 
     def pattern(sim, scene, recorded, path):
-        from bark_cli.plot import plot_pattern
-
+        data = PatternData.of(sim, scene.run.min_patch_size)
         with signals.draw():
-            plot_pattern(sim, path, scene.run.min_patch_size)
+            painter().draw("pattern", data, path, scene.run.min_patch_size)
 
     def animation(sim, scene, recorded, path):
-        from bark_cli.animation import write_gif
-
         with signals.draw():
-            write_gif(recorded["frames"], path, scene.run.min_patch_size)
+            painter().draw("animation", recorded["frames"], path, scene.run.min_patch_size)
 
     return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation)}
+
+
+def _painter():
+    from bark_cli.pictures import Painter
+
+    return Painter()
+
+
+class _Lazy:
+    """``make()`` called once, on first use."""
+
+    def __init__(self, make) -> None:
+        self._make, self.made = make, None
+
+    def __call__(self):
+        if self.made is None:
+            self.made = self._make()
+        return self.made
 
 
 def _warn(message: str) -> None:
@@ -219,7 +236,6 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
     Any --until-* option replaces the scene's stop conditions.  Ctrl-C or SIGTERM stops between
     steps, writes the outputs and a checkpoint, and prints the command that goes on."""
     from bark import runner
-    from bark_cli.progress import ProgressBar
 
     if resume is not None:
         given = [p for p, v in ctx.params.items()
@@ -232,11 +248,17 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
         strategies = {"growth": growth_name, "integrator": integrator_name, "breaker": breaker_name,
                       "analyzer": analyzer_name}
         scene = resolve_scene(scene_file, strategies, {"r0": r0, "G": G}, sets, kwargs)
-    show = not quiet and sys.stdout.isatty()
-    bar = ProgressBar() if show else None
+    bar = None
+    if not quiet and sys.stdout.isatty():
+        from bark_cli.progress import ProgressBar  # rich, only for a terminal
+
+        bar = ProgressBar()
+    painter = _Lazy(_painter)
+    if resume is None and (scene.has("pattern-image") or scene.has("animation")):
+        painter()  # start it now: matplotlib loads on the other core while the run goes on
     with Signals() as signals:
         hooks = dict(checkpoint_every=checkpoint_every, observe=bar, interrupted=signals.reason,
-                     pictures=_pictures(signals), warn=_warn, notice=None if quiet else _notice)
+                     pictures=_pictures(signals, painter), warn=_warn, notice=None if quiet else _notice)
         try:
             if resume is not None:
                 outcome = runner.resume(resume, **hooks)
@@ -247,6 +269,8 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
         finally:
             if bar is not None:
                 bar.close()
+            if painter.made:
+                painter().close()
     return _report(outcome, quiet, signals.received)
 
 
@@ -255,8 +279,6 @@ def _report(outcome, quiet: bool, signum: int | None = None) -> int:
     the exit status: 0, 1 (non-finite state or an output not written), 128 + signal (stopped by a
     signal between steps, or while drawing).  A signal during the final data writes waits for them:
     the run is whole, and ends with its own status."""
-    from bark_cli.progress import print_summary
-
     out, summary, sim = outcome.out, outcome.summary, outcome.sim
     code = 0
     if outcome.error is not None:
@@ -273,6 +295,8 @@ def _report(outcome, quiet: bool, signum: int | None = None) -> int:
         click.echo(f"bark: error: {problem}; every other output is in {out}", err=True)
         code = code or (128 + signum if outcome.drawing_stopped and signum is not None else 1)
     if not quiet:
+        from bark_cli.progress import print_summary
+
         print_summary(summary, out)
     if outcome.stop_reason in ("interrupted", "terminated"):
         signum = {"interrupted": signal.SIGINT, "terminated": signal.SIGTERM}[outcome.stop_reason]

@@ -15,7 +15,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
-from bark.output import atomic_write, unwrap
+from bark.output import atomic_write
 
 
 MAX_ASPECT = 2.0
@@ -27,11 +27,9 @@ SPRINGS_UP_TO = 50_000
 (and the drawing the slowest part of a run's end), so the patch colours alone show the pattern."""
 
 
-def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = None) -> Path:
-    s = sim.state
-    r = sim.radius
-    uv = unwrap(s.x, r)
-    labels = sim.patch_labels()
+def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = None) -> Path:
+    """Draw ``data`` (a ``bark_cli.pictures.PatternData``) into ``path``."""
+    uv, labels, r = data.uv, data.labels, data.radius
     colours = patch_colours(labels, min_size)
     width = 2 * np.pi * r
     z_lo, z_hi = float(uv[:, 1].min()), float(uv[:, 1].max())
@@ -42,12 +40,12 @@ def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = N
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     pad = 0.01 * height
-    if s.n_bases <= SPRINGS_UP_TO:
-        p = s.pairs[s.intact]
+    if data.n_bases <= SPRINGS_UP_TO:
+        p = data.springs
         seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
         seg = seg[np.abs(seg[:, 0, 0] - seg[:, 1, 0]) < np.pi * r]  # drop springs across the seam
         ax.add_collection(LineCollection(seg, colors="0.15", alpha=0.6, linewidths=0.4))
-        per_base = (72 * 7.0) ** 2 * shown / s.n_bases  # points² of figure per base: a small dot each
+        per_base = (72 * 7.0) ** 2 * shown / data.n_bases  # points² of figure per base: a small dot each
         ax.scatter(uv[:, 0], uv[:, 1], s=float(min(4.0, 0.04 * per_base)), c=colours, linewidths=0)
     else:
         ax.imshow(raster(uv, colours, width, z_lo, z_hi), origin="lower", extent=(0, width, z_lo, z_hi),
@@ -57,7 +55,7 @@ def plot_pattern(sim, path: str | Path, min_size: int = 7, title: str | None = N
     ax.set_aspect(shown / aspect)
     ax.set_xlabel("arc length r·θ (length units; θ increases to the right seen from outside)")
     ax.set_ylabel("height z (length units)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"))
-    ax.set_title(title or f"t = {s.t:.2f}, r = {r:.4f}, {sim.patch_count(min_size)} patches, {sim.n_broken} broken", fontsize=9)
+    ax.set_title(title or f"t = {data.t:.2f}, r = {r:.4f}, {data.n_patches} patches, {data.n_broken} broken", fontsize=9)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", bbox_inches="tight")
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))

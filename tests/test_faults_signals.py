@@ -128,8 +128,10 @@ def test_a_signal_during_the_final_writes_waits_for_them(tmp_path, monkeypatch):
 def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, monkeypatch):
     import bark_cli.plot
 
+    command = os.getpid()  # the picture may be drawn in a process of its own: the signal goes to the command
+
     def slow_picture(*args, **kwargs):
-        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(command, signal.SIGINT)
         time.sleep(30)  # a huge picture; the signal must cut it short
         raise AssertionError("the drawing was not stopped")
 
@@ -158,3 +160,30 @@ def test_a_signal_while_a_large_scene_is_built_stops_at_once(tmp_path):
     err = proc.stderr.read()
     assert code == 143 and err == "bark: terminated before the run began: nothing was run\n", err
     assert not out.exists()
+
+
+def test_the_drawing_process_does_not_outlive_a_killed_command(tmp_path):
+    """The painter (a process that readies matplotlib beside the run) ends when the command is gone,
+    even by SIGKILL: it holds no copy of the command's end of their pipe, so it sees it close."""
+    out = tmp_path / "out"
+    proc = _start(out, "--checkpoint-every", "0.2")
+    _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+
+    def left() -> list[int]:
+        found = []
+        for entry in Path("/proc").iterdir():
+            if entry.name.isdigit():
+                try:
+                    if str(out).encode() in (entry / "cmdline").read_bytes():
+                        found.append(int(entry.name))
+                except OSError:
+                    pass
+        return found
+
+    deadline = time.monotonic() + 10
+    while left() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert left() == []
+    proc.stderr.read()  # and nothing holds the command's stderr open
