@@ -18,13 +18,30 @@ def bench():
     """Benchmarks: speed of the step loop, per backend."""
 
 
-def _phase_sim(n: int, backend: str, start_t: float):
-    """The default scene at ``n`` bases on ``backend``, stepped as the paper did (fixed dt = 0.01, so
-    that a step is the same work whatever the backend), compiled and run up to ``start_t``."""
-    from bark.scene import Scene
+CASES = {
+    "default": "the default scene (Table 2 vertical regime)",
+    "bulge": "the default scene with two bulges (a radius that depends on height: per-base radii)",
+    "joining": "the default scene growing: half the bases at t = 0, the rest joining at the top",
+}
+
+
+def _case(n: int, case: str) -> dict:
+    if case == "bulge":
+        bulges = [{"z": 0.25 * n * 0.0005, "half_width": 0.1 * n * 0.0005, "magnitude": 0.01, "G": 0.02, "f_max": 0.004},
+                  {"z": 0.7 * n * 0.0005, "half_width": 0.1 * n * 0.0005, "magnitude": 0.005}]
+        return {"lattice": {"n_bases": n}, "growth": {"name": "bulge", "bulges": bulges}}
+    if case == "joining":
+        return {"lattice": {"n_bases": n, "n_start": n // 2, "join_rate": n / 80.0, "join_every": 1.0}}
+    return {"lattice": {"n_bases": n}}
+
+
+def _phase_sim(n: int, backend: str, start_t: float, case: str = "default"):
+    """``case`` at ``n`` bases on ``backend``, stepped as the paper did (fixed dt = 0.01, so that a
+    step is the same work whatever the backend), compiled and run up to ``start_t``."""
+    from bark.scene import Scene, merge
 
     run = {"backend": backend, "dt": 0.01, "stepping": "fixed", "until_time": 1e6}  # the bench stops it itself
-    sim = Scene.from_dict({"lattice": {"n_bases": n}, "run": run}).simulation()
+    sim = Scene.from_dict(merge(_case(n, case), {"run": run})).simulation()
     sim.run(Stop(until_time=max(start_t, 2 * sim.clock.h)))  # also compiles the kernels, outside the timing
     return sim
 
@@ -67,20 +84,22 @@ class PlainNumpy:
         self.steps += 1
 
 
-def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int) -> dict[str, float]:
-    """Median steps/s of the plain numpy baseline and each backend over ``repeats`` stretches of
-    ``steps`` steps from ``start_t``.
+def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int, case: str = "default"
+                      ) -> dict[str, float]:
+    """Median steps/s of the plain numpy baseline (the default case only: it knows no bulges and no
+    joining) and each backend over ``repeats`` stretches of ``steps`` steps from ``start_t``.
 
     The stretches are interleaved (plain, numpy, numba, plain, numpy, numba, ...), so that a change in
     the machine's load falls on all of them alike and the ratios stay honest."""
-    sims = {b: _phase_sim(n, b, start_t) for b in backends}
-    plain = PlainNumpy(sims[backends[0]])
-    rates = {b: [] for b in ("plain numpy", *backends)}
+    sims = {b: _phase_sim(n, b, start_t, case) for b in backends}
+    plain = PlainNumpy(sims[backends[0]]) if case == "default" else None
+    rates = {b: [] for b in (("plain numpy",) if plain else ()) + tuple(backends)}
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            plain.step()
-        rates["plain numpy"].append(steps / (time.perf_counter() - t0))
+        if plain is not None:
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                plain.step()
+            rates["plain numpy"].append(steps / (time.perf_counter() - t0))
         for b, sim in sims.items():
             s0, t0 = sim.step_count, time.perf_counter()
             sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
@@ -88,11 +107,11 @@ def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int
     return {b: float(np.median(r)) for b, r in rates.items()}
 
 
-def _peak_memory(n: int, backend: str, start_t: float, steps: int) -> float:
+def _peak_memory(n: int, backend: str, start_t: float, steps: int, case: str = "default") -> float:
     """Peak memory (MiB, numpy and Python allocations as traced by tracemalloc) of building the
     simulation and running it through the phase; measured apart from the timing, which tracing slows."""
     tracemalloc.start()
-    sim = _phase_sim(n, backend, start_t)
+    sim = _phase_sim(n, backend, start_t, case)
     sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
@@ -117,8 +136,11 @@ PHASES = {
               help="Steps per timed stretch (default: about 0.3 s of numpy work).")
 @click.option("--repeats", type=click.IntRange(1, 1000), default=5, show_default=True,
               help="Timed stretches per backend, interleaved.")
+@click.option("--case", "cases", type=click.Choice(list(CASES)), multiple=True, default=("default",), show_default=True,
+              help="default: the vertical regime; bulge: with two bulges (per-base radii); joining: bases joining "
+                   "at the top during the run.  The plain numpy baseline is measured for the default case.")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None, help="Also write the table as CSV.")
-def speed(sizes, backends, phases, steps, repeats, csv_path):
+def speed(sizes, backends, phases, steps, repeats, cases, csv_path):
     """Steps per second of the full step (integrate, constrain, tensions, breaking, stop checks) on
     the default scene, per backend and phase, with ratios against a plain vectorised numpy step of
     the same model measured in this run, interleaved."""
@@ -131,24 +153,25 @@ def speed(sizes, backends, phases, steps, repeats, csv_path):
     for n in sizes:  # every size is a valid scene that fits in memory, before any work
         Scene.from_dict({"lattice": {"n_bases": n}, "run": {"until_time": 1e6}}).memory_estimate()
     rows = []
-    for n in sizes:
-        for phase in phases:
-            start_t, end_t, _ = PHASES[phase]
-            if phase == "cracking" and n > 10000:
-                continue
-            k = steps or max(10, int(0.3 / (1.3e-7 * n)))  # numpy takes ~0.13 µs per base per step
-            k = min(k, int((end_t - start_t) / 0.01 / repeats))  # stay inside the phase
-            rates = _steps_per_second(n, backends, start_t, k, repeats)
-            base = rates["plain numpy"]
-            peaks = {b: _peak_memory(n, b, start_t, k) for b in backends}
-            for backend, rate in rates.items():
-                rows.append({
-                    "n_bases": n, "phase": phase, "backend": backend, "steps": k * repeats,
-                    "steps_per_s": rate, "speed_vs_plain_numpy": rate / base,
-                    "peak_MiB": peaks.get(backend, float("nan")),
-                    "memory_vs_numpy_backend": peaks.get(backend, float("nan")) / peaks["numpy"],
-                })
-    table = Table(*rows[0].keys(), title="bark bench speed — default scene (Table 2 vertical regime)")
+    for case in cases:
+        for n in sizes:
+            for phase in phases:
+                start_t, end_t, _ = PHASES[phase]
+                if phase == "cracking" and n > 10000:
+                    continue
+                k = steps or max(10, int(0.3 / (1.3e-7 * n)))  # numpy takes ~0.13 µs per base per step
+                k = min(k, int((end_t - start_t) / 0.01 / repeats))  # stay inside the phase
+                rates = _steps_per_second(n, backends, start_t, k, repeats, case)
+                peaks = {b: _peak_memory(n, b, start_t, k, case) for b in backends}
+                for backend, rate in rates.items():
+                    rows.append({
+                        "case": case, "n_bases": n, "phase": phase, "backend": backend, "steps": k * repeats,
+                        "steps_per_s": rate, "speed_vs_plain_numpy": rate / rates.get("plain numpy", float("nan")),
+                        "speed_vs_numpy_backend": rate / rates["numpy"],
+                        "peak_MiB": peaks.get(backend, float("nan")),
+                        "memory_vs_numpy_backend": peaks.get(backend, float("nan")) / peaks["numpy"],
+                    })
+    table = Table(*rows[0].keys(), title="bark bench speed — steps per second, interleaved")
     for r in rows:
         table.add_row(*(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r.values()))
     Console(width=140).print(table)
