@@ -31,6 +31,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import math
+import sys
 from typing import Callable
 
 import attrs
@@ -113,9 +114,10 @@ class Backend:
         raise NotImplementedError
 
 
-AUTO_WORK = 5e6
-"""Base-steps below which ``auto`` takes numpy: numba's start (importing it and loading its compiled
-code, about 0.55 s measured) costs more than it saves (about 0.09 µs a base-step at 3000 bases)."""
+AUTO_WORK = 3e6
+"""Base-steps below which ``auto`` takes numpy: numba's start in a fresh process (importing it,
+loading its compiled code: about 0.55 s measured) costs more than it saves (about 0.18 µs a
+base-step at 3000 bases, measured with adaptive stepping)."""
 
 
 def _numba_available() -> bool:
@@ -124,13 +126,16 @@ def _numba_available() -> bool:
 
 def resolve(name: str, work: float | None = None) -> str:
     """The concrete backend ``name`` stands for.  ``auto``: numba if installed, unless the run is
-    expected to be short (``work`` base-steps under ``AUTO_WORK``): then numpy.  The two give the
-    same results to the bit, so the choice is one of speed alone."""
+    expected to be short (``work`` base-steps under ``AUTO_WORK``) and numba is not loaded in this
+    process yet: then numpy.  The two give the same results to the bit, so the choice is one of speed
+    alone."""
     if name not in BACKENDS:
         raise BarkError("{0}: must be one of " + ", ".join(BACKENDS), Ref("run", "backend", name))
     if name == "auto":
-        short = work is not None and work < AUTO_WORK
-        return "numba" if _numba_available() and not short else "numpy"
+        if not _numba_available():
+            return "numpy"
+        started = "numba" in sys.modules  # its start is paid already (a sweep, a benchmark)
+        return "numba" if started or work is None or work >= AUTO_WORK else "numpy"
     if name == "numba" and not _numba_available():
         raise BarkError("{0} but numba is not installed: pip install numba, or use the numpy backend",
                         Ref("run", "backend", name))
