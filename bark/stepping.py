@@ -182,13 +182,12 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     Many steps go in one call when the integrator and the growth law have compiled forms, the step is
     full size, and the breakers can be watched by one rule; the call then ends where a stop condition
     can next hold or a trigger is next due.  Springs break inside the call when every breaker has the
-    same rule and stepping is not adaptive (undoing a long call of breaks would cost a replay);
-    otherwise the call ends after the first step in which the rule picks a spring, and the breakers
-    select in Python (an ``overload_only`` breaker is watched by the threshold rule)."""
+    same compiled rule (a step that adaptive stepping undoes is replayed from the call's start, its
+    breaks with it); otherwise the call ends after the first step in which the rule picks a spring,
+    and the breakers select in Python (an ``overload_only`` breaker is watched by the threshold rule)."""
     clock = sim.clock
     adaptive = clock.levels > 0
     rule, breaking = _rule(sim.breakers)
-    breaking = breaking and not (adaptive and sim.breakers)
     compiled = sim.integrator.update is not None and sim.growth.compiled is not None
     n = 1
     if compiled and clock.halvings == 0 and rule is not None:
