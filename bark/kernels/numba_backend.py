@@ -24,6 +24,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import attrs
 import numba
 import numba.extending
 import numpy as np
@@ -439,35 +440,62 @@ def _radii(r) -> np.ndarray:
     return np.ascontiguousarray(r)
 
 
+@attrs.define(eq=False)
+class _Frame:
+    """What a kernel call is given besides the state: the state's columns as vectors, and work space
+    kept between calls (derived data: rebuilt whenever the state's arrays are replaced or resized)."""
+
+    of: tuple
+    """The state's sizes and stored arrays this frame was made for (compared by identity)."""
+    bases: tuple
+    """The 14 base vectors the kernel takes: x, v, f, anchor (3 each), anchor direction (2)."""
+    runs: tuple
+    work: tuple
+    start: tuple
+    """Copies of x, v and anchor at the start of a call: an undone step is replayed from them."""
+    live: np.ndarray
+    inv_fmax: np.ndarray
+    log: tuple
+
+
+def _frame_of(state) -> tuple:
+    return (state.n_bases, state.n_springs, *state._store.values())
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    return len(a) == len(b) and all(p is q for p, q in zip(a, b))
+
+
 class NumbaBackend(Backend):
     name = NAME
 
     def __init__(self) -> None:
-        self._buffers: dict[str, np.ndarray] = {}
+        self._frame: _Frame | None = None
 
-    def _buffer(self, name: str, like: np.ndarray, dtype=None) -> np.ndarray:
-        """A work buffer shaped and laid out like ``like``, kept between calls (derived data)."""
-        dtype = like.dtype if dtype is None else np.dtype(dtype)
-        buf = self._buffers.get(name)
-        if buf is None or not isinstance(buf, np.ndarray) or buf.shape != like.shape or buf.dtype != dtype:
-            buf = self._buffers[name] = np.empty_like(like, dtype=dtype, order="F" if like.ndim > 1 else "C")
-        return buf
+    def frame(self, state) -> _Frame:
+        """The call frame for ``state``: reused while the state keeps its arrays and sizes."""
+        of = _frame_of(state)
+        if self._frame is not None and _same(self._frame.of, of):
+            return self._frame
+        x, v, a, d = state.x, state.v, state.anchor, state.anchor_dir
+        f = np.zeros_like(x, order="F")
+        runs = spring_runs(state.pairs)
+        longest = int(runs[1].max(initial=1))
+        m = state.n_springs
+        self._frame = _Frame(
+            of=of, bases=(*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
+                          *(a[:, i] for i in range(3)), d[:, 0], d[:, 1]),
+            runs=runs, work=tuple(np.empty(longest) for _ in range(4)),
+            start=tuple(np.empty_like(arr, order="F") for arr in (x, v, a)), live=np.empty(m, bool),
+            inv_fmax=np.empty(m), log=(np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)),
+        )
+        return self._frame
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
+        fr = self.frame(state)
         f = np.empty_like(x, order="F")
-        _spring_forces(x, *self._runs(state), state.rest, mech.k, state.intact, f)
+        _spring_forces(x, fr.runs, fr.work, state.rest, mech.k, state.intact, f)
         return f
-
-    def _runs(self, state) -> tuple:
-        """The springs' runs (``spring_runs``) and work space for the longest (derived; rebuilt when
-        the topology grows)."""
-        key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
-        if self._buffers.get("runs_of") != key:
-            runs = spring_runs(state.pairs)
-            longest = int(runs[1].max(initial=1))
-            self._buffers["runs_of"] = key
-            self._buffers["runs"] = (runs, tuple(np.empty(longest) for _ in range(4)))
-        return self._buffers["runs"]
 
     def measure(self, state, mech, out: np.ndarray) -> float:
         return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
@@ -475,24 +503,17 @@ class NumbaBackend(Backend):
 
     def _inv_fmax(self, state) -> np.ndarray:
         """``1 / fmax`` of every spring (derived, each call: loads are ``tension · 1/fmax``)."""
-        return np.divide(1.0, state.fmax, out=self._buffer("inv_fmax", state.fmax))
+        return np.divide(1.0, state.fmax, out=self.frame(state).inv_fmax)
 
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
 
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
         kernel = specialized(plan.update, plan.rule, plan.radius)
+        fr = self.frame(state)
         now = (state.x, state.v, state.anchor)
-        start = [self._buffer(f"start{i}", a) for i, a in enumerate(now)]
-        for keep, a in zip(start, now):
-            np.copyto(keep, a)
-        live = self._buffer("live", state.intact)
-        log = (self._buffer("log_id", state.intact, np.int64), self._buffer("log_step", state.intact, np.int64),
-               self._buffer("log_t", state.intact, float))
-        x, v, a, d, f = state.x, state.v, state.anchor, state.anchor_dir, self._buffer("f", state.x)
-        bases = (x[:, 0], x[:, 1], x[:, 2], v[:, 0], v[:, 1], v[:, 2], f[:, 0], f[:, 1], f[:, 2],
-                 a[:, 0], a[:, 1], a[:, 2], d[:, 0], d[:, 1])
-        runs, work = self._runs(state)
+        for keep, arr in zip(fr.start, now):
+            np.copyto(keep, arr)
         params = np.ascontiguousarray(plan.params, dtype=float)
         constants = (float(mech.k), float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                      float(plan.accept_load), float(plan.max_batch))
@@ -500,18 +521,20 @@ class NumbaBackend(Backend):
         inv_fmax = self._inv_fmax(state)
 
         def call(times):
-            np.copyto(live, state.intact)
-            return kernel(bases, runs, work, state.rest, state.fmax, inv_fmax, live, constants, times, params, flags, log)
+            np.copyto(fr.live, state.intact)
+            return kernel(fr.bases, fr.runs, fr.work, state.rest, state.fmax, inv_fmax, fr.live, constants, times,
+                          params, flags, fr.log)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         done, load, n_log = call(times)
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
-            for keep, arr in zip(start, now):
+            for keep, arr in zip(fr.start, now):
                 np.copyto(arr, keep)
             n_log = call(times[: done - 1])[2] if done > 1 else 0
             done -= 1
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
             _measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, inv_fmax, state.intact, tension)
+        log = fr.log
         return Steps(done=int(done), load=float(load), broken=log[0][:n_log].copy(), step=log[1][:n_log].copy(),
                      tension=log[2][:n_log].copy())
 
