@@ -163,3 +163,37 @@ def test_break_springs_logs_a_batch_in_step_order():
     assert log["spring"].tolist() == [4, 6, 9] and log["step"].tolist() == [2, 3, 3]
     assert log["t"].tolist() == [0.2, 0.3, 0.3] and log["tension"].tolist() == [4.0, 6.0, 9.0]
     assert _graph_matches_arrays(sim)
+
+
+@pytest.mark.parametrize("return_on_break", [False, True])
+def test_a_calls_load_is_its_last_steps_largest_load(return_on_break):
+    """With no load bound the kernel takes the largest load once, after its last step, over the
+    springs live before that step (those it broke included); with one, every step.  Both, and the
+    numpy backend, report the same load to the bit, and the same steps and breaks."""
+    import copy
+
+    from bark import kernels, stepping
+
+    sim = build_sim(n_bases=400, G=0.05, dt=0.05, seed=3, backend="numba", stepping="fixed", fmax_spread=0.05)
+    stop = Stop(until_time=8.0)
+    sim.prepare(stop)
+    backends = {"numba": sim.backend, "numpy": kernels.load("numpy")}
+    with_breaks = ended_on_a_break = 0
+    while stop.reason(sim) is None:
+        plan = attrs.evolve(stepping.plan(sim, stop, most=5), return_on_break=return_on_break)
+        results = []
+        for name, bound in (("numba", math.inf), ("numba", 1e300), ("numpy", math.inf)):
+            state = copy.deepcopy(sim.state)
+            tension = np.empty(state.n_springs)
+            r = backends[name].steps(state, sim.mechanics, attrs.evolve(plan, accept_load=bound), tension)
+            results.append((r, state))
+        (first, s0), *rest = results
+        for r, s in rest:
+            assert r.done == first.done and np.array_equal(r.broken, first.broken)
+            assert np.array_equal(r.step, first.step) and np.array_equal(r.tension, first.tension)
+            assert r.load == first.load and np.array_equal(s.x, s0.x), (first.load, r.load)
+        with_breaks += bool(first.step.size)
+        ended_on_a_break += bool(first.step.size and first.step[-1] == first.done)
+        sim.advance(stop, most=5)
+    assert sim.n_broken > 20 and with_breaks > 5
+    assert ended_on_a_break > 5 or not return_on_break

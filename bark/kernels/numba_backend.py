@@ -9,7 +9,9 @@ the many-step paths are calls of this one kernel, so their bits agree by constru
 
 Each piece of physics is :mod:`bark.physics`'s function, inlined (``inline="always"``).  No
 fastmath: every expression is evaluated as written, so a run does not depend on where its compiled
-calls begin and end (what makes a resumed run end bit-identical).  Loops run serially: on the
+calls begin and end (what makes a resumed run end bit-identical).  The one exception is a maximum
+(``_largest_load``), exact in any order: it may use SIMD lanes, and it is taken every step only when
+adaptive stepping needs it, else once at the end of a call.  Loops run serially: on the
 2-core machines bark targets, the spring scatter is memory-bound and threads buy little.
 """
 
@@ -46,20 +48,67 @@ _no_breaking = inline(physics.no_breaking)
 
 
 @inline
-def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, breaking, rule,
+def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, k, w0, w1, w2, wt, loads, rule):
+    """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
+    with ``loads``, also whether every live tension is finite and whether ``rule`` picks a live spring."""
+    finite = True
+    hit = False
+    for q in range(rest.shape[0]):
+        d0 = b0[q] - a0[q]
+        d1 = b1[q] - a1[q]
+        d2 = b2[q] - a2[q]
+        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        t = _tension(length, rest[q], k)
+        g = _force_scale(t, length)
+        on = live[q]
+        g = g if (length > 0.0) & on else 0.0  # a spring of zero length has no direction
+        wt[q] = t
+        w0[q] = g * d0
+        w1[q] = g * d1
+        w2[q] = g * d2
+        if loads:
+            finite = finite & ((abs(t) < np.inf) | (not on))
+            hit = hit | (on & rule(t, fmax[q]))
+    return finite, hit
+
+
+@inline
+def _add_forces(first, second, w):
+    """A run's forces along one axis: subtracted at the second ends, then added at the first."""
+    for q in range(first.shape[0]):
+        second[q] -= w[q]
+    for q in range(first.shape[0]):
+        first[q] += w[q]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"nnan", "nsz"})
+def _largest_load(wt, live, inv_fmax):
+    """The largest ``tension · 1/fmax`` of the live springs of a run (``-inf`` if none).  A maximum is
+    exact in any order, so it may be taken in SIMD lanes (what these flags allow; the call that gets
+    a NaN here reports NaN from its finiteness check instead)."""
+    top = -np.inf
+    for q in range(live.shape[0]):
+        load = wt[q] * inv_fmax[q] if live[q] else -np.inf
+        top = max(top, load)
+    return top
+
+
+@inline
+def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, breaking, rule,
                  log_id, log_step, log_t, n_log, step):
-    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also find the largest
-    tension / threshold (``t · 1/fmax``) and apply the rule: with ``breaking``, a spring it picks is
-    marked broken in ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after
-    the break gives, to the bit) and logged; without, it is only noted.  Returns ``(largest load,
-    all tensions finite, log length, whether the rule picked a spring)``.
+    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
+    finite and apply the rule: with ``breaking``, a spring it picks is marked broken in ``live`` (the
+    call's working copy), left out of ``f`` (what a fresh pass after the break gives, to the bit) and
+    logged; without, it is only noted.  With ``tops`` too: find the largest tension / threshold
+    (``t · 1/fmax``; else ``-inf``).  Returns ``(largest load, all tensions finite, log length,
+    whether the rule picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
     ``spring_runs``), each done on contiguous slices so the loops run in SIMD lanes: the springs'
-    tensions and force vectors; their loads and the rule (a spring by itself only where the rule picks
-    one); then the forces, added to the second ends first and the first ends second, so that every
-    base receives its springs' forces in spring-id order — the order, and the bits, of a pass one
-    spring at a time."""
+    tensions, force vectors, finiteness and the rule in one loop; their largest load in a second; a
+    spring by itself only where the rule picks one; then the forces, added to the second ends first
+    and the first ends second, so that every base receives its springs' forces in spring-id order —
+    the order, and the bits, of a pass one spring at a time."""
     x0, x1, x2 = x
     f0, f1, f2 = f
     w0, w1, w2, wt = work
@@ -72,28 +121,12 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, breakin
         a0, a1, a2 = x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n]
         b0, b1, b2 = x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n], x2[i0 + o:i0 + o + n]
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
-        for q in range(n):
-            d0 = b0[q] - a0[q]
-            d1 = b1[q] - a1[q]
-            d2 = b2[q] - a2[q]
-            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            t = _tension(length, rr[q], k)
-            g = _force_scale(t, length)
-            g = g if (length > 0.0) & lv[q] else 0.0  # a spring of zero length has no direction
-            wt[q] = t
-            w0[q] = g * d0
-            w1[q] = g * d1
-            w2[q] = g * d2
+        fm = fmax[s0:s0 + n]
+        run_finite, hit = _run_forces(a0, a1, a2, b0, b1, b2, rr, lv, fm, k, w0, w1, w2, wt, loads, rule)
         if loads:
-            fm, iv = fmax[s0:s0 + n], inv_fmax[s0:s0 + n]
-            hit = False
-            for q in range(n):
-                t = wt[q]
-                on = lv[q]
-                finite = finite & ((abs(t) < np.inf) | (not on))
-                load = t * iv[q]
-                top = load if on & (load > top) else top
-                hit = hit | (on & rule(t, fm[q]))
+            finite = finite & run_finite
+            if tops:
+                top = max(top, _largest_load(wt, lv, inv_fmax[s0:s0 + n]))
             if hit:
                 for q in range(n):
                     if lv[q] and rule(wt[q], fm[q]):
@@ -109,12 +142,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, breakin
                         else:
                             picked = True
         for u, w in ((f0, w0), (f1, w1), (f2, w2)):
-            ends = u[i0 + o:i0 + o + n]
-            for q in range(n):
-                ends[q] -= w[q]
-            ends = u[i0:i0 + n]
-            for q in range(n):
-                ends[q] += w[q]
+            _add_forces(u[i0:i0 + n], u[i0 + o:i0 + o + n], w)
     return top, finite, n_log, picked
 
 
@@ -189,12 +217,14 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
     f0[:] = 0.0
     f1[:] = 0.0
     f2[:] = 0.0
-    _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, rule,
+    _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule,
                  log_id, log_step, log_t, 0, 0)
+    tops = accept_load < np.inf  # every step's load is needed; else only the last one's (below)
     top = -np.inf
     finite = True
     done = 0
     n_log = 0
+    before = 0
     r_before = 0.0
     for step in range(times.shape[0]):
         t = times[step]
@@ -204,8 +234,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         r_before = r_now
         before = n_log
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work,
-                                                          True, breaking, rule, log_id, log_step, log_t, n_log,
-                                                          step + 1)
+                                                          True, tops, breaking, rule, log_id, log_step, log_t,
+                                                          n_log, step + 1)
         finite = finite and springs_finite
         done = step + 1
         if not finite or top > accept_load or picked:
@@ -216,7 +246,31 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         for q in range(ax.shape[0]):
             ax[q] = r_before * dx[q]
             ay[q] = r_before * dy[q]
+    if finite and not tops and done > 0:
+        top = _last_load((x0, x1, x2), runs, rest, k, live, inv_fmax, work, log_id[before:n_log])
     return done, (top if finite else np.nan), n_log
+
+
+@inline
+def _last_load(x, runs, rest, k, live, inv_fmax, work, broke):
+    """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
+    those it broke): what that step's own pass finds when it looks (the same tensions, and a maximum
+    is exact), taken once per call instead of every step."""
+    x0, x1, x2 = x
+    w0, w1, w2, wt = work
+    r_start, r_len, r_i, r_o = runs
+    for s in broke:
+        live[s] = True
+    top = -np.inf
+    for r in range(r_start.shape[0]):
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
+        _run_forces(x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n], x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n],
+                    x2[i0 + o:i0 + o + n], rr, lv, rr, k, w0, w1, w2, wt, False, _no_breaking)
+        top = max(top, _largest_load(wt, lv, inv_fmax[s0:s0 + n]))
+    for s in broke:
+        live[s] = False
+    return top
 
 
 # -- one wrapper per combination of compiled forms, generated and cached ---------------------------
@@ -353,11 +407,12 @@ def _write_once(name: str, text: str) -> Path:
 
 @jit
 def _spring_forces(x, runs, work, rest, k, intact, f):
-    f[:] = 0.0
+    for axis in range(3):
+        f[:, axis] = 0.0  # a column at a time: a vector fill (the whole 2-D array is filled elementwise)
     no = np.empty(0)
     no_i = np.empty(0, dtype=np.int64)
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, (f[:, 0], f[:, 1], f[:, 2]), work,
-                 False, False, _no_breaking, no_i, no_i, no, 0, 0)
+                 False, False, False, _no_breaking, no_i, no_i, no, 0, 0)
 
 
 @jit
