@@ -1,0 +1,164 @@
+"""The whole tree's geometry: the apical dome's profile and Ridley's placement of the organs on it."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings, strategies as st
+from scipy.integrate import quad
+from scipy.spatial import cKDTree
+
+from bark.errors import BarkError
+from bark.lattice import Lattice
+from bark.tree import Apex, Dome
+
+WHOLE_TREE = Lattice(n_bases=70000, n_start=45000, join_rate=101.0, rise=0.00012, offsets=(55, 89))
+FIBONACCI = [1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 144, 233, 377, 610, 987]
+
+
+def ellipse_area(height: float, p: float, psi0: float = 0.0, psi1: float = 0.5 * math.pi) -> float:
+    """Area (per radius²) of the superellipse dome between parameters psi0 and psi1, by quadrature of
+    2πρ|c'(ψ)| on the curve's own parametrisation: independent of bark's tabulation."""
+    e = 2.0 / p
+
+    def integrand(psi):
+        c, s = math.cos(psi), math.sin(psi)
+        drho = -e * c ** (e - 1) * s if c > 0 else 0.0
+        du = height * e * s ** (e - 1) * c if s > 0 else 0.0
+        return 2.0 * math.pi * c**e * math.hypot(drho, du)
+
+    return quad(integrand, psi0, psi1, limit=200, epsabs=1e-13, epsrel=1e-11)[0]
+
+
+@pytest.mark.parametrize("height, p", [(1.0, 2.0), (0.5, 2.0), (2.0, 2.0), (0.8, 4.0), (1.3, 1.5)])
+def test_the_dome_area_is_the_surface_of_revolution_of_its_profile(height, p):
+    assert Dome(height=height, exponent=p).area(0.35) / 0.35**2 == pytest.approx(ellipse_area(height, p), rel=1e-6)
+
+
+def test_a_hemisphere_has_area_two_pi_r_squared():
+    assert Dome().area(2.0) == pytest.approx(8 * math.pi, rel=1e-7)
+
+
+@pytest.mark.parametrize("t, radius", [(0.0, 0.35), (40.0, 0.6), (247.5, 0.98)])
+def test_each_organ_takes_the_prescribed_area(t, radius):
+    """Between two successive organs on the dome lies the organ area 2πRh of surface, and the
+    youngest sits within 1½ organ areas of the tip (a new one is inserted once there is room)."""
+    apex = Apex(dome=Dome(height=1.0), lattice=WHOLE_TREE)
+    ids, x = apex.organs(t, radius)
+    u = (x[:, 2] - apex.top(t)) / radius  # height above the join, per radius: sin ψ on a hemisphere
+    from_tip = np.array([ellipse_area(1.0, 2.0, math.asin(min(v, 1.0))) for v in u]) * radius**2
+    a = apex.organ_area(radius)
+    spacing = np.diff(from_tip[::-1])[:-1]  # tip first; the oldest may be waiting at the join
+    assert len(ids) > 100
+    assert a == pytest.approx(2 * math.pi * radius * 0.00012, rel=1e-15)  # one base's area on the trunk
+    assert spacing == pytest.approx(np.full(len(ids) - 2, a), rel=1e-6)
+    assert a / 2 - 1e-12 <= from_tip[-1] < 1.5 * a
+
+
+def test_successive_organs_keep_the_divergence_angle():
+    apex = Apex(lattice=WHOLE_TREE)
+    ids, x = apex.organs(12.3, 0.5)
+    theta = np.arctan2(x[:, 1], x[:, 0])
+    step = np.degrees(np.mod(np.diff(theta), 2 * math.pi))
+    assert np.diff(ids).tolist() == [1] * (len(ids) - 1)
+    assert step == pytest.approx(np.full(len(step), WHOLE_TREE.divergence_deg), abs=1e-9)
+
+
+def contact_offsets(lattice: Lattice, radius: float, window=(30000, 34000)) -> list[int]:
+    """The index offsets to each base's four nearest neighbours on the unrolled cylinder (periodic
+    around it: two parastichies, each up and down), most common first."""
+    i = np.arange(*window)
+    arc = np.mod(i * math.radians(lattice.divergence_deg), 2 * math.pi) * radius
+    z = i * lattice.rise
+    tree = cKDTree(np.column_stack([arc, z - z.min()]), boxsize=[2 * math.pi * radius, 1e9])
+    _, nearest = tree.query(np.column_stack([arc, z - z.min()])[1000:-1000], k=5)
+    offsets = np.abs(i[nearest[:, 1:]] - i[1000:-1000, None]).ravel()
+    values, counts = np.unique(offsets, return_counts=True)
+    return values[np.argsort(-counts)].tolist()
+
+
+@settings(max_examples=20, deadline=None)
+@given(radius=st.floats(0.2, 1.2), rise=st.floats(0.00005, 0.0005))
+def test_parastichies_on_the_trunk_are_consecutive_fibonacci_numbers(radius, rise):
+    lattice = Lattice(n_bases=40000, rise=rise, offsets=(55, 89))
+    first, second = contact_offsets(lattice, radius)[:2]
+    assert first in FIBONACCI and second in FIBONACCI
+    assert abs(FIBONACCI.index(first) - FIBONACCI.index(second)) == 1
+
+
+def test_the_whole_trees_parastichies_at_its_first_radius():
+    """Table 1 (h = 0.00012) at 0.35 (10 cm): the closest neighbours are 89 and 144 apart."""
+    assert sorted(contact_offsets(WHOLE_TREE, 0.35)[:2]) == [89, 144]
+
+
+@pytest.mark.parametrize("dome", [Dome(), Dome(height=0.4), Dome(height=3.0, exponent=6.0),
+                                  Dome(shape="points", points=[[1, 0], [0, 1]]),
+                                  Dome(shape="points", points=[[1, 0], [0.9, 0.5], [0.4, 0.9], [0, 1.0]])])
+def test_the_dome_meets_the_trunk_with_a_vertical_tangent(dome):
+    assert dome.tangent_at_join() == pytest.approx([0.0, 1.0], abs=2e-3)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.05, 0.95), st.floats(0.05, 2.0)), min_size=0, max_size=4), st.floats(0.1, 2.0))
+def test_a_curve_given_by_points_joins_smoothly_or_is_refused_in_one_line(inner, top):
+    rho = sorted((p[0] for p in inner), reverse=True)
+    u = sorted(p[1] for p in inner)
+    assume(all(v < top for v in u) and len(set(rho)) == len(rho))
+    points = [[1.0, 0.0], *([r, v] for r, v in zip(rho, u)), [0.0, top]]
+    dome = Dome(shape="points", points=points)
+    assert dome.tangent_at_join() == pytest.approx([0.0, 1.0], abs=1e-9)
+    try:
+        area = dome.area(1.0)
+    except BarkError as err:  # the spline through these points bulges past the trunk or the axis
+        assert "\n" not in str(err) and "points" in str(err)
+        return
+    assert area > 0 and np.isfinite(area)
+
+
+@pytest.mark.parametrize("points, words", [
+    ([], "at least two points"),
+    ([[1, 0]], "from [1, 0]"),
+    ([[0.9, 0], [0, 1]], "from [1, 0]"),
+    ([[1, 0], [0.5, 1], [0.6, 1.2], [0, 2]], "no further from the axis"),
+    ([[1, 0], [0.5, 0.5], [0.5, 0.5], [0, 1]], "differ"),
+    ([[1, 0], [0, float("nan")]], "finite"),
+    ([[1, 0], [0, 1e6]], "100 trunk radii"),
+    ([[1, 0], [0, 1, 2]], "pairs"),
+    ("round", "pairs"),
+])
+def test_bad_profiles_are_refused_in_one_line(points, words):
+    with pytest.raises(BarkError) as err:
+        Dome(shape="points", points=points)
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+@settings(max_examples=60, deadline=None)
+@given(t1=st.floats(0.0, 240.0), dt=st.floats(0.0, 20.0), r1=st.floats(0.3, 1.0), dr=st.floats(0.0, 0.2))
+def test_organs_are_never_lost_or_duplicated_and_only_move_down(t1, dt, r1, dr):
+    """From t1 to t2 = t1 + dt, with the trunk not narrowing: ids on the dome are one run, every organ
+    on it at t1 is still on it or has passed to the trunk at t2, the tip only gains organs, and each
+    organ is further from the tip (in area) than before."""
+    apex = Apex(lattice=WHOLE_TREE)
+    t2, r2 = t1 + dt, r1 + dr
+    ids1, x1 = apex.organs(t1, r1)
+    ids2, x2 = apex.organs(t2, r2, first=int(ids1[0]))
+    assert np.all(np.diff(ids1) == 1) and np.all(np.diff(ids2) == 1)
+    assert ids2[0] == ids1[0] and ids2[-1] >= ids1[-1]
+    joined = ids1 <= apex.top_index(t2)  # passed onto the trunk by t2: they sit at the join
+    u1 = (x1[:, 2] - apex.top(t1)) / r1
+    u2 = (x2[: len(ids1), 2] - apex.top(t2)) / r2
+    assert np.all(u2[joined] == 0.0)
+    # further down the profile (in units of the radius) means further from the tip in area per radius²
+    assert np.all(u2[~joined] <= u1[~joined] + 1e-12)
+
+
+def test_an_organ_reaches_the_trunk_at_its_lattice_site():
+    """When j(t) = i the organ is at the join, at height i·h and angle i·φ: the site where it joins the
+    mechanics (before jitter)."""
+    apex = Apex(lattice=WHOLE_TREE)
+    i = 50000
+    t = (i - (WHOLE_TREE.initial - 1)) / WHOLE_TREE.join_rate
+    ids, x = apex.organs(t, 0.6, first=i)
+    theta = i * math.radians(WHOLE_TREE.divergence_deg)
+    assert ids[0] == i
+    assert x[0] == pytest.approx([0.6 * math.cos(theta), 0.6 * math.sin(theta), i * WHOLE_TREE.rise], abs=1e-9)
