@@ -46,6 +46,12 @@ def _check_offsets(instance, attribute, value) -> None:
         raise BarkError("{0}: must be a list of distinct integers >= 1, e.g. [21, 34]", Ref(None, attribute.name, value))
 
 
+def _check_partition(instance, attribute, value) -> None:
+    _check_offsets(instance, attribute, value)
+    if len(value) != 2:
+        raise BarkError("{0}: must be two distinct integers >= 1, e.g. [34, 144]", Ref(None, attribute.name, value))
+
+
 @attrs.frozen(kw_only=True)
 class Lattice:
     """Where the leaf bases start and which of them are joined by springs."""
@@ -69,6 +75,10 @@ class Lattice:
     when n_start is below n_bases)."""
     join_every: float = attrs.field(default=1.0, validator=positive)
     """Time between two joinings: the bases due by then join together (time units)."""
+    partition: tuple[int, ...] | None = attrs.field(default=None, converter=_offsets, validator=optional(_check_partition))
+    """Index offsets p, q to the bases whose midpoints with a base are the corners of its rhomboid
+    leaf-base shape, drawn in 3-D output (Table 1: 34, 144); none: o2 − o1 and o1 + o2 from the
+    two spring offsets (21, 34 give 13, 55; 55, 89 give 34, 144)."""
 
     def __attrs_post_init__(self) -> None:
         if self.n_start is not None and self.n_start > self.n_bases:
@@ -117,6 +127,16 @@ class Lattice:
         theta = i * math.radians(self.divergence_deg) + noise[0] * (sigma / radius)
         z = i * self.rise + noise[1] * sigma
         return theta, z
+
+    def partition_offsets(self) -> tuple[int, int]:
+        """The two index offsets whose midpoints make a base's rhomboid (``partition``, or from ``offsets``)."""
+        if self.partition is not None:
+            return self.partition
+        if len(self.offsets) != 2:
+            raise BarkError("{0} is needed for leaf-base shapes when {1} are not two", Ref(None, "partition", None),
+                            Ref(None, "offsets", self.offsets))
+        o1, o2 = sorted(self.offsets)
+        return (o2 - o1, o1 + o2)
 
     @property
     def n_springs(self) -> int:

@@ -46,19 +46,27 @@ def temp_name_prefix(name: str) -> str:
 
 
 def atomic_write(path: str | Path, write: Callable[[io.BufferedWriter], None], *,
-                 verify: Callable[[Path], None] | None = None, keep: str | Path | None = None) -> Path:
+                 verify: Callable[[Path], None] | None = None, keep: str | Path | None = None,
+                 by_name: bool = False) -> Path:
     """Call ``write(fh)`` on a temporary file beside ``path``, then move it onto ``path``.
 
-    ``verify(tmp)``, if given, is called on the written temporary file before it replaces anything
-    (it raises to refuse it).  ``keep``, if given, is where the file being replaced goes (moved,
-    not copied), so that the previous version survives until the new one is whole and verified."""
+    ``by_name``: ``write`` is given the temporary file's path instead (for writers that open files
+    themselves, like meshio's VTU writer).  ``verify(tmp)``, if given, is called on the written
+    temporary file before it replaces anything (it raises to refuse it).  ``keep``, if given, is where
+    the file being replaced goes (moved, not copied), so that the previous version survives until the
+    new one is whole and verified."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=temp_name_prefix(path.name), suffix=TMP_SUFFIX, dir=path.parent)
     try:
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
+        if by_name:
+            os.close(fd)
+            write(Path(tmp))
+            fd = os.open(tmp, os.O_RDONLY)
+        with os.fdopen(fd, "rb" if by_name else "wb") as fh:
+            if not by_name:
+                write(fh)
+                fh.flush()
             os.fsync(fh.fileno())
         if verify is not None:
             verify(Path(tmp))
@@ -189,7 +197,8 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
 
 def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None) -> dict:
     """Write what the scene's effects ask for into ``out_dir``: summary.json always; patches.csv
-    (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml)."""
+    (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml),
+    tree.vtu and tree.ply (mesh)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     analyses = sim.analyze()
@@ -212,6 +221,10 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
         )
     if scene.has("graphml"):
         write_graphml(out / "graph.graphml", sim)
+    if scene.has("mesh"):
+        from bark.mesh import write_mesh
+
+        write_mesh(sim, out, scene.run.min_patch_size)
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s)
     write_json(out / "summary.json", summary)
     return summary

@@ -43,7 +43,7 @@ from bark._validate import in_range, one_of
 from bark.errors import BarkError, Ref
 from bark.lattice import Lattice
 
-__all__ = ["Dome", "Apex", "SAMPLES"]
+__all__ = ["Dome", "Apex", "SAMPLES", "leaf_corners"]
 
 SAMPLES = 8193
 """Points along the profile at which its arc length and area are tabulated (area error ~1e-8)."""
@@ -201,3 +201,25 @@ class Apex:
         rho, u = self.dome.at_area(self.dome.area(radius) - sigma, radius)
         theta = ids * math.radians(self.lattice.divergence_deg)
         return ids, np.column_stack([rho * np.cos(theta), rho * np.sin(theta), float(self.top(t)) + u])
+
+
+def leaf_corners(lattice: Lattice, radius) -> np.ndarray:
+    """Corners of each base's rhomboid leaf-base shape (paper, Fig. 5C, D), shape ``(n, 4, 2)``: offsets
+    (arc length, height) from the base's centre, counter-clockwise seen from outside the trunk.
+
+    The corners are the midpoints between a base and its partition neighbours ``±p``, ``±q``
+    (``lattice.partition_offsets()``) on the lattice at ``radius``, the trunk radius where and when the
+    base joined (one per base): the shape is fixed then and carried with its base.  With ``p``, ``q``
+    whose lattice vectors span twice a base's area (34 and 144 on a golden-angle lattice), each
+    rhomboid has exactly the area ``2πRh`` of one base, and together they partition the cylinder."""
+    radius = np.atleast_1d(np.asarray(radius, dtype=float))
+    phi = math.radians(lattice.divergence_deg)
+
+    def half(o: int) -> np.ndarray:  # half the lattice vector to the base o further on
+        turn = math.remainder(o * phi, 2.0 * math.pi)
+        return 0.5 * np.column_stack([radius * turn, np.full_like(radius, o * lattice.rise)])
+
+    p, q = lattice.partition_offsets()
+    u, v = half(p), half(q)
+    ccw = (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] > 0)[:, None, None]
+    return np.where(ccw, np.stack([u, v, -u, -v], axis=1), np.stack([u, -v, -u, v], axis=1))

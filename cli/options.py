@@ -58,7 +58,7 @@ def _allowed(validator) -> tuple[str, ...] | None:
 
 
 def _click_type(field: attrs.Attribute):
-    if field.name == "offsets":
+    if field.name in ("offsets", "partition"):
         return OffsetsType()
     choices = _allowed(field.validator)
     if choices:

@@ -35,19 +35,19 @@ def test_resolution_adds_what_is_needed_and_says_why():
     assert "sparkles" in str(err.value) and "\n" not in str(err.value)
 
 
-def test_image_not_asked_means_matplotlib_never_imported(tmp_path):
+def test_image_and_mesh_not_asked_means_matplotlib_and_meshio_never_imported(tmp_path):
     code = (
         "import sys\n"
         "from bark_cli.main import cli\n"
         f"try:\n    cli.main(['simulate', '--scene', {str(SCENES / 'statistics-only.toml')!r}, '--n-bases', '400',"
         f" '--until-patches', '40', '--until-time', '1000', '-G', '0.05', '--out', {str(tmp_path / 'out')!r}, '--quiet'])\n"
         "except SystemExit as e:\n    assert e.code == 0, e.code\n"
-        "print('matplotlib' in sys.modules, sorted(p.name for p in __import__('pathlib').Path("
+        "print('matplotlib' in sys.modules, 'meshio' in sys.modules, sorted(p.name for p in __import__('pathlib').Path("
         f"{str(tmp_path / 'out')!r}).iterdir()))\n"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == "False ['patches.csv', 'summary.json']"
+    assert result.stdout.strip() == "False False ['patches.csv', 'summary.json']"
 
 
 def test_image_asked_imports_matplotlib_and_draws(tmp_path):

@@ -1,0 +1,85 @@
+"""The trunk as a 3-D mesh: each leaf base a rhomboid, coloured by its patch (``mesh`` effect).
+
+Written with meshio (imported here only, when a scene asks for the mesh): ``tree.vtu`` for ParaView
+(cell data ``patch``, ``patch_size``, ``base``, ``born``; point colours) and ``tree.ply`` for Blender
+(vertex colours ``red``, ``green``, ``blue``).  Each leaf base is a quad of its own — four corners,
+not shared with its neighbours — so bases that have moved apart show the crack between them.
+
+A base's rhomboid is fixed when it joins the trunk (:func:`bark.tree.leaf_corners`, at the radius it
+joined at) and carried with it: its corners keep their arc length and height offsets from the base's
+centre, and lie on the trunk's surface at their own heights.  Patches of fewer than ``min_size``
+bases (fragments) are grey; every other patch gets a colour of its own from the golden-ratio hue
+sequence, so patches with neighbouring ids differ.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import math
+from pathlib import Path
+
+import numpy as np
+
+from bark.output import atomic_write
+from bark.tree import leaf_corners
+
+__all__ = ["leaf_quads", "patch_colours", "write_mesh", "MESH_FILES"]
+
+MESH_FILES = ("tree.vtu", "tree.ply")
+GREY = (150, 150, 150)
+
+
+def join_radii(sim) -> np.ndarray:
+    """The trunk radius at each base's site when it joined (the growth law at its birth time)."""
+    s = sim.state
+    z, born = s.anchor[:, 2], s.born
+    out = np.empty(s.n_bases)
+    for t in np.unique(born):  # bases join in groups: one call of the law per group
+        at = born == t
+        out[at] = np.broadcast_to(sim.growth.radius(float(t), z[at]), z[at].shape)
+    return out
+
+
+def leaf_quads(sim) -> np.ndarray:
+    """The corners of every base's rhomboid now, shape ``(n, 4, 3)``, on the trunk's surface."""
+    s = sim.state
+    corners = leaf_corners(sim.lattice, join_radii(sim))
+    x = s.x
+    theta = np.arctan2(x[:, 1], x[:, 0])
+    r_now = np.hypot(x[:, 0], x[:, 1])
+    angle = theta[:, None] + corners[:, :, 0] / r_now[:, None]  # arc length kept on today's trunk
+    z = x[:, 2, None] + corners[:, :, 1]
+    r = np.broadcast_to(sim.growth.radius(s.t, z.ravel()), z.size).reshape(z.shape)
+    return np.stack([r * np.cos(angle), r * np.sin(angle), z], axis=-1)
+
+
+def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
+    """An RGB colour (uint8) per base: its patch's, or grey for a fragment of fewer than ``min_size``."""
+    labels = np.asarray(labels)
+    sizes = np.bincount(labels)
+    rgb = np.full((sizes.size, 3), GREY, dtype=np.uint8)
+    golden = (math.sqrt(5.0) - 1.0) / 2.0
+    for label in np.flatnonzero(sizes >= min_size):
+        rgb[label] = np.round(255 * np.array(colorsys.hsv_to_rgb((label * golden) % 1.0, 0.65, 0.9)))
+    return rgb[labels]
+
+
+def write_mesh(sim, out: str | Path, min_size: int = 7) -> list[Path]:
+    """Write ``tree.vtu`` and ``tree.ply`` into ``out``; returns their paths."""
+    import meshio
+
+    quads = leaf_quads(sim)
+    n = len(quads)
+    labels = sim.patch_labels()
+    colours = np.repeat(patch_colours(labels, min_size), 4, axis=0)
+    points = quads.reshape(-1, 3)
+    cells = [("quad", np.arange(4 * n, dtype=np.int32).reshape(n, 4))]
+    colour_data = {name: colours[:, k] for k, name in enumerate(("red", "green", "blue"))}
+    sizes = np.bincount(labels)[labels]
+    cell_data = {"patch": [labels.astype(np.int32)], "patch_size": [sizes.astype(np.int32)],
+                 "base": [np.arange(n, dtype=np.int32)], "born": [sim.state.born.astype(float)]}
+    out = Path(out)
+    vtu = meshio.Mesh(points, cells, point_data=colour_data, cell_data=cell_data)
+    ply = meshio.Mesh(points, cells, point_data=colour_data)  # PLY keeps no cell data
+    return [atomic_write(out / "tree.vtu", lambda tmp: meshio.write(tmp, vtu, file_format="vtu"), by_name=True),
+            atomic_write(out / "tree.ply", lambda fh: meshio.write(fh, ply, file_format="ply", binary=True))]
