@@ -40,6 +40,7 @@ from typing import Any, Callable
 import attrs
 import numpy as np
 
+from bark import kernels
 from bark.errors import BarkError
 from bark.output import write_npz
 from bark.state import BASE_FIELDS, SPRING_FIELDS
@@ -77,7 +78,7 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict]:
     count, the random generator's state, the events."""
     arrays = {**sim.state.arrays(), **{f"breaks_{k}": v for k, v in sim.breaks.arrays().items()}}
     meta = {"t": sim.state.t, "h_last": sim.state.h, "clock": attrs.asdict(sim.clock), "step_count": sim.step_count,
-            "events": sim.events, "rng": sim.rng.bit_generator.state}
+            "events": sim.events, "rng": sim.rng.bit_generator.state, "backend": sim.backend.name}
     return arrays, meta
 
 
@@ -89,6 +90,10 @@ def restore_into(sim, arrays: dict[str, np.ndarray], meta: dict):
 
     sim.rng = np.random.default_rng(sim.seed)
     sim.rng.bit_generator.state = meta["rng"]
+    if sim.numerics.backend == "auto" and meta.get("backend") in ("numpy", "numba") and kernels.available(meta["backend"]):
+        # go on with the backend the run had: auto's choice depends on the process and on the time left,
+        # and the backends' transcendental functions (numpy's own, the C library's) may differ in the last bit
+        sim.numerics = attrs.evolve(sim.numerics, backend=meta["backend"])
     sim.build(State.from_arrays(arrays, meta["t"], meta["h_last"]), Clock(**meta["clock"]))
     log = tuple(np.asarray(arrays[f"breaks_{k}"]) for k in BREAKS)
     sim.breaks = BreakLog([log] if log[0].size else [])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import attrs
@@ -96,7 +97,7 @@ def bulge_radius(t, z, p):
     r = base
     for b in range(int(p[3])):
         o = 4 + 5 * b
-        extra = p[o + 2] * np.exp(-p[o + 3] * t)
+        extra = p[o + 2] * math.exp(-p[o + 3] * t)  # a scalar: the C library's exp in numpy and numba alike
         if not np.isnan(p[o + 4]):
             extra = extra + (p[1] + p[o + 4] * ft) - base
         r = r + bump(z, p[o], p[o + 1]) * extra
@@ -165,7 +166,7 @@ class BulgeGrowth(Growth):
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:
-            extra = b.magnitude * np.exp(-b.decay * t)
+            extra = b.magnitude * math.exp(-b.decay * t)
             if b.G is not None:
                 extra = extra + np.broadcast_to(attrs.evolve(self.base, G=b.G).radius(t, z), z.shape) - base
             r = r + b.profile(z) * extra

@@ -64,3 +64,24 @@ def test_checkpoint_holds_what_it_documents(tmp_path):
 
 
 # Real signals in a real process, and damaged checkpoints: tests/test_faults_signals.py, tests/test_faults_files.py.
+
+
+def test_a_resumed_run_goes_on_with_the_backend_it_had(tmp_path, monkeypatch):
+    """``auto`` decides by the process (is numba loaded?) and the time left, and the backends' own
+    transcendental functions may differ in the last bit: a resumed run keeps the backend the run was
+    on, so it ends bit for bit where the uninterrupted run ends."""
+    from bark import kernels, runner
+    from bark.scene import Scene
+
+    scene = Scene.from_dict({"lattice": {"n_bases": 600}, "growth": {"G": 0.03}, "run": {"until_time": 20.0}})
+    assert scene.run.backend == "auto"
+    monkeypatch.setattr(kernels, "resolve", lambda name, work=None: "numpy")  # what a fresh process may choose
+    seen = []
+    out = runner.run(scene, tmp_path / "part", checkpoint_every=1e-9, observe=lambda s, stop: seen.append(s.state.t),
+                     interrupted=lambda: "interrupted" if seen and seen[-1] >= 8.0 else None)
+    assert out.stop_reason == "interrupted" and out.sim.backend.name == "numpy"
+    assert checkpoint.read_meta(tmp_path / "part" / "checkpoint.npz")["backend"] == "numpy"
+    monkeypatch.undo()
+    assert kernels.resolve("auto", None) == "numba"  # left to itself, auto would now take numba
+    resumed = runner.resume(tmp_path / "part")
+    assert resumed.sim.backend.name == "numpy" and resumed.summary["backend"] == "numpy"

@@ -643,7 +643,7 @@ def test_the_backends_agree_to_the_bit(stepping, dt, extra):
 
     runs = []
     for backend in ("numpy", "numba"):
-        growth = (BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=[Bulge(z=0.1, half_width=0.05, magnitude=0.01, G=0.02)])
+        growth = (BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=[Bulge(z=0.1, half_width=0.05, magnitude=0.01, decay=0.07, G=0.02)])
                   if extra.get("growth") else None)
         breakers = [ProbabilisticBreaker()] if extra.get("breaker") else None
         sim = build_sim(n_bases=400, G=0.05, dt=dt, seed=3, stepping=stepping, backend=backend, fmax_spread=0.05,

@@ -39,7 +39,7 @@ import numpy as np
 
 from bark.errors import BarkError, Ref
 
-__all__ = ["BACKENDS", "Backend", "Plan", "Steps", "resolve", "load"]
+__all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
 
 BACKENDS = ("auto", "numpy", "numba")
 
@@ -122,6 +122,11 @@ base-step at 3000 bases, measured with adaptive stepping)."""
 
 def _numba_available() -> bool:
     return importlib.util.find_spec("numba") is not None  # without importing it (0.2 s, 40 MB)
+
+
+def available(name: str) -> bool:
+    """Whether the concrete backend ``name`` can run here."""
+    return name == "numpy" or (name == "numba" and _numba_available())
 
 
 def resolve(name: str, work: float | None = None) -> str:
