@@ -1,4 +1,5 @@
-"""The rich progress bar (simulated time, radius, broken springs, patches) and the closing table."""
+"""The rich progress bar (simulated time and years, bases, height, radius, broken springs, patches) and the
+closing table."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+
+from bark.units import metres, years
 
 
 def _fraction(sim, stop, r0: float) -> float:
@@ -19,6 +22,14 @@ def _fraction(sim, stop, r0: float) -> float:
     if stop.until_patches is not None:
         parts.append(sim.patch_count(stop.min_patch_size) / stop.until_patches)
     return min(1.0, max(parts, default=0.0))
+
+
+def _fields(sim, stop) -> dict:
+    """What the bar shows: simulated time (and years), bases on the trunk, its height (the highest
+    site, in metres), mean radius (and cm), broken springs, patches."""
+    s, r = sim.state, sim.radius
+    return {"t": s.t, "years": years(s.t), "bases": s.n_bases, "height": metres(float(s.anchor[:, 2].max(initial=0.0))),
+            "r": r, "r_cm": 100 * metres(r), "broken": sim.n_broken, "patches": sim.patch_count(stop.min_patch_size)}
 
 
 class ProgressBar:
@@ -41,17 +52,17 @@ class ProgressBar:
             columns = (
                 TextColumn("[bold]bark"),
                 BarColumn(),
-                TextColumn("t={task.fields[t]:>9.2f}  r={task.fields[r]:.4f}  broken={task.fields[broken]:>6}  "
-                           "patches={task.fields[patches]:>4}"),
+                TextColumn("t={task.fields[t]:>8.2f} ({task.fields[years]:.1f} y)  bases={task.fields[bases]}  "
+                           "height={task.fields[height]:.2f} m  r={task.fields[r]:.4f} ({task.fields[r_cm]:.1f} cm)  "
+                           "broken={task.fields[broken]:>6}  patches={task.fields[patches]:>4}"),
                 TimeElapsedColumn(),
             )
             self._progress = Progress(*columns, transient=False)
             self._progress.start()
-            self._task = self._progress.add_task("run", total=1.0, t=0.0, r=self._r0, broken=0, patches=0)
+            self._task = self._progress.add_task("run", total=1.0, **_fields(sim, stop))
             self._stop = stop
         self._sim = sim
-        self._progress.update(self._task, completed=_fraction(sim, stop, self._r0), t=sim.state.t, r=sim.radius,
-                              broken=sim.n_broken, patches=sim.patch_count(stop.min_patch_size))
+        self._progress.update(self._task, completed=_fraction(sim, stop, self._r0), **_fields(sim, stop))
 
     def close(self) -> None:
         if self._progress is not None:

@@ -1,0 +1,23 @@
+"""The model's units, from the paper's calibration ("Growth simulation"): stated once, used everywhere.
+
+1 time unit = 88.5 days (about 412.5 leaves a year and 10–20 mm of trunk a year); 1 length unit =
+0.3 m.  Everything inside bark is in model units; these convert for people (progress, figures).
+"""
+
+from __future__ import annotations
+
+DAYS_PER_TIME_UNIT = 88.5
+METRES_PER_LENGTH_UNIT = 0.3
+DAYS_PER_YEAR = 365.25
+
+__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "years", "metres"]
+
+
+def years(t):
+    """Simulated time ``t`` (time units) in years."""
+    return t * (DAYS_PER_TIME_UNIT / DAYS_PER_YEAR)
+
+
+def metres(length):
+    """A length (length units) in metres."""
+    return length * METRES_PER_LENGTH_UNIT

@@ -1,0 +1,76 @@
+"""The shipped whole-tree scenes: Table 1 values, bases joining at the top, bulges, the 3-D mesh,
+and a run interrupted and resumed ending bit for bit where the uninterrupted one ends."""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+
+import meshio
+import pytest
+from click.testing import CliRunner
+
+from bark import runner
+from bark.scene import Scene
+from bark.units import metres, years
+from bark_cli.main import cli
+from conftest import REPO_ROOT
+
+SCENES = REPO_ROOT / "examples" / "scenes"
+
+
+def test_the_whole_tree_scene_has_table_1s_values_and_the_papers_calibration():
+    scene = Scene.from_toml(SCENES / "whole-tree.toml")
+    lat, mech, growth = scene.lattice, scene.mechanics, scene.simulation().growth
+    assert (lat.rise, lat.offsets, lat.partition_offsets()) == (0.00012, (55, 89), (34, 144))
+    assert (mech.k, mech.c, mech.b, mech.m, mech.f_max) == (1.0, 0.03, 2.0, 1.0, 0.005)
+    assert (growth.base.r0, growth.base.G) == (0.35, 0.04)
+    assert all((b.G, b.f_max) == (0.02, 0.006) for b in growth.bulges)
+    t_end = scene.run.until_time
+    assert years(t_end) == pytest.approx(60.0, rel=2e-3)
+    assert (lat.initial, lat.bases_at(t_end)) == (45000, 70000)
+    assert metres(lat.initial * lat.rise) == pytest.approx(1.62) and metres(lat.n_bases * lat.rise) == pytest.approx(2.52)
+    assert 100 * metres(growth.base.radius(0.0, 0.0)) == pytest.approx(10.5)
+    assert 100 * metres(growth.base.radius(t_end, 0.0)) == pytest.approx(29.4, abs=0.1)
+    assert (lat.join_rate / years(1.0)) == pytest.approx(412.5, rel=0.02)  # leaves a year (paper's calibration)
+
+
+def test_the_small_variant_is_the_same_tree_cut_down():
+    big = tomllib.loads((SCENES / "whole-tree.toml").read_text())
+    small = tomllib.loads((SCENES / "whole-tree-small.toml").read_text())
+    for section in ("mechanics", "effects"):
+        assert {k: v for k, v in small[section].items() if k != "series_every"} == \
+               {k: v for k, v in big[section].items() if k != "series_every"}
+    same = ("rise", "offsets", "partition", "join_rate", "join_every", "jitter")
+    assert {k: small["lattice"][k] for k in same} == {k: big["lattice"][k] for k in same}
+    assert small["growth"]["base"] == big["growth"]["base"]
+
+
+def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(SCENES / "whole-tree-small.toml"), "--quiet",
+                                      "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_bases"] == 7000 and summary["stop_reason"] == "time"
+    # the mean radius: Table 1's law, a little less where the bulge grows at G = 0.02 (and stands out)
+    assert 0.35 + 0.02 * math.sqrt(24.8) < summary["radius"] < 0.35 + 0.04 * math.sqrt(24.8) + 0.06
+    assert summary["n_broken"] > 0
+    mesh = meshio.read(out / "tree.vtu")
+    assert mesh.points.shape == (4 * 7000, 3) and mesh.cells[0].data.shape == (7000, 4)
+    assert {"statistics.csv", "pattern.png", "tree.ply", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
+
+
+def test_the_small_whole_tree_interrupted_and_resumed_ends_bit_for_bit(tmp_path):
+    scene = Scene.from_toml(SCENES / "whole-tree-small.toml")
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    runner.run(scene, whole)
+    seen = []
+    out = runner.run(scene, part, checkpoint_every=1e-9, observe=lambda s, stop: seen.append(s.state.t),
+                     interrupted=lambda: "interrupted" if seen and seen[-1] >= 9.0 else None)
+    assert out.stop_reason == "interrupted" and 4500 < out.sim.state.n_bases < 7000
+    resumed = runner.resume(part)
+    assert resumed.sim.state.n_bases == 7000
+    for name in ("breaks.csv", "state.npz", "patches.csv", "statistics.csv", "tree.vtu"):
+        assert (part / name).read_bytes() == (whole / name).read_bytes(), name
