@@ -37,7 +37,6 @@ import math
 
 import attrs
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from bark._validate import in_range, one_of
 from bark.errors import BarkError, Ref
@@ -104,8 +103,9 @@ class Dome:
             return rho, u
         return self._spline()(np.linspace(0.0, 1.0, n)).T.copy()
 
-    def _spline(self) -> CubicSpline:
+    def _spline(self):
         """The parametric spline through ``points`` on normalised chord length, tangents clamped."""
+        from scipy.interpolate import CubicSpline  # 0.5 s to import: only for a curve given by points
         p = np.array(self.points)
         c = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
         length = c[-1]

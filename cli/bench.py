@@ -292,12 +292,35 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
     console.print(f"wrote {out}/accuracy.png, accuracy_position.csv, accuracy_pattern.csv, accuracy_summary.json")
 
 
+def _run_words(text: str) -> list[str]:
+    """``bark simulate`` arguments for one ``bench scenes`` argument: a scene file, optionally followed
+    by options (``"whole-tree.toml --backend numpy --dt 0.01"``), checked as ``simulate`` checks them."""
+    import shlex
+
+    from bark_cli.main import scene_of, simulate
+
+    try:
+        words = shlex.split(text)
+    except ValueError as err:
+        raise click.BadParameter(f"{text!r}: {err}", param_hint="SCENES") from None
+    if not words or words[0].startswith("-"):
+        raise click.BadParameter(f"{text!r}: must start with a scene file", param_hint="SCENES")
+    args = ["--scene", words[0], *words[1:]]
+    if any(w in ("--out", "--resume", "--overwrite") or w.startswith(("--out=", "--resume=")) for w in words[1:]):
+        raise click.BadParameter(f"{text!r}: the benchmark chooses the output folder", param_hint="SCENES")
+    scene_of(simulate.make_context("simulate", list(args)).params)  # every run is valid before any runs
+    return args
+
+
 @bench.command()
-@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False), required=True)
+@click.argument("scenes", nargs=-1, required=True)
 @click.option("--repeats", type=click.IntRange(1, 1000), default=3, show_default=True, help="Runs per scene, interleaved; medians.")
 def scenes(scenes, repeats):
     """Wall time and peak memory of `bark simulate --scene S` for each scene, as the command runs it
-    (a fresh process each time, outputs to a temporary folder), with ratios against the first."""
+    (a fresh process each time, outputs to a temporary folder), with ratios against the first.  A
+    scene may come with options for `bark simulate`, in one argument: compare the whole tree with its
+    paper-numerics numpy baseline by `bark bench scenes examples/scenes/whole-tree.toml
+    "examples/scenes/whole-tree.toml --backend numpy --dt 0.01 --stepping fixed"`."""
     import subprocess
     import sys
     import tempfile
@@ -305,10 +328,7 @@ def scenes(scenes, repeats):
     from rich.console import Console
     from rich.table import Table
 
-    from bark.scene import Scene, read_toml
-
-    for scene in scenes:  # every scene is valid before any run
-        Scene.from_dict(read_toml(scene))
+    runs = {scene: _run_words(scene) for scene in scenes}
     # each run reports its own peak resident memory (RUSAGE_CHILDREN would give the largest so far)
     child = ("import resource, sys\nfrom bark_cli.main import cli\ncode = 0\n"
              "try:\n    cli.main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"
@@ -320,7 +340,7 @@ def scenes(scenes, repeats):
         for scene in scenes:  # interleaved, so that a change in the machine's load falls on all alike
             with tempfile.TemporaryDirectory() as out:
                 t0 = time.perf_counter()
-                done = subprocess.run([sys.executable, "-c", child, "simulate", "--scene", scene, "--out", out, "--quiet"],
+                done = subprocess.run([sys.executable, "-c", child, "simulate", *runs[scene], "--out", out, "--quiet"],
                                       capture_output=True, text=True)
                 times[scene].append(time.perf_counter() - t0)
                 if done.returncode != 0:

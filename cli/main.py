@@ -206,6 +206,15 @@ def _notice(message: str) -> None:
     click.echo(f"bark: {message}", err=True)
 
 
+def scene_of(params: dict) -> Scene:
+    """The scene ``bark simulate`` runs for its parsed options ``params`` (one-line BarkError if bad)."""
+    own = {"scene_file", "growth_name", "integrator_name", "breaker_name", "analyzer_name", "r0", "G", "sets", "out",
+           "overwrite", "resume", "checkpoint_every", "quiet"}
+    strategies = {kind: params[f"{kind}_name"] for kind in ("growth", "integrator", "breaker", "analyzer")}
+    return resolve_scene(params["scene_file"], strategies, {"r0": params["r0"], "G": params["G"]}, params["sets"],
+                         {k: v for k, v in params.items() if k not in own})
+
+
 @cli.command(context_settings=CONTEXT)
 @click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
               help="Scene TOML file (examples/scenes/); options given here override it.")
@@ -245,9 +254,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
             name = given[0].split("__")[-1].replace("_", "-")
             raise BarkError(f"--resume goes on with the settings in its checkpoint: --{name} cannot be given with it")
     else:
-        strategies = {"growth": growth_name, "integrator": integrator_name, "breaker": breaker_name,
-                      "analyzer": analyzer_name}
-        scene = resolve_scene(scene_file, strategies, {"r0": r0, "G": G}, sets, kwargs)
+        scene = scene_of(ctx.params)
     bar = None
     if not quiet and sys.stdout.isatty():
         from bark_cli.progress import ProgressBar  # rich, only for a terminal
