@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold", "no_breaking"]
+__all__ = ["tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold", "no_breaking",
+           "as_given"]
 
 
 def tension(length, rest, k):
@@ -54,3 +55,8 @@ def over_threshold(t, fmax):
 def no_breaking(t, fmax):
     """The rule of a layer without fracture: nothing breaks."""
     return False
+
+
+def as_given(t, params):
+    """The per-step preparation of a growth law that has none: its parameters as they are."""
+    return params

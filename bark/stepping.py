@@ -200,6 +200,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
         accept_load=1.0 + sim.numerics.overshoot_tol if adaptive and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
+        prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given,
     )
 
 

@@ -34,7 +34,10 @@ strategy in Python once per step.  The function is the definition: the verb is d
   from it.  A subclass that writes ``select`` again loses the inherited rule (and ``overload_only``)
   unless it states them again: a compiled rule and a Python ``select`` can never disagree.
 * ``Growth.compiled(t, z, params) -> r`` with ``compiled_params()``, and ``uniform = True`` when
-  the radius does not depend on height; ``radius(t, z)`` then follows from it.
+  the radius does not depend on height; ``radius(t, z)`` then follows from it.  A law whose radius
+  has parts that depend on time alone (a fading bulge's ``exp``) may also give
+  ``compiled_time(t, params) -> q``: computed once a step, and ``compiled`` is then called with ``q``
+  in place of ``params`` (per base, only what depends on height is left).
 
 The functions must be importable by name (module-level functions or static methods) to be cached
 on disk; others are compiled once per process.  Written with numpy ufuncs (``np.sqrt``), one
@@ -52,7 +55,8 @@ import numpy as np
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS"]
 
 
-_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "update": None, "rule": None, "overload_only": False}
+_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "update": None, "rule": None,
+                                  "overload_only": False}
 
 
 def _form_owner(strategy, form: str) -> type | None:
@@ -100,16 +104,20 @@ class Growth(Strategy):
     """Secondary growth: how the trunk radius changes with time (and, for bulges, with height)."""
 
     kind: ClassVar[str] = "growth"
-    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform")
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time")
     compiled: ClassVar[Callable | None] = None
     """Compiled form ``compiled(t, z, params) -> r`` (see the module's docstring), or ``None``."""
     uniform: ClassVar[bool] = False
     """Whether the radius is the same at every height (evaluated once per step, not per base)."""
+    compiled_time: ClassVar[Callable | None] = None
+    """Optional per-step part of the compiled form, ``compiled_time(t, params) -> q``: what depends
+    on time alone, computed once a step; ``compiled`` then receives ``q`` in place of ``params``."""
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
         """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""
         compiled, owner = _form(self, "compiled"), _form_owner(self, "compiled")
-        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, self.compiled_params())
+        prepare = getattr(self, "compiled_time", None) or (lambda t, p: p)
+        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, prepare(t, self.compiled_params()))
 
     def compiled_params(self) -> np.ndarray:
         """The ``params`` array of the compiled form."""
@@ -120,6 +128,11 @@ class Growth(Strategy):
         are made).  The default leaves them as they are; a law with regions of their own material
         (bulges) overrides it."""
         return fmax
+
+    def region(self, z: np.ndarray) -> np.ndarray:
+        """The name of the region of the trunk at each height ``z``, for pattern statistics per region
+        (summary.json ``regions``).  One region, ``trunk``, unless a law has regions of its own."""
+        return np.full(np.shape(z), "trunk", dtype=object)
 
 
 @attrs.frozen(kw_only=True)

@@ -81,26 +81,47 @@ def _base(value):
 
 def bump(z, center, half_width):
     """The ``sin²`` profile of a bulge: 1 at ``center``, 0 with zero slope at ``center ± half_width``
-    and 0 beyond (where the sine is taken of 0: its fast path, so a base far from every bulge costs
-    little)."""
+    and 0 beyond.  One height (the compiled kernel, per base) takes the sine only inside the bulge;
+    an array of heights takes it of 0 outside.  Both give the same bits."""
     u = (z - center) / half_width
+    if isinstance(u, float):  # one height: most bases are outside every bulge, and cost a comparison
+        if abs(u) < 1.0:
+            return np.sin(0.5 * np.pi * (u + 1.0)) ** 2
+        return 0.0
     inside = np.abs(u) < 1.0
-    u = inside * u + (1.0 - inside) * -1.0  # u inside (exactly), -1 outside; arrays and scalars alike
+    u = inside * u + (1.0 - inside) * -1.0  # u inside (exactly), -1 outside
     return np.sin(0.5 * np.pi * (u + 1.0)) ** 2 * inside
 
 
-def bulge_radius(t, z, p):
-    """The compiled form of :class:`BulgeGrowth` over a sqrt (``p[0] = 0``) or linear (``1``) law:
-    ``p = (kind, r0, G, n, z_1, half_width_1, magnitude_1, decay_1, G_1 or NaN, ...)``."""
+def bulge_time(t, p):
+    """The per-step part of :class:`BulgeGrowth`'s compiled form (``compiled_time``): everything that
+    depends on time alone, once per step.  From ``p = (kind, r0, G, n, z_1, half_width_1,
+    magnitude_1, decay_1, G_1 or NaN, ...)`` (kind 0: sqrt law, 1: linear) it makes ``q = (r_base(t),
+    n, z_1, half_width_1, extra_1(t), ...)``, where a bulge's ``extra`` is its fading magnitude plus
+    what its own growth constant adds to the base law."""
     ft = np.sqrt(t) if p[0] == 0.0 else t * 1.0
     base = p[1] + p[2] * ft
-    r = base
-    for b in range(int(p[3])):
+    n = int(p[3])
+    q = np.empty(2 + 3 * n)
+    q[0] = base
+    q[1] = p[3]
+    for b in range(n):
         o = 4 + 5 * b
         extra = p[o + 2] * math.exp(-p[o + 3] * t)  # a scalar: the C library's exp in numpy and numba alike
         if not np.isnan(p[o + 4]):
             extra = extra + (p[1] + p[o + 4] * ft) - base
-        r = r + bump(z, p[o], p[o + 1]) * extra
+        q[2 + 3 * b] = p[o]
+        q[3 + 3 * b] = p[o + 1]
+        q[4 + 3 * b] = extra
+    return q
+
+
+def bulge_radius(t, z, q):
+    """The per-base part of :class:`BulgeGrowth`'s compiled form: ``r_base + Σ_b s_b(z)·extra_b`` with
+    ``q`` from :func:`bulge_time`."""
+    r = q[0]
+    for b in range(int(q[1])):
+        r = r + bump(z, q[2 + 3 * b], q[3 + 3 * b]) * q[4 + 3 * b]
     return r
 
 
@@ -152,6 +173,11 @@ class BulgeGrowth(Growth):
         radius is then evaluated in Python once per step."""
         return bulge_radius if type(self.base).compiled in _BASE_KINDS else None
 
+    @property
+    def compiled_time(self):
+        """``bulge_time`` (the fading and the growth constants, once per step) beside ``compiled``."""
+        return bulge_time if self.compiled is not None else None
+
     def compiled_params(self) -> np.ndarray:
         """``(kind of the base law, r0, G, number of bulges, then z, half_width, magnitude, decay, G or
         NaN for each bulge)``."""
@@ -162,7 +188,7 @@ class BulgeGrowth(Growth):
     def radius(self, t: float, z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, dtype=float)
         if self.compiled is not None:
-            return np.broadcast_to(bulge_radius(t, z, self.compiled_params()), z.shape)
+            return np.broadcast_to(bulge_radius(t, z, bulge_time(t, self.compiled_params())), z.shape)
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:
@@ -171,6 +197,15 @@ class BulgeGrowth(Growth):
                 extra = extra + np.broadcast_to(attrs.evolve(self.base, G=b.G).radius(t, z), z.shape) - base
             r = r + b.profile(z) * extra
         return r
+
+    def region(self, z: np.ndarray) -> np.ndarray:
+        """``bulge`` within a bulge's reach (``|z − peak| < half_width``), ``straight`` elsewhere (the
+        paper's two kinds of trunk section, Table 1)."""
+        z = np.asarray(z, dtype=float)
+        inside = np.zeros(z.shape, dtype=bool)
+        for b in self.bulges:
+            inside |= np.abs(z - b.z) < b.half_width
+        return np.where(inside, "bulge", "straight").astype(object)
 
     def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
         out = np.asarray(fmax, dtype=float).copy()

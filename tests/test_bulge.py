@@ -87,3 +87,53 @@ def test_bad_bulge_is_one_line(bulge, key):
     with pytest.raises(BarkError) as err:
         Scene.from_dict({"growth": {"name": "bulge", "bulges": [bulge]}})
     assert "\n" not in str(err.value) and key in str(err.value)
+
+
+def test_pattern_statistics_per_region_near_bulges_and_away():
+    """summary.json ``regions``: each patch counted in the region of its centroid (bulge or straight),
+    the two counts adding up to all patches; a trunk without bulges has one region and no table."""
+    from bark import runner
+    from bark.scene import Scene
+
+    data = {"lattice": {"n_bases": 1500}, "growth": {"name": "bulge", "base": {"name": "sqrt", "G": 0.05},
+                                                     "bulges": [{"z": 0.2, "half_width": 0.15, "magnitude": 0.01}]},
+            "run": {"until_time": 12.0}, "effects": {"want": ["bulges", "patch-statistics"]}}
+    outcome = runner.run(Scene.from_dict(data))
+    regions = outcome.summary["regions"]
+    assert set(regions) == {"bulge", "straight"}
+    assert regions["bulge"]["n_patches"] + regions["straight"]["n_patches"] == outcome.summary["n_patches"] > 5
+    growth = outcome.sim.growth
+    assert list(growth.region(np.array([0.04, 0.2, 0.34, 0.36]))) == ["straight", "bulge", "bulge", "straight"]
+    plain = runner.run(Scene.from_dict({**data, "growth": {"name": "sqrt", "G": 0.05}, "effects": {"want": ["patch-statistics"]}}))
+    assert plain.summary["regions"] is None
+
+
+def test_the_bulge_law_per_base_and_on_arrays_gives_the_same_bits():
+    """The kernel calls ``compiled(t, z, compiled_time(t, params))`` for one height at a time (the sine
+    only inside a bulge), the numpy backend for all heights at once: the same numbers, to the bit, and
+    the same as the ``radius`` verb."""
+    from bark_plugins.growth import Bulge, BulgeGrowth, bulge_radius, bulge_time
+
+    growth = BulgeGrowth(base={"name": "sqrt", "r0": 0.35, "G": 0.04},
+                         bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.1, decay=0.03, G=0.02),
+                                 Bulge(z=0.5, half_width=0.05, magnitude=0.02)])
+    assert growth.compiled is bulge_radius and growth.compiled_time is bulge_time
+    z = np.concatenate([np.linspace(0.0, 1.0, 1001), [0.2, 0.6, 0.45, 0.55]])  # edges of both bulges
+    for t in (0.0, 0.37, 12.5, 247.5):
+        q = bulge_time(t, growth.compiled_params())
+        one_by_one = np.array([bulge_radius(t, float(v), q) for v in z])
+        assert np.array_equal(one_by_one, bulge_radius(t, z, q))
+        assert np.array_equal(one_by_one, growth.radius(t, z))
+
+
+def test_a_growth_law_that_writes_radius_again_loses_the_inherited_compiled_forms():
+    import attrs
+
+    from bark_plugins.growth import BulgeGrowth
+
+    @attrs.frozen(kw_only=True)
+    class Wider(BulgeGrowth):
+        def radius(self, t, z):
+            return 2 * super().radius(t, z)
+
+    assert Wider.compiled is None and Wider.compiled_time is None

@@ -37,6 +37,7 @@ from typing import Callable
 import attrs
 import numpy as np
 
+from bark import physics
 from bark.errors import BarkError, Ref
 
 __all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
@@ -74,6 +75,9 @@ class Plan:
     """End the call after a step that breaks more springs than this (a degenerate event)."""
     compiled: bool = True
     """Whether the integrator and the growth law have compiled forms (else one step in Python)."""
+    prepare: Callable = physics.as_given
+    """The growth law's per-step part, ``prepare(t, params) -> q``: ``radius`` gets ``q`` (default: the
+    parameters as given)."""
 
 
 @attrs.frozen

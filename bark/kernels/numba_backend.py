@@ -201,7 +201,7 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
 
 @inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log, update, rule,
-                  radius):
+                  radius, prepare):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
@@ -228,8 +228,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
     r_before = 0.0
     for step in range(times.shape[0]):
         t = times[step]
-        r_now = radius(t, 0.0, params) if uniform else 0.0
-        finite = _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before,
+        q = prepare(t, params)  # the growth law's time-only part, once a step
+        r_now = radius(t, 0.0, q) if uniform else 0.0
+        finite = _base_pass(bases, c, b, hm, h, t, update, radius, q, uniform, r_now, r_before,
                             uniform and step > 0)
         r_before = r_now
         before = n_log
@@ -282,12 +283,13 @@ from bark.kernels.numba_backend import _steps_kernel, inline
 _update = inline({update})
 _rule = inline({rule})
 _radius = inline({radius})
+_prepare = inline({prepare})
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
     return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
-                         _update, _rule, _radius)
+                         _update, _rule, _radius, _prepare)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
 
@@ -342,23 +344,23 @@ def _make_jitable(functions) -> None:
             _JITABLE.add(fn)
 
 
-def specialized(update, rule, radius):
-    """The stepping kernel with ``update``, ``rule`` and ``radius`` inlined (compiled once per
-    combination and kept on disk; see the module's docstring).  Functions that cannot be imported by
-    name (lambdas, local functions) get a wrapper compiled in this process only."""
-    key = (update, rule, radius)
+def specialized(update, rule, radius, prepare=physics.as_given):
+    """The stepping kernel with ``update``, ``rule``, ``radius`` and ``prepare`` inlined (compiled once
+    per combination and kept on disk; see the module's docstring).  Functions that cannot be imported
+    by name (lambdas, local functions) get a wrapper compiled in this process only."""
+    key = (update, rule, radius, prepare)
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
     helpers = [h for fn in key for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
     names = [_importable(fn) for fn in key]
     if None in names:
-        u, r, g = (inline(fn) for fn in key)
+        u, r, g, p = (inline(fn) for fn in key)
 
         @numba.njit(nogil=True, error_model="numpy")
         def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
-                                 u, r, g)
+                                 u, r, g, p)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -372,7 +374,7 @@ def specialized(update, rule, radius):
         imports.append(f"from {module} import {head} as _f{i}")
         refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
     text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
-                           update=refs[0], rule=refs[1], radius=refs[2])
+                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3])
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -564,7 +566,7 @@ class NumbaBackend(Backend):
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
 
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
-        kernel = specialized(plan.update, plan.rule, plan.radius)
+        kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare)
         fr = self.frame(state)
         now = (state.x, state.v, state.anchor)
         for keep, arr in zip(fr.start, now):

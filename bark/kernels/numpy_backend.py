@@ -93,8 +93,9 @@ class NumpyBackend(Backend):
             for axis in range(3):
                 g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
                 x[:, axis], v[:, axis] = plan.update(x[:, axis], v[:, axis], g, hm, plan.h)
-            r_x = plan.radius(t, 0.0, plan.params) if plan.uniform else plan.radius(t, x[:, 2], plan.params)
-            self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, plan.params))
+            q = plan.prepare(t, plan.params)
+            r_x = plan.radius(t, 0.0, q) if plan.uniform else plan.radius(t, x[:, 2], q)
+            self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, q))
             _, length = self._geometry(state, x)
             t_all = physics.tension(length, state.rest, mech.k)
             if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()):
