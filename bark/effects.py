@@ -42,6 +42,8 @@ EFFECTS: dict[str, Effect] = {
         Effect("checkpoints", "checkpoint.npz: periodic, on Ctrl-C and at the end (for --resume)"),
         Effect("graphml", "the leaf-base graph of intact springs at the end: graph.graphml"),
         Effect("animation", "frames of the pattern along the way: development.gif", ("fracture",)),
+        Effect("tree-image", "the trunk seen from the side at the end, leaf bases coloured by patch: tree.png",
+               ("fracture",)),
         Effect("mesh", "the trunk's leaf bases as a 3-D mesh coloured by patch at the end: tree.vtu (ParaView), "
                "tree.ply (Blender)", ("fracture",)),
     ]

@@ -36,7 +36,7 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 __all__ = ["RUN_FILES", "OutputFolder", "writable_folder"]
 
 RUN_FILES = ("summary.json", "patches.csv", "breaks.csv", "state.npz", "graph.graphml", "statistics.csv",
-             "pattern.png", "development.gif", "tree.vtu", "tree.ply", CHECKPOINT_NAME, PREVIOUS_NAME)
+             "pattern.png", "development.gif", "tree.vtu", "tree.ply", "tree.png", CHECKPOINT_NAME, PREVIOUS_NAME)
 """Every file a run may write.  A fresh run removes these (and only these) from its folder."""
 PROBE = "bark-probe"
 

@@ -21,23 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from bark.output import atomic_write
-from bark.tree import leaf_corners
+from bark.tree import join_radii, leaf_corners
 
 __all__ = ["leaf_quads", "patch_colours", "write_mesh", "MESH_FILES"]
 
 MESH_FILES = ("tree.vtu", "tree.ply")
 GREY = (150, 150, 150)
-
-
-def join_radii(sim) -> np.ndarray:
-    """The trunk radius at each base's site when it joined (the growth law at its birth time)."""
-    s = sim.state
-    z, born = s.anchor[:, 2], s.born
-    out = np.empty(s.n_bases)
-    for t in np.unique(born):  # bases join in groups: one call of the law per group
-        at = born == t
-        out[at] = np.broadcast_to(sim.growth.radius(float(t), z[at]), z[at].shape)
-    return out
 
 
 def leaf_quads(sim) -> np.ndarray:

@@ -156,11 +156,34 @@ def write_npz(path: str | Path, *, compress: bool = True, verify=None, keep=None
 PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
 
 
+def region_summaries(sim, rows: list[dict]) -> dict[str, dict] | None:
+    """Pattern statistics per region of the trunk (``Growth.region`` of each patch's centroid height:
+    near bulges and away from them), or ``None`` when the trunk has one region."""
+    from bark.analysis import pattern_summary
+
+    names = sim.growth.region(np.array([r["z"] for r in rows], dtype=float))
+    every = np.unique(sim.growth.region(sim.state.anchor[:, 2]))
+    if len(every) < 2:
+        return None
+    return {str(name): pattern_summary([r for r, n in zip(rows, names) if n == name]) for name in every}
+
+
+def _phyllotaxis(sim) -> dict | None:
+    """The paper's checks of the leaf-base pattern now (``bark.tree.phyllotaxis``), or ``None`` for a
+    lattice without two spring offsets."""
+    from bark.tree import join_radii, phyllotaxis
+
+    if len(sim.lattice.offsets) != 2 or sim.state.n_bases <= max(sim.lattice.offsets) + sum(sim.lattice.partition_offsets()):
+        return None
+    return phyllotaxis(sim.lattice, sim.state.anchor, join_radii(sim))
+
+
 def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s: float | None = None) -> dict[str, Any]:
     """Everything summary.json holds about a finished (or stopped) run; ``analyses`` from ``sim.analyze()``."""
     from bark import __version__
 
     stats = next((a.summary for a in analyses.values() if "n_patches" in a.summary), {})
+    rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), None)
     effects = scene.effects
     return {
         "bark_version": __version__,
@@ -188,6 +211,8 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "circular_sd_deg": stats.get("circular_sd_deg"),
         "mean_anisotropy": stats.get("mean_anisotropy"),
         "fraction_within_45_deg": stats.get("fraction_within_45_deg"),
+        "regions": region_summaries(sim, rows) if rows is not None else None,
+        "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
         "wall_time_s": wall_time_s,
         "conventions": "orientation: degrees from horizontal in [0, 180), 90 = along the trunk axis; "

@@ -12,6 +12,7 @@ vertical regime of Table 2)::
     [analyzer]    name = "patches" + its fields          (min_size)
     [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
     [effects]     want = [...] (bark.effects), frame_every  (what is simulated and written)
+    [dome]        bark.tree.Dome fields                  (shape, height, exponent, points: the apical dome)
 
 Unknown tables or keys, bad values and unknown strategy names raise :class:`~bark.errors.BarkError`
 with one line naming the key and what is allowed.  Nothing here writes files or imports plotting.
@@ -32,6 +33,7 @@ from bark._validate import construct, positive
 from bark.errors import BarkError, Ref
 from bark.forces import Mechanics
 from bark.lattice import Lattice
+from bark.tree import Dome
 from bark.simulation import Simulation, Stop
 from bark.stepping import Numerics
 
@@ -71,7 +73,7 @@ class RunSettings(attrs.make_class(
 STOP_KEYS = ("until_time", "until_radius", "until_patches")
 STRATEGY_SECTIONS: dict[str, str] = {"growth": "growth", "integrator": "integrator", "breaker": "breaker", "analyzer": "analyzer"}
 DEFAULT_STRATEGIES: dict[str, str] = {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
-PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings}
+PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings, "dome": Dome}
 SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS, "effects")
 
 
@@ -205,6 +207,8 @@ class Scene:
     """With the ``animation`` effect: simulated time between frames."""
     series_every: float = 10.0
     """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    dome: Dome = attrs.field(factory=Dome)
+    """The apical dome's profile (``bark.tree.Dome``): drawn in tree.png."""
 
     @property
     def effects(self) -> dict[str, str]:
@@ -255,6 +259,7 @@ class Scene:
         if "bulges" in resolved and names["growth"] != "bulge":
             raise BarkError("the effect 'bulges' needs {0} with its bulges", Ref("growth", "name", "bulge"))
         _check_feasible(parts["lattice"], run, strategies["growth"], resolved)
+        _place("dome", lambda: parts["dome"].table)  # a curve through points that leaves the trunk's width
         return cls(
             name=meta.name,
             description=meta.description,

@@ -42,7 +42,7 @@ from bark._validate import in_range, one_of
 from bark.errors import BarkError, Ref
 from bark.lattice import Lattice
 
-__all__ = ["Dome", "Apex", "SAMPLES", "leaf_corners"]
+__all__ = ["Dome", "Apex", "SAMPLES", "leaf_corners", "join_radii", "phyllotaxis"]
 
 SAMPLES = 8193
 """Points along the profile at which its arc length and area are tabulated (area error ~1e-8)."""
@@ -223,3 +223,51 @@ def leaf_corners(lattice: Lattice, radius) -> np.ndarray:
     u, v = half(p), half(q)
     ccw = (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] > 0)[:, None, None]
     return np.where(ccw, np.stack([u, v, -u, -v], axis=1), np.stack([u, -v, -u, v], axis=1))
+
+
+def join_radii(sim) -> np.ndarray:
+    """The trunk radius at each base's site when it joined (the growth law at its birth time)."""
+    s = sim.state
+    z, born = s.anchor[:, 2], s.born
+    out = np.empty(s.n_bases)
+    for t in np.unique(born):  # bases join in groups: one call of the law per group
+        at = born == t
+        out[at] = np.broadcast_to(sim.growth.radius(float(t), z[at]), z[at].shape)
+    return out
+
+
+def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray, n_lines: int = 16) -> dict:
+    """The paper's checks of the phyllotactic pattern ("Growth simulation", Fig. 4), measured on the
+    bases' sites (``anchor``, one row per base) and the radius each joined at:
+
+    * ``parastichy_angle_deg``: the acute angle between the two parastichies of the spring offsets
+      (55 and 89 in Table 1) — each the axial mean direction of its site-to-site vectors, unrolled on
+      the trunk (arc length at the sites' radius, height); the paper measured ≈ 57° on real trunks.
+    * ``bases_crossed_front``: leaf bases whose rhomboid a horizontal line crosses on the half of the
+      trunk facing a viewer (as in a photograph), averaged over ``n_lines`` heights and four sides.
+    * ``bases_side_by_side_front``: half the circumference over a rhomboid's width — the bases seen in
+      one horizontal row on that half; the paper reports ≈ 37 (observed) and ≈ 40 (its model).
+    """
+    anchor = np.asarray(anchor, dtype=float)
+    theta = np.arctan2(anchor[:, 1], anchor[:, 0])
+    z = anchor[:, 2]
+    r_site = np.hypot(anchor[:, 0], anchor[:, 1])
+    n = len(z)
+    angles = []
+    for o in sorted(lattice.offsets)[:2]:
+        i = np.arange(n - o)
+        arc = r_site[i] * np.remainder(theta[i + o] - theta[i] + math.pi, 2 * math.pi) - r_site[i] * math.pi
+        doubled = np.exp(2j * np.arctan2(z[i + o] - z[i], arc))
+        angles.append(0.5 * math.degrees(np.angle(doubled.mean())) % 180.0)
+    between = abs(angles[0] - angles[1]) % 180.0
+    corners = leaf_corners(lattice, radius_joined)
+    low = z + corners[:, :, 1].min(axis=1)
+    high = z + corners[:, :, 1].max(axis=1)
+    width = corners[:, :, 0].max(axis=1) - corners[:, :, 0].min(axis=1)
+    lines = np.linspace(np.quantile(z, 0.1), np.quantile(z, 0.9), n_lines)
+    counts = [np.count_nonzero((low < h) & (h < high) & (np.cos(theta - side) > 0))
+              for h in lines for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
+    return {"parastichy_angle_deg": float(min(between, 180.0 - between)),
+            "parastichy_directions_deg": [float(a) for a in angles],
+            "bases_crossed_front": float(np.mean(counts)),
+            "bases_side_by_side_front": float(np.mean(math.pi * radius_joined / width))}

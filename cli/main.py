@@ -177,7 +177,15 @@ def _pictures(signals: Signals, painter) -> dict:
         with signals.draw():
             painter().draw("animation", recorded["frames"], path, scene.run.min_patch_size)
 
-    return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation)}
+    def tree(sim, scene, recorded, path):
+        from bark_cli.tree_picture import TreeData
+
+        data = TreeData.of(sim, scene.run.min_patch_size, scene.dome)
+        with signals.draw():
+            painter().draw("tree", data, path, scene.run.min_patch_size)
+
+    return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation),
+            "tree-image": ("tree.png", tree)}
 
 
 def _painter():
@@ -261,7 +269,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
 
         bar = ProgressBar()
     painter = _Lazy(_painter)
-    if resume is None and (scene.has("pattern-image") or scene.has("animation")):
+    if resume is None and any(scene.has(e) for e in ("pattern-image", "animation", "tree-image")):
         painter()  # start it now: matplotlib loads on the other core while the run goes on
     with Signals() as signals:
         hooks = dict(checkpoint_every=checkpoint_every, observe=bar, interrupted=signals.reason,

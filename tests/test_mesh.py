@@ -100,7 +100,7 @@ def test_mesh_corners_lie_on_the_trunk_and_surround_their_base(meshed):
     assert r == pytest.approx(np.broadcast_to(sim.growth.radius(sim.state.t, quads[..., 2].ravel()), r.size).reshape(r.shape),
                               rel=1e-12)
     assert quads.mean(axis=1) == pytest.approx(sim.state.x, abs=2e-3)  # corners come in opposite pairs
-    from bark.mesh import join_radii
+    from bark.tree import join_radii
 
     corners = leaf_corners(sim.lattice, join_radii(sim))  # the shape fixed at joining, carried: same diagonals
     for a, b in ((0, 2), (1, 3)):

@@ -162,3 +162,22 @@ def test_an_organ_reaches_the_trunk_at_its_lattice_site():
     theta = i * math.radians(WHOLE_TREE.divergence_deg)
     assert ids[0] == i
     assert x[0] == pytest.approx([0.6 * math.cos(theta), 0.6 * math.sin(theta), i * WHOLE_TREE.rise], abs=1e-9)
+
+
+@pytest.mark.parametrize("radius", [0.35, 0.6, 0.97])
+def test_the_phyllotaxis_checks_on_the_exact_lattice(radius):
+    """On Table 1's exact lattice: the parastichy angle is that between the lattice vectors of 55 and 89;
+    a horizontal line crosses 144 rhomboids around the trunk (each spans 144 rises), 72 on the half a
+    viewer sees; a row of rhomboids side by side on that half holds π / |34·φ mod 2π| of them."""
+    from bark.tree import phyllotaxis
+
+    lattice = Lattice(n_bases=20000, rise=0.00012, offsets=(55, 89), jitter=0.0)
+    theta, z = lattice.sites(radius, np.random.default_rng(0), 0, lattice.n_bases)
+    sites = np.column_stack([radius * np.cos(theta), radius * np.sin(theta), z])
+    got = phyllotaxis(lattice, sites, np.full(lattice.n_bases, radius))
+    phi = math.radians(lattice.divergence_deg)
+    v55, v89 = ([radius * math.remainder(o * phi, 2 * math.pi), o * lattice.rise] for o in (55, 89))
+    cos = abs(np.dot(v55, v89)) / (np.linalg.norm(v55) * np.linalg.norm(v89))
+    assert got["parastichy_angle_deg"] == pytest.approx(math.degrees(math.acos(cos)), abs=1e-6)
+    assert got["bases_crossed_front"] == pytest.approx(72, abs=1.0)
+    assert got["bases_side_by_side_front"] == pytest.approx(math.pi / abs(math.remainder(34 * phi, 2 * math.pi)))

@@ -60,6 +60,12 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
     mesh = meshio.read(out / "tree.vtu")
     assert mesh.points.shape == (4 * 7000, 3) and mesh.cells[0].data.shape == (7000, 4)
     assert {"statistics.csv", "pattern.png", "tree.ply", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
+    from PIL import Image
+
+    with Image.open(out / "tree.png") as image:  # the side view, of a bounded size
+        assert 300 < image.size[0] <= 1000 and 300 < image.size[1] <= 2000
+    assert set(summary["regions"]) == {"bulge", "straight"}
+    assert summary["phyllotaxis"]["bases_side_by_side_front"] == pytest.approx(38.0, abs=0.5)
 
 
 def test_the_small_whole_tree_interrupted_and_resumed_ends_bit_for_bit(tmp_path):

@@ -1,0 +1,89 @@
+"""The whole tree seen from the side (``tree-image`` effect, tree.png; the paper's Fig. 10).
+
+An orthographic view along −y of the trunk's leaf bases — each its rhomboid (``bark.mesh``), coloured
+by patch, fragments grey, cracks showing as the gaps between bases — with the trunk's outline
+(bulges stand out) and the apical dome's profile on top.  Only the half facing the viewer is drawn,
+far bases first.  Lengths in metres, the title in years.  A bounded figure: the trunk's height sets
+it, at most ``MAX_HEIGHT_IN`` inches.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import attrs
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import PolyCollection
+from matplotlib.figure import Figure
+
+from bark.output import atomic_write
+from bark.units import METRES_PER_LENGTH_UNIT, metres, years
+
+MAX_HEIGHT_IN = 12.0
+WIDTH_IN = 5.0
+
+
+@attrs.frozen
+class TreeData:
+    """What tree.png shows, as plain arrays (sent to the drawing process)."""
+
+    polygons: np.ndarray
+    """Projected rhomboids (x, z) of the bases facing the viewer, far first, ``(n, 4, 2)``, metres."""
+    colours: np.ndarray
+    outline: np.ndarray
+    """(z, r) of the trunk's outline, metres."""
+    dome: np.ndarray
+    """(x, z) of the dome's profile (right half), metres."""
+    t: float
+    n_bases: int
+    n_patches: int
+    n_broken: int
+
+    @classmethod
+    def of(cls, sim, min_size: int, dome) -> "TreeData":
+        from bark.mesh import leaf_quads, patch_colours
+
+        quads = leaf_quads(sim)
+        front = quads[..., 1].mean(axis=1) > 0.0
+        order = np.argsort(quads[front][..., 1].mean(axis=1))  # far (small y) first
+        polygons = metres(quads[front][order][..., [0, 2]])
+        colours = patch_colours(sim.patch_labels(), min_size)[front][order]
+        z = sim.state.anchor[:, 2]
+        zs = np.linspace(float(z.min()), float(z.max()), 400)
+        r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)
+        rho, u = dome.curve(200)
+        top_r = float(r[-1])
+        dome = np.column_stack([rho * top_r, zs[-1] + u * top_r])
+        return cls(polygons=polygons, colours=colours, outline=metres(np.column_stack([zs, r])), dome=metres(dome),
+                   t=sim.state.t, n_bases=sim.state.n_bases, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
+
+
+def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
+    """Draw ``data`` into ``path`` (PNG, atomically)."""
+    z_lo = float(data.outline[0, 0])
+    z_hi = float(data.dome[:, 1].max())
+    half = float(max(data.outline[:, 1].max(), 1e-9)) * 1.15
+    height_in = min(MAX_HEIGHT_IN, max(3.0, WIDTH_IN * (z_hi - z_lo) / (2 * half)))
+    fig = Figure(figsize=(WIDTH_IN, height_in + 0.5), dpi=150)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    ax.add_collection(PolyCollection(data.polygons, facecolors=data.colours / 255.0, edgecolors="none"))
+    zo, ro = data.outline[:, 0], data.outline[:, 1]
+    ax.plot(ro, zo, color="0.2", lw=0.6)
+    ax.plot(-ro, zo, color="0.2", lw=0.6)
+    ax.fill_betweenx(data.dome[:, 1], -data.dome[:, 0], data.dome[:, 0], color="#6b8e23", alpha=0.5, lw=0)
+    ax.set_xlim(-half, half)
+    ax.set_ylim(z_lo, z_hi + 0.02 * (z_hi - z_lo))
+    ax.set_aspect("auto" if height_in == MAX_HEIGHT_IN else "equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("height (m)" + ("" if height_in < MAX_HEIGHT_IN else ", compressed"))
+    ax.set_title(f"{years(data.t):.1f} years, {data.n_bases} leaf bases, {data.n_patches} patches "
+                 f"(≥ {min_size} bases; fragments grey)", fontsize=8)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", bbox_inches="tight")
+    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+
+
+__all__ = ["TreeData", "plot_tree", "METRES_PER_LENGTH_UNIT"]
