@@ -274,7 +274,8 @@ class Simulation:
         self.clock.relax(result.load)
         due = self.lattice.bases_at(self.state.t) - self.state.n_bases
         if due > 0:  # primary growth has made room at the top: the next bases of the lattice join
-            self.join(*self.lattice.sites(self.radius, self.rng, self.state.n_bases, due))
+            top = float(np.broadcast_to(self.growth.radius(self.state.t, self.state.n_bases * self.lattice.rise), 1)[0])
+            self.join(*self.lattice.sites(top, self.rng, self.state.n_bases, due))
         return result.done
 
     def step(self) -> None:
