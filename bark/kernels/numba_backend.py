@@ -164,9 +164,12 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
     step the anchors are ``r_before · direction`` (the last step's radius; written back once, at the end
     of the call — the very products, so the bits do not depend on where calls end); else each is placed
-    at its own radius, every step.  Returns whether every coordinate stayed finite.
+    at its own radius, every step (``_base_pass_per_base_radius``).  Returns whether every coordinate
+    stayed finite.
     One coordinate per vector: this loop runs in SIMD lanes."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    if not uniform:
+        return _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params)
     bad = 0
     for q in range(x0.shape[0]):
         anchor_x = r_before * dx[q] if from_radius else ax[q]
@@ -180,7 +183,7 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
         px, u0 = update(x0[q], v0[q], g0, hm, h)
         py, u1 = update(x1[q], v1[q], g1, hm, h)
         pz, u2 = update(x2[q], v2[q], g2, hm, h)
-        r = r_now if uniform else radius(t, pz, params)
+        r = r_now
         scale = _surface_scale(px, py, r)
         px *= scale
         py *= scale
@@ -192,10 +195,42 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
         v0[q] = u0 - vr * px
         v1[q] = u1 - vr * py
         v2[q] = u2
-        if not uniform:
-            ra = radius(t, az[q], params)
-            ax[q] = ra * dx[q]
-            ay[q] = ra * dy[q]
+    return bad == 0
+
+
+@inline
+def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params):
+    """``_base_pass`` for a radius that depends on height, in two loops: the forces and the update
+    (no calls: SIMD lanes), then the surface at each base's own radius and its anchor at its site's
+    (a call of the growth law each, which keeps a loop scalar).  Per base the same operations in the
+    same order as one loop: the same bits."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    for q in range(x0.shape[0]):
+        g0 = _base_force(f0[q], x0[q], ax[q], v0[q], c, b)
+        g1 = _base_force(f1[q], x1[q], ay[q], v1[q], c, b)
+        g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
+        f0[q] = 0.0
+        f1[q] = 0.0
+        f2[q] = 0.0
+        x0[q], v0[q] = update(x0[q], v0[q], g0, hm, h)
+        x1[q], v1[q] = update(x1[q], v1[q], g1, hm, h)
+        x2[q], v2[q] = update(x2[q], v2[q], g2, hm, h)
+    bad = 0
+    for q in range(x0.shape[0]):
+        px, py, pz = x0[q], x1[q], x2[q]
+        r = radius(t, pz, params)
+        scale = _surface_scale(px, py, r)
+        px *= scale
+        py *= scale
+        x0[q] = px
+        x1[q] = py
+        bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
+        vr = _radial_speed(v0[q], v1[q], px, py, 1.0 / (r * r))
+        v0[q] = v0[q] - vr * px
+        v1[q] = v1[q] - vr * py
+        ra = radius(t, az[q], params)
+        ax[q] = ra * dx[q]
+        ay[q] = ra * dy[q]
     return bad == 0
 
 
