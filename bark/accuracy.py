@@ -157,7 +157,15 @@ METRICS = ("broken_rel_diff", "patch_count_diff", "hellinger")
 def spread(reference: dict[int, dict]) -> dict[str, float]:
     """Mean of each metric over all pairs of different seeds of the reference."""
     pairs = [_distance(reference[a], reference[b]) for a, b in itertools.combinations(sorted(reference), 2)]
-    return {m: float(np.nanmean([p[m] for p in pairs])) for m in METRICS}
+    return {m: _mean_of_defined([p[m] for p in pairs]) for m in METRICS}
+
+
+def _mean_of_defined(values) -> float:
+    """Mean of the values that are defined (a Hellinger distance needs two patches on each side), NaN
+    when none is — without numpy's warning about an empty slice."""
+    values = np.asarray(values, dtype=float)
+    values = values[~np.isnan(values)]
+    return float(values.mean()) if values.size else float("nan")
 
 
 def pattern_study(
@@ -181,7 +189,7 @@ def pattern_study(
             row = {"method": method.label, "param": param, "wall_s": float(np.mean([r["wall_s"] for r in runs])),
                    "steps": float(np.mean([r["steps"] for r in runs]))}
             for m in METRICS:
-                row[m] = float(np.nanmean([d[m] for d in dist]))
+                row[m] = _mean_of_defined([d[m] for d in dist])
                 row[m + "_per_seed"] = [d[m] for d in dist]
             rows.append(row)
             if progress:
