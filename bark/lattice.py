@@ -35,21 +35,21 @@ def _offsets(value):
     return value
 
 
+def _distinct_offsets(value, count: int | None = None) -> bool:
+    """Whether ``value`` is a tuple of distinct integer offsets >= 1 (``count`` of them, if given)."""
+    return (isinstance(value, tuple) and len(value) > 0 and (count is None or len(value) == count)
+            and all(isinstance(o, int) and not isinstance(o, bool) and 1 <= o <= INT_MAX for o in value)
+            and len(set(value)) == len(value))
+
+
 def _check_offsets(instance, attribute, value) -> None:
-    ok = (
-        isinstance(value, tuple)
-        and len(value) > 0
-        and all(isinstance(o, int) and not isinstance(o, bool) and 1 <= o <= INT_MAX for o in value)
-        and len(set(value)) == len(value)
-    )
-    if not ok:
-        raise BarkError("{0}: must be a list of distinct integers >= 1, e.g. [21, 34]", Ref(None, attribute.name, value))
+    if not _distinct_offsets(value):
+        raise BarkError("{0}: must be distinct integers >= 1 (e.g. 21 and 34)", Ref(None, attribute.name, value))
 
 
 def _check_partition(instance, attribute, value) -> None:
-    _check_offsets(instance, attribute, value)
-    if len(value) != 2:
-        raise BarkError("{0}: must be two distinct integers >= 1, e.g. [34, 144]", Ref(None, attribute.name, value))
+    if not _distinct_offsets(value, 2):
+        raise BarkError("{0}: must be two distinct integers >= 1 (Table 1: 34 and 144)", Ref(None, attribute.name, value))
 
 
 @attrs.frozen(kw_only=True)
