@@ -2,7 +2,8 @@
 
 An orthographic view along −y of the trunk's leaf bases — each its rhomboid (``bark.mesh``), coloured
 by patch, fragments grey, cracks showing as the gaps between bases — with the trunk's outline
-(bulges stand out) and the apical dome's profile on top.  Only the half facing the viewer is drawn,
+(bulges stand out) and the apical dome on top, its leaf bases where Ridley's placement puts them
+(``bark.tree.Apex``).  Only the half facing the viewer is drawn,
 far bases first.  Lengths in metres, the title in years.  A bounded figure: the trunk's height sets
 it, at most ``MAX_HEIGHT_IN`` inches.
 """
@@ -36,6 +37,8 @@ class TreeData:
     """(z, r) of the trunk's outline, metres."""
     dome: np.ndarray
     """(x, z) of the dome's profile (right half), metres."""
+    organs: np.ndarray
+    """(x, z) of the leaf bases on the dome facing the viewer (Ridley's placement), far first, metres."""
     t: float
     n_bases: int
     n_patches: int
@@ -53,10 +56,18 @@ class TreeData:
         z = sim.state.anchor[:, 2]
         zs = np.linspace(float(z.min()), float(z.max()), 400)
         r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)
-        rho, u = dome.curve(200)
+        from bark.tree import Apex
+
         top_r = float(r[-1])
-        dome = np.column_stack([rho * top_r, zs[-1] + u * top_r])
-        return cls(polygons=polygons, colours=colours, outline=metres(np.column_stack([zs, r])), dome=metres(dome),
+        apex = Apex(dome=dome, lattice=sim.lattice)
+        top = float(apex.top(sim.state.t))
+        rho, u = dome.curve(200)
+        profile = np.column_stack([rho * top_r, top + u * top_r])
+        _, organs = apex.organs(sim.state.t, top_r)
+        organs = organs[organs[:, 1] > 0.0]
+        organs = organs[np.argsort(organs[:, 1])][:, [0, 2]]
+        return cls(polygons=polygons, colours=colours, outline=metres(np.column_stack([zs, r])), dome=metres(profile),
+                   organs=metres(organs),
                    t=sim.state.t, n_bases=sim.state.n_bases, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
 
 
@@ -73,7 +84,10 @@ def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
     zo, ro = data.outline[:, 0], data.outline[:, 1]
     ax.plot(ro, zo, color="0.2", lw=0.6)
     ax.plot(-ro, zo, color="0.2", lw=0.6)
-    ax.fill_betweenx(data.dome[:, 1], -data.dome[:, 0], data.dome[:, 0], color="#6b8e23", alpha=0.5, lw=0)
+    ax.fill_betweenx(data.dome[:, 1], -data.dome[:, 0], data.dome[:, 0], color="#6b8e23", alpha=0.35, lw=0)
+    if len(data.organs):  # the leaf bases still on the dome, where Ridley's placement puts them
+        per_organ = (72.0 * WIDTH_IN) ** 2 * 0.25 / len(data.organs)
+        ax.scatter(data.organs[:, 0], data.organs[:, 1], s=float(min(4.0, per_organ)), c="#3b5e0b", linewidths=0)
     ax.set_xlim(-half, half)
     ax.set_ylim(z_lo, z_hi + 0.02 * (z_hi - z_lo))
     ax.set_aspect("auto" if height_in == MAX_HEIGHT_IN else "equal")
