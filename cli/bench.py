@@ -181,7 +181,7 @@ def speed(sizes, backends, phases, steps, repeats, cases, csv_path):
         write_csv(csv_path, rows, list(rows[0]))
 
 
-def _accuracy_methods(quick: bool):
+def _accuracy_methods(quick: bool, integrators=("euler-cromer", "implicit-overdamped")):
     from bark.accuracy import Method
 
     ec, io = "euler-cromer", "implicit-overdamped"
@@ -194,8 +194,11 @@ def _accuracy_methods(quick: bool):
     }
     if quick:
         position = {m: v[::2] for m, v in position.items()}
-        pattern = {Method(ec): [0.01, 0.1], Method(ec, "adaptive", 0.3): [0.05, 0.01], Method(io, "adaptive", 3.0): [0.01]}
-    return position, pattern
+        pattern = {Method(ec): [0.01, 0.1], Method(ec, "adaptive", 0.3): [0.05, 0.01, 0.002],
+                   Method(io, "adaptive", 3.0): [0.01]}
+    keep = set(integrators)
+    return ({m: v for m, v in position.items() if m.integrator in keep},
+            {m: v for m, v in pattern.items() if m.integrator in keep})
 
 
 @bench.command()
@@ -207,9 +210,11 @@ def _accuracy_methods(quick: bool):
               help="Time each pattern run stops at (time units; 1 = 88.5 days).")
 @click.option("--reference-dt", type=click.FloatRange(0, 1, min_open=True), default=0.005, show_default=True,
               help="dt of the fine Euler–Cromer reference (fixed steps; must be below the stability limit).")
-@click.option("--quick", is_flag=True, help="A few settings only: a look, not a measurement.")
+@click.option("--quick", is_flag=True, help="A few settings only (the default among them): a look, not a measurement.")
+@click.option("--integrator", "integrators", type=click.Choice(["euler-cromer", "implicit-overdamped"]), multiple=True,
+              help="Study only these integrators (repeatable; default: both).  The implicit one is slow on large scenes.")
 @click.option("--out", type=click.Path(file_okay=False), default="bark-bench-accuracy", show_default=True)
-def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
+def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, out):
     """Work-precision: error against wall time per integrator and stepping mode.
 
     (a) position error on a small system without breaking, against a Radau reference, with each
@@ -240,7 +245,7 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, out):
                               "run": {"dt": reference_dt, "stepping": "fixed", "until_time": until_time}})
     Scene.from_dict(reference).simulation().build()
     out = writable_folder(out)
-    position_methods, pattern_methods = _accuracy_methods(quick)
+    position_methods, pattern_methods = _accuracy_methods(quick, integrators or ("euler-cromer", "implicit-overdamped"))
     log = (lambda m: console.print(f"[dim]{m}[/dim]"))
 
     pos_rows, orders = position_study(position_methods, progress=log)
