@@ -179,9 +179,10 @@ def _first(flags: np.ndarray) -> int:
 def plan(sim, stop, most: int | None = None) -> Plan:
     """The next call: how many steps of what size, and what may happen inside it.
 
-    Many steps go in one call when the integrator and the growth law have compiled forms, the step is
-    full size, and the breakers can be watched by one rule; the call then ends where a stop condition
-    can next hold or a trigger is next due.  Springs break inside the call when every breaker has the
+    Many steps go in one call when the integrator and the growth law have compiled forms and the
+    breakers can be watched by one rule; the call then ends where a stop condition can next hold, a
+    trigger is next due or bases next join, and — at a halved step — after a quiet step that ends on
+    the grid of the next larger step, where the clock doubles the step (``Plan.relax``).  Springs break inside the call when every breaker has the
     same compiled rule (a step that adaptive stepping undoes is replayed from the call's start, its
     breaks with it); otherwise the call ends after the first step in which the rule picks a spring,
     and the breakers select in Python (an ``overload_only`` breaker is watched by the threshold rule)."""
@@ -190,9 +191,11 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     rule, breaking = _rule(sim.breakers)
     compiled = sim.integrator.update is not None and sim.growth.compiled is not None
     n = 1
-    if compiled and clock.halvings == 0 and rule is not None:
+    if compiled and rule is not None:  # halved steps too: the call ends where the clock may double the step
         n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases, 1), most or CHUNK))
         n = _bounded(sim, stop, clock.times(n), n)
+    ends = clock.ticks + (np.arange(n) + 1) * clock.size  # ticks at the end of each step
+    relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
     must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
     return Plan(
         h=clock.step, times=clock.times(n), update=sim.integrator.update, radius=sim.growth.compiled,
@@ -200,7 +203,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
         accept_load=1.0 + sim.numerics.overshoot_tol if adaptive and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
-        prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given,
+        prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
     )
 
 

@@ -65,17 +65,24 @@ def test_smallest_step_overshoot_is_recorded_not_silent(make_sim):
 
 @pytest.mark.parametrize("seed", [0, 5])
 def test_quiet_kernel_and_step_by_step_agree_under_adaptive_stepping(make_sim, seed):
-    """advance() (compiled chunks, rejected last steps replayed) and step() decide alike."""
+    """advance() (compiled chunks — halved steps too, each chunk ending where the clock may double
+    the step; rejected last steps replayed) and step() decide alike, to the bit."""
     kw = dict(n_bases=300, G=0.05, dt=0.3, seed=seed, stepping="adaptive", overshoot_tol=0.005, backend="numba")
     chunked, stepped = make_sim(**kw), make_sim(**kw)
     stop = Stop(until_time=8.1)  # 27 full steps: run() keeps h, as step() by hand does
-    chunked.run(stop)
+    chunked.prepare(stop)
+    halved_chunks = 0
+    while stop.reason(chunked) is None:
+        halved = chunked.clock.halvings > 0
+        done = chunked.advance(stop)
+        halved_chunks += halved and done > 1
     while stop.reason(stepped) is None:
         stepped.step()
     a, b = chunked.breaks.arrays(), stepped.breaks.arrays()
     assert np.array_equal(a["spring"], b["spring"]) and np.array_equal(a["step"], b["step"])
     assert chunked.step_count == stepped.step_count
-    np.testing.assert_allclose(chunked.state.x, stepped.state.x, rtol=0, atol=1e-12)
+    assert np.array_equal(chunked.state.x, stepped.state.x)
+    assert halved_chunks > 0  # several halved steps in one call happened
 
 
 def test_adaptive_numpy_and_numba_agree(make_sim):

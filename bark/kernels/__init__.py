@@ -78,6 +78,14 @@ class Plan:
     prepare: Callable = physics.as_given
     """The growth law's per-step part, ``prepare(t, params) -> q``: ``radius`` gets ``q`` (default: the
     parameters as given)."""
+    relax: np.ndarray | None = None
+    """Per step, whether it ends on the grid of the next larger step (adaptive stepping at a halved
+    step): the call ends after such a step whose load is at most 1, so the clock can double the step
+    there, as it would after a call of one step (default: never)."""
+
+    def relax_flags(self) -> np.ndarray:
+        """``relax`` as one bool per step."""
+        return np.zeros(len(self.times), bool) if self.relax is None else np.ascontiguousarray(self.relax, dtype=bool)
 
 
 @attrs.frozen

@@ -235,8 +235,8 @@ def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params):
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log, update, rule,
-                  radius, prepare):
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, update,
+                  rule, radius, prepare):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
@@ -254,7 +254,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
     f2[:] = 0.0
     _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule,
                  log_id, log_step, log_t, 0, 0)
-    tops = accept_load < np.inf  # every step's load is needed; else only the last one's (below)
+    may_relax = False
+    for step in range(relax.shape[0]):
+        may_relax = may_relax or relax[step]
+    tops = accept_load < np.inf or may_relax  # every step's load is needed; else only the last one's (below)
     top = -np.inf
     finite = True
     done = 0
@@ -277,6 +280,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         if not finite or top > accept_load or picked:
             break
         if n_log > before and (return_on_break or n_log - before > max_batch):
+            break
+        if relax[step] and top <= 1.0:  # quiet again on the coarser grid: the clock doubles the step
             break
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
@@ -322,8 +327,8 @@ _prepare = inline({prepare})
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
-    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log):
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log,
                          _update, _rule, _radius, _prepare)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
@@ -393,9 +398,9 @@ def specialized(update, rule, radius, prepare=physics.as_given):
         u, r, g, p = (inline(fn) for fn in key)
 
         @numba.njit(nogil=True, error_model="numpy")
-        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log):
-            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, params, flags, log,
-                                 u, r, g, p)
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log):
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
+                                 log, u, r, g, p)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -612,17 +617,18 @@ class NumbaBackend(Backend):
         flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break))
         inv_fmax = self._inv_fmax(state)
 
-        def call(times):
+        def call(times, relax):
             np.copyto(fr.live, state.intact)
             return kernel(fr.bases, fr.runs, fr.work, state.rest, state.fmax, inv_fmax, fr.live, constants, times,
-                          params, flags, fr.log)
+                          relax, params, flags, fr.log)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
-        done, load, n_log = call(times)
+        relax = plan.relax_flags()
+        done, load, n_log = call(times, relax)
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
             for keep, arr in zip(fr.start, now):
                 np.copyto(arr, keep)
-            n_log = call(times[: done - 1])[2] if done > 1 else 0
+            n_log = call(times[: done - 1], relax[: done - 1])[2] if done > 1 else 0
             done -= 1
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
             _measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, inv_fmax, state.intact, tension)
