@@ -31,8 +31,8 @@ DEFAULT_DT = 0.3
 """Default (largest) time step.  With adaptive stepping and ``DEFAULT_OVERSHOOT_TOL`` this setting
 was measured by ``bark bench accuracy`` to give pattern statistics within the seed-to-seed spread of
 a fine dt = 0.005 reference, in the vertical and the diamond regime, faster than the paper's fixed
-dt = 0.01 (which ``dt = 0.01, stepping = "fixed"`` reproduces): 4.0× in the vertical regime as last
-measured (``bark bench accuracy`` prints the current figure)."""
+dt = 0.01 (which ``dt = 0.01, stepping = "fixed"`` reproduces): about 6× in the vertical regime as
+last measured (``bark bench accuracy`` prints the current figure)."""
 DEFAULT_STEPPING = "adaptive"
 DEFAULT_OVERSHOOT_TOL = 0.002
 SAFETY = 0.9
