@@ -182,10 +182,11 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     Many steps go in one call when the integrator and the growth law have compiled forms and the
     breakers can be watched by one rule; the call then ends where a stop condition can next hold, a
     trigger is next due or bases next join, and — at a halved step — after a quiet step that ends on
-    the grid of the next larger step, where the clock doubles the step (``Plan.relax``).  Springs break inside the call when every breaker has the
-    same compiled rule (a step that adaptive stepping undoes is replayed from the call's start, its
-    breaks with it); otherwise the call ends after the first step in which the rule picks a spring,
-    and the breakers select in Python (an ``overload_only`` breaker is watched by the threshold rule)."""
+    the grid of the next larger step, where the clock doubles the step (``Plan.relax``).  Springs
+    break inside the call when every breaker has the same compiled rule (a step that adaptive
+    stepping undoes is replayed from the call's start, its breaks with it); otherwise the call ends
+    after the first step in which the rule picks a spring, and the breakers select in Python (an
+    ``overload_only`` breaker is watched by the threshold rule)."""
     clock = sim.clock
     adaptive = clock.levels > 0
     rule, breaking = _rule(sim.breakers)

@@ -52,6 +52,8 @@ from typing import Any, Callable, ClassVar
 import attrs
 import numpy as np
 
+from bark.physics import as_given
+
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS"]
 
 
@@ -116,7 +118,7 @@ class Growth(Strategy):
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
         """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""
         compiled, owner = _form(self, "compiled"), _form_owner(self, "compiled")
-        prepare = getattr(self, "compiled_time", None) or (lambda t, p: p)
+        prepare = getattr(self, "compiled_time", None) or as_given
         return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, prepare(t, self.compiled_params()))
 
     def compiled_params(self) -> np.ndarray:

@@ -253,13 +253,13 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     z = anchor[:, 2]
     r_site = np.hypot(anchor[:, 0], anchor[:, 1])
     n = len(z)
+    from bark.analysis import axial_difference, axial_mean
+
     angles = []
     for o in sorted(lattice.offsets)[:2]:
         i = np.arange(n - o)
-        arc = r_site[i] * np.remainder(theta[i + o] - theta[i] + math.pi, 2 * math.pi) - r_site[i] * math.pi
-        doubled = np.exp(2j * np.arctan2(z[i + o] - z[i], arc))
-        angles.append(0.5 * math.degrees(np.angle(doubled.mean())) % 180.0)
-    between = abs(angles[0] - angles[1]) % 180.0
+        arc = r_site[i] * (np.remainder(theta[i + o] - theta[i] + math.pi, 2 * math.pi) - math.pi)
+        angles.append(axial_mean(np.degrees(np.arctan2(z[i + o] - z[i], arc))))
     corners = leaf_corners(lattice, radius_joined)
     low = z + corners[:, :, 1].min(axis=1)
     high = z + corners[:, :, 1].max(axis=1)
@@ -267,7 +267,7 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     lines = np.linspace(np.quantile(z, 0.1), np.quantile(z, 0.9), n_lines)
     counts = [np.count_nonzero((low < h) & (h < high) & (np.cos(theta - side) > 0))
               for h in lines for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
-    return {"parastichy_angle_deg": float(min(between, 180.0 - between)),
+    return {"parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
             "parastichy_directions_deg": [float(a) for a in angles],
             "bases_crossed_front": float(np.mean(counts)),
             "bases_side_by_side_front": float(np.mean(math.pi * radius_joined / width))}

@@ -181,7 +181,8 @@ def speed(sizes, backends, phases, steps, repeats, cases, csv_path):
         write_csv(csv_path, rows, list(rows[0]))
 
 
-def _accuracy_methods(quick: bool, integrators=("euler-cromer", "implicit-overdamped")):
+def _accuracy_methods(quick: bool, integrators=()):
+    """Position and pattern methods to study, of the given integrators (none given: all)."""
     from bark.accuracy import Method
 
     ec, io = "euler-cromer", "implicit-overdamped"
@@ -196,7 +197,7 @@ def _accuracy_methods(quick: bool, integrators=("euler-cromer", "implicit-overda
         position = {m: v[::2] for m, v in position.items()}
         pattern = {Method(ec): [0.01, 0.1], Method(ec, "adaptive", 0.3): [0.05, 0.01, 0.002],
                    Method(io, "adaptive", 3.0): [0.01]}
-    keep = set(integrators)
+    keep = set(integrators) or {ec, io}
     return ({m: v for m, v in position.items() if m.integrator in keep},
             {m: v for m, v in pattern.items() if m.integrator in keep})
 
@@ -245,7 +246,7 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, ou
                               "run": {"dt": reference_dt, "stepping": "fixed", "until_time": until_time}})
     Scene.from_dict(reference).simulation().build()
     out = writable_folder(out)
-    position_methods, pattern_methods = _accuracy_methods(quick, integrators or ("euler-cromer", "implicit-overdamped"))
+    position_methods, pattern_methods = _accuracy_methods(quick, integrators)
     log = (lambda m: console.print(f"[dim]{m}[/dim]"))
 
     pos_rows, orders = position_study(position_methods, progress=log)

@@ -216,11 +216,10 @@ def _notice(message: str) -> None:
 
 def scene_of(params: dict) -> Scene:
     """The scene ``bark simulate`` runs for its parsed options ``params`` (one-line BarkError if bad)."""
-    own = {"scene_file", "growth_name", "integrator_name", "breaker_name", "analyzer_name", "r0", "G", "sets", "out",
-           "overwrite", "resume", "checkpoint_every", "quiet"}
     strategies = {kind: params[f"{kind}_name"] for kind in ("growth", "integrator", "breaker", "analyzer")}
+    settings = {k: v for k, v in params.items() if "__" in k}  # the options generated from scene fields
     return resolve_scene(params["scene_file"], strategies, {"r0": params["r0"], "G": params["G"]}, params["sets"],
-                         {k: v for k, v in params.items() if k not in own})
+                         settings)
 
 
 @cli.command(context_settings=CONTEXT)

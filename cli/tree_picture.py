@@ -47,17 +47,17 @@ class TreeData:
     @classmethod
     def of(cls, sim, min_size: int, dome) -> "TreeData":
         from bark.mesh import leaf_quads, patch_colours
+        from bark.tree import Apex
 
         quads = leaf_quads(sim)
-        front = quads[..., 1].mean(axis=1) > 0.0
-        order = np.argsort(quads[front][..., 1].mean(axis=1))  # far (small y) first
-        polygons = metres(quads[front][order][..., [0, 2]])
-        colours = patch_colours(sim.patch_labels(), min_size)[front][order]
+        depth = quads[..., 1].mean(axis=1)  # towards the viewer
+        shown = np.flatnonzero(depth > 0.0)
+        shown = shown[np.argsort(depth[shown])]  # far (small y) first
+        polygons = metres(quads[shown][..., [0, 2]])
+        colours = patch_colours(sim.patch_labels(), min_size)[shown]
         z = sim.state.anchor[:, 2]
         zs = np.linspace(float(z.min()), float(z.max()), 400)
         r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)
-        from bark.tree import Apex
-
         top_r = float(r[-1])
         apex = Apex(dome=dome, lattice=sim.lattice)
         top = float(apex.top(sim.state.t))
