@@ -28,12 +28,12 @@ COMPARED = ("breaks.csv", "state.npz", "patches.csv")
 
 
 def _start(out: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", *LONG, *extra, "--out", str(out)],
+    return subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", *LONG, *extra, "--out", str(out)],
                             cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
 
 
 def _resume(out: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "bark_cli.main", "simulate", "--resume", str(out), "--quiet"],
+    return subprocess.run([sys.executable, "-m", "bark_cli", "simulate", "--resume", str(out), "--quiet"],
                           cwd=REPO_ROOT, capture_output=True, text=True)
 
 
@@ -93,7 +93,7 @@ def test_stopped_twice_and_resumed_twice_is_byte_identical(tmp_path, uninterrupt
     _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
     proc.send_signal(signal.SIGTERM)
     assert proc.wait() in (0, 143)
-    again = subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", "--resume", str(out), "--quiet",
+    again = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", "--resume", str(out), "--quiet",
                               "--checkpoint-every", "0.2"], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
     time.sleep(0.4)
     again.send_signal(signal.SIGINT)
@@ -149,7 +149,7 @@ def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, m
 
 def test_a_signal_while_a_large_scene_is_built_stops_at_once(tmp_path):
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "bark_cli.main", "simulate", "--n-bases", "1500000", "--until-time", "1",
+    proc = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", "--n-bases", "1500000", "--until-time", "1",
                              "--quiet", "--out", str(out)], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
     time.sleep(2.0)  # imports done, building the lattice and its graph (about 20 s at this size)
     proc.send_signal(signal.SIGTERM)
@@ -159,6 +159,31 @@ def test_a_signal_while_a_large_scene_is_built_stops_at_once(tmp_path):
         proc.kill()
     err = proc.stderr.read()
     assert code == 143 and err == "bark: terminated before the run began: nothing was run\n", err
+    assert not out.exists()
+
+
+# a signal while Python loads the program: a finder that raises it when `bark_cli.main` is looked up
+_SIGNAL_WHILE_LOADING = """
+import os, signal, sys
+class Finder:
+    def find_spec(self, name, path=None, target=None):
+        if name == "bark_cli.main":
+            os.kill(os.getpid(), signal.{sig})
+        return None
+sys.meta_path.insert(0, Finder())
+sys.argv = ["bark", "simulate", "--quiet", "--out", sys.argv[1]]
+from bark_cli.__main__ import main
+main()
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=lambda s: signal.Signals(s).name)
+def test_a_signal_while_the_program_loads_is_one_line(tmp_path, sig):
+    out = tmp_path / "out"
+    code = _SIGNAL_WHILE_LOADING.format(sig=signal.Signals(sig).name)
+    proc = subprocess.run([sys.executable, "-c", code, str(out)], cwd=REPO_ROOT, capture_output=True, text=True)
+    reason = "interrupted" if sig == signal.SIGINT else "terminated"
+    assert (proc.returncode, proc.stderr) == (128 + sig, f"bark: {reason} before the run began: nothing was run\n")
     assert not out.exists()
 
 

@@ -123,7 +123,7 @@ def test_editable_finder_maps_only_bark_names():
 
 def test_console_script_is_registered():
     scripts = {ep.name: ep.value for ep in metadata.entry_points(group="console_scripts") if ep.name == "bark"}
-    assert scripts == {"bark": "bark_cli.main:main"}
+    assert scripts == {"bark": "bark_cli.__main__:main"}
 
 
 def test_a_built_wheel_has_every_module(tmp_path):

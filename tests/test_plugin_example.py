@@ -32,7 +32,7 @@ def plugin_path(tmp_path_factory):
 
 def _bark(plugin_path, *args, **kw):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-m", "bark_cli.main", *args], env=env, capture_output=True, text=True, **kw)
+    return subprocess.run([sys.executable, "-m", "bark_cli", *args], env=env, capture_output=True, text=True, **kw)
 
 
 def test_example_plugin_is_listed(plugin_path):
