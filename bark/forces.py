@@ -27,7 +27,7 @@ from bark.errors import BarkError, Ref
 if TYPE_CHECKING:
     import scipy.sparse as sp
 
-__all__ = ["Mechanics", "ForceField", "spring_geometry", "incidence", "stiffness_matvec"]
+__all__ = ["Mechanics", "ForceField", "SpringOrder", "spring_geometry", "incidence", "stiffness_matvec"]
 
 
 @attrs.frozen(kw_only=True)
@@ -78,16 +78,75 @@ def spring_geometry(x: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.nd
     return d, np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
-def incidence(pairs: np.ndarray, n: int) -> sp.csr_matrix:
+def _order_keys(pairs: np.ndarray) -> np.ndarray:
+    """Sort keys of springs ``(i, j)``: by offset ``j − i``, then by ``i`` (one unsigned integer each)."""
+    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    return ((j - i + 2**31).astype(np.uint64) << np.uint64(32)) | i.astype(np.uint64)
+
+
+@attrs.define(eq=False)
+class SpringOrder:
+    """The order in which every base sums its springs' forces: by offset ``j − i``, then by first end
+    ``i`` (ties by id).  A fixed lattice is made in this order; springs that join later are appended
+    to the state (their ids follow the join), and this order places them among the others, so the
+    compiled pass can take the springs in long runs of equal offset and the numpy backend sums in
+    the same order (the same bits).  Derived data: extended as springs are appended (a join costs
+    one pass over the springs, not a sort), made again for springs it has not seen."""
+
+    pairs: np.ndarray = attrs.field(factory=lambda: np.empty((0, 2), np.int64))
+    """A copy of the springs it was made for."""
+    keys: np.ndarray = attrs.field(factory=lambda: np.empty(0, np.uint64))
+    """Their sort keys, in order."""
+    ids: np.ndarray = attrs.field(factory=lambda: np.empty(0, np.int64))
+    """Spring ids in order."""
+
+    def of(self, pairs: np.ndarray) -> np.ndarray | None:
+        """Spring ids of ``pairs`` in summation order; ``None`` when that is id order."""
+        m, seen = len(pairs), len(self.pairs)
+        if not (seen <= m and np.array_equal(pairs[:seen], self.pairs)):
+            seen, self.keys, self.ids = 0, np.empty(0, np.uint64), np.empty(0, np.int64)
+        if m > seen:
+            keys = _order_keys(pairs[seen:])
+            new = np.argsort(keys, kind="stable")
+            keys = keys[new]
+            at = np.searchsorted(self.keys, keys, side="right")  # after equal keys: ties stay in id order
+            self.keys = np.insert(self.keys, at, keys)
+            self.ids = np.insert(self.ids, at, new + seen)
+            self.pairs = np.array(pairs, dtype=np.int64)
+        return None if bool(np.all(self.ids[1:] > self.ids[:-1])) else self.ids
+
+    def runs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The springs in this order as runs ``(first position, length, first i, offset o)`` of
+        consecutive springs ``(i, i + o), (i + 1, i + 1 + o), ...`` with ``o > 0`` (a lattice of any
+        size is one run per offset); any other spring is a run of its own."""
+        keys = self.keys
+        i = (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+        o = (keys >> np.uint64(32)).astype(np.int64) - 2**31
+        joins = (keys[1:] == keys[:-1] + np.uint64(1)) & (o[1:] > 0)  # the same offset, the next i
+        starts = np.flatnonzero(np.concatenate([[True], ~joins])) if len(keys) else np.empty(0, np.int64)
+        lengths = np.diff(np.append(starts, len(keys)))
+        return starts.astype(np.int64), lengths.astype(np.int64), i[starts], o[starts]
+
+
+def incidence(pairs: np.ndarray, n: int, order: np.ndarray | None = None) -> sp.csr_matrix:
     """The ``(n, m)`` matrix that sums per-spring vectors onto bases: ``+1`` at ``(i, s)``, ``−1`` at
-    ``(j, s)`` for spring ``s = (i, j)``.  (scipy.sparse is imported here, not with the module: a
-    run on the compiled backend never needs it.)"""
+    ``(j, s)`` for spring ``s = (i, j)``.  Each row holds its entries in summation order (``order``,
+    spring ids, from :class:`SpringOrder`; default id order), so a product sums each base's springs
+    in that order.  (scipy.sparse is imported here, not with the module: a run on the compiled
+    backend never needs it.)"""
     import scipy.sparse as sp
 
     m = pairs.shape[0]
+    ids = np.arange(m) if order is None else np.asarray(order, dtype=np.int64)
+    ends = pairs[ids].T.astype(np.int64).ravel()
     cols = np.concatenate([np.arange(m), np.arange(m)])
     vals = np.concatenate([np.ones(m), -np.ones(m)])
-    return sp.csr_matrix((vals, (pairs.T.astype(np.int64).ravel(), cols)), shape=(n, m))
+    mat = sp.csr_matrix((vals, (ends, cols)), shape=(n, m))
+    mat.sort_indices()  # each row in summation order (columns are positions in it, so far)
+    if order is not None:
+        mat.indices = ids[mat.indices].astype(mat.indices.dtype)  # positions -> spring ids, the rows' order kept
+        mat.has_sorted_indices = False
+    return mat
 
 
 @attrs.define(eq=False)

@@ -34,8 +34,8 @@ BASE_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
 }
 SPRING_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
     "pairs": ((2,), "uint32"),        # the two bases (i, j); d = x_j − x_i
-    "rest": ((), "float64"),          # rest length, taken when the spring was made
-    "fmax": ((), "float64"),          # breaking threshold, per spring (never per base)
+    "rest": ((), "float64"),          # rest length, taken when the spring was made; never changed
+    "fmax": ((), "float64"),          # breaking threshold, per spring (never per base), set then too
     "intact": ((), "bool"),           # changed only by Simulation.break_springs
 }
 MIN_CAPACITY = 64
@@ -73,7 +73,9 @@ class State:
     ``x``, ``v``, ``anchor``, ``anchor_dir``, ``born`` (per base) and ``pairs``, ``rest``, ``fmax``,
     ``intact`` (per spring) are views of the active rows; assigning into them (``state.x[:] = ...``)
     writes the state.  Integrators change ``x`` and ``v``; the simulation changes ``t``, applies the
-    surface constraint, breaks springs and adds bases.
+    surface constraint, breaks springs and adds bases.  A spring's ``rest`` and ``fmax`` are its
+    material, set when it is made and never changed afterwards (backends keep derived copies of
+    them, made again only when springs are added).
     """
 
     n_bases: int = 0

@@ -51,7 +51,7 @@ def build_sim(
     ``backend``) may be given as keywords."""
     numerics = {"dt": dt, "stepping": "fixed", **{k: kwargs.pop(k) for k in NUMERICS if k in kwargs}}
     return Simulation(
-        lattice=Lattice(n_bases=n_bases, jitter=jitter),
+        lattice=kwargs.pop("lattice", None) or Lattice(n_bases=n_bases, jitter=jitter),
         mechanics=Mechanics(f_max=f_max, fmax_spread=fmax_spread),
         growth=kwargs.pop("growth", None) or SqrtGrowth(G=G),
         integrator=kwargs.pop("integrator", None) or EulerCromer(),

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from bark import kernels, physics
-from bark.forces import Mechanics, incidence, spring_geometry
+from bark.forces import Mechanics, SpringOrder, incidence, spring_geometry
 from bark.state import State
 
 BACKENDS = ["numpy", "numba"]
@@ -218,6 +218,34 @@ def test_incidence_puts_plus_on_first_end_minus_on_second():
     f = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     out = incidence(pairs, 4) @ f
     np.testing.assert_array_equal(out, [[1, 0, 0], [0, -1, 0], [-1, 1, 0], [0, 0, 0]])
+
+
+spring_pair = st.tuples(st.integers(0, 40), st.integers(0, 40))
+
+
+@given(st.lists(st.lists(spring_pair, max_size=12), min_size=1, max_size=6))
+def test_the_spring_order_extended_join_by_join_is_the_order_made_at_once(batches):
+    """Springs appended batch by batch (bases joining) are placed exactly where sorting all of them
+    at once puts them: by offset j − i, then by i, ties in id order."""
+    order, pairs = SpringOrder(), np.empty((0, 2), np.int64)
+    for batch in batches:
+        pairs = np.concatenate([pairs, np.array(batch, np.int64).reshape(-1, 2)])
+        got = order.of(pairs)
+        o, i = pairs[:, 1] - pairs[:, 0], pairs[:, 0]
+        expected = np.lexsort((np.arange(len(pairs)), i, o))
+        np.testing.assert_array_equal(np.arange(len(pairs)) if got is None else got, expected)
+        assert (got is None) == bool(np.all(expected == np.arange(len(pairs))))
+
+
+def test_the_incidence_sums_each_base_in_the_order_given():
+    """Rows hold their springs in summation order, whatever the ids: the sum is taken in that order
+    (seen in the bits: 1 + 1e-16 − 1 is not −1 + 1 + 1e-16)."""
+    pairs = np.array([[0, 1], [0, 2], [0, 3]])
+    w = np.array([[1.0, 0, 0], [1e-16, 0, 0], [-1.0, 0, 0]])
+    assert (incidence(pairs, 4) @ w)[0, 0] == 0.0  # (1 + 1e-16) − 1
+    by_order = incidence(pairs, 4, np.array([2, 0, 1])) @ w  # −1 + 1 + 1e-16
+    assert by_order[0, 0] == 1e-16
+    np.testing.assert_array_equal(by_order[1:], -w)
 
 
 @given(hnp.arrays(np.float64, (20, 3), elements=coord), st.floats(0.01, 10.0))

@@ -633,11 +633,14 @@ def test_cli_runs_stiff_scene_with_substeps_or_implicit(tmp_path, extra):
     ("adaptive", 0.3, {}),
     ("adaptive", 0.3, {"growth": "bulge"}),
     ("fixed", 0.05, {"breaker": "probabilistic"}),
+    ("adaptive", 0.3, {"growth": "bulge", "join": True}),
 ])
 def test_the_backends_agree_to_the_bit(stepping, dt, extra):
     """numpy and numba evaluate the same physics functions in the same order (a base's spring forces
-    are summed in spring-id order by both): the same run, bit for bit — positions, break log,
+    are summed in the order of bark.forces.SpringOrder by both, also when bases join during the run
+    and their springs' ids follow the joins): the same run, bit for bit — positions, break log,
     tensions.  So the backend is a matter of speed alone."""
+    from bark.lattice import Lattice
     from bark_plugins.breakers import ProbabilisticBreaker
     from bark_plugins.growth import Bulge, BulgeGrowth
 
@@ -646,8 +649,9 @@ def test_the_backends_agree_to_the_bit(stepping, dt, extra):
         growth = (BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=[Bulge(z=0.1, half_width=0.05, magnitude=0.01, decay=0.07, G=0.02)])
                   if extra.get("growth") else None)
         breakers = [ProbabilisticBreaker()] if extra.get("breaker") else None
+        lattice = Lattice(n_bases=700, n_start=400, join_rate=60.0, join_every=0.1, jitter=0.05) if extra.get("join") else None
         sim = build_sim(n_bases=400, G=0.05, dt=dt, seed=3, stepping=stepping, backend=backend, fmax_spread=0.05,
-                        growth=growth, breakers=breakers)
+                        growth=growth, breakers=breakers, lattice=lattice)
         sim.run(Stop(until_time=6.0))
         runs.append(sim)
     a, b = runs

@@ -32,6 +32,7 @@ import numba.extending
 import numpy as np
 
 from bark import physics
+from bark.forces import SpringOrder
 from bark.kernels import Backend, Plan, Steps
 
 NAME = "numba"
@@ -104,11 +105,12 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
     whether the rule picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
-    ``spring_runs``), each done on contiguous slices so the loops run in SIMD lanes: the springs'
+    ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes: the springs'
     tensions, force vectors, finiteness and the rule in one loop; their largest load in a second; a
     spring by itself only where the rule picks one; then the forces, added to the second ends first
-    and the first ends second, so that every base receives its springs' forces in spring-id order —
-    the order, and the bits, of a pass one spring at a time."""
+    and the first ends second, so that every base receives its springs' forces in the order of the
+    runs (:class:`bark.forces.SpringOrder`, in which the springs come here) — the order, and the
+    bits, of a pass one spring at a time, and of the numpy backend's sum."""
     x0, x1, x2 = x
     f0, f1, f2 = f
     w0, w1, w2, wt = work
@@ -144,17 +146,6 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
         for u, w in ((f0, w0), (f1, w1), (f2, w2)):
             _add_forces(u[i0:i0 + n], u[i0 + o:i0 + o + n], w)
     return top, finite, n_log, picked
-
-
-def spring_runs(pairs: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The springs as runs ``(first id, length, first i, offset o)`` of consecutive springs
-    ``(i, i + o), (i + 1, i + 1 + o), ...`` with ``o > 0``; any other spring is a run of its own."""
-    i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
-    o = j - i
-    joins = (o[1:] == o[:-1]) & (i[1:] == i[:-1] + 1) & (o[1:] > 0)
-    starts = np.flatnonzero(np.concatenate([[True], ~joins])) if len(pairs) else np.empty(0, np.int64)
-    lengths = np.diff(np.append(starts, len(pairs)))
-    return starts.astype(np.int64), lengths.astype(np.int64), i[starts], o[starts]
 
 
 @inline
@@ -377,10 +368,12 @@ def _helpers(fn, seen=None) -> list:
 
 def _make_jitable(functions) -> None:
     """Let compiled code call these plain functions (``register_jitable``): a plugin's compiled form
-    may call its own helpers without importing numba."""
+    may call its own helpers without importing numba.  They are inlined where called, as the compiled
+    forms themselves are: a call per base and step otherwise costs more than the helper (a bulge's
+    profile: 3.5x slower measured)."""
     for fn in functions:
         if fn not in _JITABLE:
-            numba.extending.register_jitable(fn)
+            numba.extending.register_jitable(inline="always")(fn)
             _JITABLE.add(fn)
 
 
@@ -546,12 +539,18 @@ class _Frame:
     """The state's sizes and stored arrays this frame was made for (compared by identity)."""
     bases: tuple
     """The 14 base vectors the kernel takes: x, v, f, anchor (3 each), anchor direction (2)."""
+    order: np.ndarray | None
+    """Spring ids in the order the kernel takes them (:class:`bark.forces.SpringOrder`; ``None``: id
+    order).  The kernel's per-spring arrays are in this order; it logs positions in it."""
     runs: tuple
+    """The springs in that order as runs (``SpringOrder.runs``)."""
+    springs: tuple
+    """Rest lengths, thresholds and ``1 / fmax`` in that order: copies made with the frame (a spring's
+    rest length and threshold are set when it is made and never change; see ``bark.state``)."""
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call: an undone step is replayed from them."""
     live: np.ndarray
-    inv_fmax: np.ndarray
     log: tuple
 
 
@@ -568,6 +567,7 @@ class NumbaBackend(Backend):
 
     def __init__(self) -> None:
         self._frame: _Frame | None = None
+        self._order = SpringOrder()
 
     def frame(self, state) -> _Frame:
         """The call frame for ``state``: reused while the state keeps its arrays and sizes."""
@@ -576,31 +576,42 @@ class NumbaBackend(Backend):
             return self._frame
         x, v, a, d = state.x, state.v, state.anchor, state.anchor_dir
         f = np.zeros_like(x, order="F")
-        runs = spring_runs(state.pairs)
+        order = self._order.of(state.pairs)
+        runs = self._order.runs()
         longest = int(runs[1].max(initial=1))
         m = state.n_springs
         self._frame = _Frame(
             of=of, bases=(*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
                           *(a[:, i] for i in range(3)), d[:, 0], d[:, 1]),
-            runs=runs, work=tuple(np.empty(longest) for _ in range(4)),
-            start=tuple(np.empty_like(arr, order="F") for arr in (x, v, a)), live=np.empty(m, bool),
-            inv_fmax=np.empty(m), log=(np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)),
+            order=order, runs=runs, springs=self._springs_in(state, order),
+            work=tuple(np.empty(longest) for _ in range(4)),
+            start=tuple(np.empty_like(arr, order="F") for arr in (x, v, a)), live=np.empty(m, bool), log=(np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)),
         )
         return self._frame
 
+    @staticmethod
+    def _springs_in(state, order) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rest lengths, thresholds and ``1 / fmax`` in the kernel's spring order."""
+        rest, fmax = (state.rest, state.fmax) if order is None else (state.rest[order], state.fmax[order])
+        return rest, fmax, 1.0 / fmax
+
+    def _live(self, state) -> np.ndarray:
+        """The state's intact mask, in the kernel's order, into the frame's working copy."""
+        fr = self.frame(state)
+        if fr.order is None:
+            return np.copyto(fr.live, state.intact) or fr.live
+        return np.take(state.intact, fr.order, out=fr.live)
+
     def spring_forces(self, state, mech, x) -> np.ndarray:
         fr = self.frame(state)
+        rest = fr.springs[0]
         f = np.empty_like(x, order="F")
-        _spring_forces(x, fr.runs, fr.work, state.rest, mech.k, state.intact, f)
+        _spring_forces(x, fr.runs, fr.work, rest, mech.k, self._live(state), f)
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> float:
         return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
-                              self._inv_fmax(state), state.intact, out))
-
-    def _inv_fmax(self, state) -> np.ndarray:
-        """``1 / fmax`` of every spring (derived, each call: loads are ``tension · 1/fmax``)."""
-        return np.divide(1.0, state.fmax, out=self.frame(state).inv_fmax)
+                              1.0 / state.fmax, state.intact, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
@@ -615,11 +626,10 @@ class NumbaBackend(Backend):
         constants = (float(mech.k), float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                      float(plan.accept_load), float(plan.max_batch))
         flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break))
-        inv_fmax = self._inv_fmax(state)
+        rest, fmax, inv_fmax = fr.springs
 
         def call(times, relax):
-            np.copyto(fr.live, state.intact)
-            return kernel(fr.bases, fr.runs, fr.work, state.rest, state.fmax, inv_fmax, fr.live, constants, times,
+            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, self._live(state), constants, times,
                           relax, params, flags, fr.log)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
@@ -631,10 +641,13 @@ class NumbaBackend(Backend):
             n_log = call(times[: done - 1], relax[: done - 1])[2] if done > 1 else 0
             done -= 1
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
-            _measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, inv_fmax, state.intact, tension)
-        log = fr.log
-        return Steps(done=int(done), load=float(load), broken=log[0][:n_log].copy(), step=log[1][:n_log].copy(),
-                     tension=log[2][:n_log].copy())
+            self.measure(state, mech, tension)
+        ids, step, t = (a[:n_log] for a in fr.log)
+        if fr.order is not None and n_log:  # positions in the kernel's order -> spring ids, by step then id
+            ids = fr.order[ids]
+            by = np.lexsort((ids, step))
+            ids, step, t = ids[by], step[by], t[by]
+        return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy())
 
     def patch_labels(self, state) -> np.ndarray:
         labels = np.empty(state.n_bases, dtype=np.int32)

@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from bark import physics
-from bark.forces import incidence
+from bark.forces import SpringOrder, incidence
 from bark.kernels import Backend, Plan, Steps
 
 NAME = "numpy"
@@ -22,14 +22,15 @@ class NumpyBackend(Backend):
     def __init__(self) -> None:
         self._inc_key = None
         self._inc = None
+        self._order = SpringOrder()
 
     def incidence(self, state) -> sp.csr_matrix:
         """Spring-to-base incidence of the state's springs (derived; rebuilt when the topology grows).
         A sparse product sums spring forces onto bases 2.5× faster than ``bincount`` at 70 000 bases."""
         key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
-        if key != self._inc_key:
-            self._inc, self._inc_key = incidence(state.pairs, state.n_bases), key
-            self._inc.sort_indices()  # each base's sum runs over its springs in id order, as the compiled pass adds them
+        if key != self._inc_key:  # each base's sum runs over its springs in the order the compiled pass adds them
+            self._inc = incidence(state.pairs, state.n_bases, self._order.of(state.pairs))
+            self._inc_key = key
         return self._inc
 
     def _geometry(self, state, x):
