@@ -30,6 +30,7 @@ __all__ = [
     "axial_sd",
     "axial_difference",
     "patch_statistics",
+    "window_labels",
     "pattern_summary",
     "hellinger",
     "orientation_hellinger",
@@ -112,6 +113,32 @@ def patch_statistics(points: np.ndarray, labels: np.ndarray, min_size: int = 7) 
         row.update(orientation_deg=orientation, anisotropy=anisotropy, lambda1=l1, lambda2=l2)
         rows.append(row)
     return rows
+
+
+def window_labels(points: np.ndarray, pairs: np.ndarray, intact: np.ndarray, size: float) -> np.ndarray:
+    """Patches as photographs of the trunk show them: the surface unrolled (arc length × height) is
+    cut into windows about ``size`` × ``size`` (rows of height ``size``; in each row, a whole number
+    of equal windows round the trunk at the row's mean radius, the first at θ = 0), and a patch is a
+    connected component of the intact springs whose two bases lie in the same window.  A network of
+    strands that joins far away is, in a window, the strands it shows.  Returns a label per base
+    (components numbered as ``scipy.sparse.csgraph`` numbers them)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    points = np.asarray(points, dtype=float)
+    n = len(points)
+    radius = np.hypot(points[:, 0], points[:, 1])
+    turn = (np.arctan2(points[:, 1], points[:, 0]) / (2.0 * np.pi)) % 1.0
+    row = np.floor((points[:, 2] - (points[:, 2].min() if n else 0.0)) / size).astype(np.int64)  # from the lowest base
+    rows, inverse = np.unique(row, return_inverse=True)
+    mean_radius = np.bincount(inverse, weights=radius) / np.bincount(inverse)
+    across = np.maximum(1, np.rint(2.0 * np.pi * mean_radius / size)).astype(np.int64)[inverse]
+    window = inverse * (int(across.max(initial=1)) + 1) + np.minimum((turn * across).astype(np.int64), across - 1)
+    pairs = np.asarray(pairs, dtype=np.int64)
+    kept = np.asarray(intact, bool) & (window[pairs[:, 0]] == window[pairs[:, 1]])
+    p = pairs[kept]
+    adjacency = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n))
+    return connected_components(adjacency, directed=False)[1].astype(np.int32)
 
 
 def pattern_summary(rows: list[dict]) -> dict:

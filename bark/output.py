@@ -23,6 +23,8 @@ import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
+from bark.units import metres
+
 import numpy as np
 
 __all__ = ["atomic_write", "write_csv", "write_json", "write_npz", "run_summary", "write_run"]
@@ -156,6 +158,10 @@ def write_npz(path: str | Path, *, compress: bool = True, verify=None, keep=None
 PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
 
 
+WINDOW = 0.5
+"""Side of the windows of ``summary.json``'s ``windows`` (length units: 15 cm, a photograph's field)."""
+
+
 def region_summaries(sim, rows: list[dict]) -> dict[str, dict] | None:
     """Pattern statistics per region of the trunk (``Growth.region`` of each patch's centroid height:
     near bulges and away from them), or ``None`` when the trunk has one region."""
@@ -166,6 +172,27 @@ def region_summaries(sim, rows: list[dict]) -> dict[str, dict] | None:
     if len(every) < 2:
         return None
     return {str(name): pattern_summary([r for r, n in zip(rows, names) if n == name]) for name in every}
+
+
+def window_summaries(sim, min_size: int) -> dict[str, Any] | None:
+    """Pattern statistics per region as photographs of the trunk would give them: patches cut at the
+    borders of ``WINDOW``-sized windows (``bark.analysis.window_labels``), each counted in the region
+    of its centroid; and (``initial_trunk``, when bases joined during the run) the same over the
+    patches of bases that were there from the start, the trunk whose growth the whole run stretched.
+    ``None`` when the trunk has one region."""
+    from bark.analysis import patch_statistics, window_labels
+
+    s = sim.state
+    labels = window_labels(s.x, s.pairs, s.intact, WINDOW)
+    rows = patch_statistics(s.x, labels, min_size)
+    regions = region_summaries(sim, rows)
+    if regions is None:
+        return None
+    first = s.born.min(initial=0.0)  # the trunk the run began with, apart from what grew on it since
+    initial = np.bincount(labels, weights=s.born > first, minlength=len(rows)) == 0
+    old = [r for r in rows if initial[r["patch"]]] if (s.born > first).any() else None
+    return {"window": WINDOW, "window_m": metres(WINDOW), "regions": regions,
+            "initial_trunk": None if old is None else region_summaries(sim, old)}
 
 
 def _phyllotaxis(sim) -> dict | None:
@@ -212,6 +239,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "mean_anisotropy": stats.get("mean_anisotropy"),
         "fraction_within_45_deg": stats.get("fraction_within_45_deg"),
         "regions": region_summaries(sim, rows) if rows is not None else None,
+        "windows": window_summaries(sim, scene.run.min_patch_size) if rows is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
         "wall_time_s": wall_time_s,

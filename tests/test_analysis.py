@@ -17,6 +17,7 @@ from bark.analysis import (
     pattern_summary,
     principal_axes,
     tangent_plane,
+    window_labels,
 )
 from bark_plugins.analyzers import PatchAnalyzer
 
@@ -322,3 +323,44 @@ def test_axial_statistics_are_scipys(centre, spread, n, seed):
     mean, ref = axial_mean(deg), float(stats.circmean(deg, high=180.0, low=0.0)) % 180.0
     assert min(abs(mean - ref), 180.0 - abs(mean - ref)) < 1e-9
     assert axial_sd(deg) == pytest.approx(float(stats.circstd(deg, high=180.0, low=0.0)), rel=1e-9, abs=1e-7)  # √(−2 ln R) cancels as R → 1
+
+
+def _strands(n_strands: int = 12, length: int = 60, radius: float = 1.0, rise: float = 0.05):
+    """Vertical strands of bases round a trunk, each a chain of springs, joined to the next strand
+    by one bridge at the top only: one network, whose strands a window shows apart."""
+    theta = np.repeat(np.arange(n_strands) * 2 * np.pi / n_strands, length)
+    z = np.tile(np.arange(length) * rise, n_strands)
+    points = np.column_stack([radius * np.cos(theta), radius * np.sin(theta), z])
+    ids = np.arange(n_strands * length).reshape(n_strands, length)
+    chain = np.column_stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()])
+    bridges = np.column_stack([ids[:, -1], np.roll(ids[:, -1], -1)])
+    return points, np.concatenate([chain, bridges])
+
+
+def test_windows_show_a_network_of_vertical_strands_as_vertical_patches():
+    points, pairs = _strands()
+    intact = np.ones(len(pairs), bool)
+    whole = patch_statistics(points, np.zeros(len(points), int), 7)
+    assert len(whole) == 1  # one connected network round the trunk
+    rows = patch_statistics(points, window_labels(points, pairs, intact, 0.5), 7)
+    assert len(rows) >= 12
+    assert all(abs(r["orientation_deg"] - 90.0) < 1e-6 and r["anisotropy"] > 0.99 for r in rows)
+
+
+@given(st.integers(0, 2**32 - 1), st.floats(0.05, 3.0))
+def test_window_patches_refine_the_patches_and_stay_in_one_window(seed, size):
+    rng = np.random.default_rng(seed)
+    n = 200
+    theta, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2.0, n)
+    r = rng.uniform(0.5, 1.5, n)
+    points = np.column_stack([r * np.cos(theta), r * np.sin(theta), z])
+    pairs = rng.integers(0, n, size=(400, 2))
+    intact = rng.random(400) < 0.7
+    labels = window_labels(points, pairs, intact, size)
+    p = pairs[intact]
+    joined = labels[p[:, 0]] == labels[p[:, 1]]
+    whole = window_labels(points, pairs, intact, 1e9)  # one window: the patches themselves
+    for label in np.unique(labels):  # every window patch lies inside one whole patch
+        assert len(np.unique(whole[labels == label])) == 1
+    rows = np.floor((z - z.min()) / size)
+    assert np.all(rows[p[joined, 0]] == rows[p[joined, 1]])  # never across a row of windows

@@ -65,6 +65,9 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
     with Image.open(out / "tree.png") as image:  # the side view, of a bounded size
         assert 300 < image.size[0] <= 1000 and 300 < image.size[1] <= 2000
     assert set(summary["regions"]) == {"bulge", "straight"}
+    windows = summary["windows"]  # the same, in photograph-sized windows; and on the trunk of the start
+    assert windows["window_m"] == pytest.approx(0.15) and set(windows["initial_trunk"]) == {"bulge", "straight"}
+    assert sum(w["n_patches"] for w in windows["regions"].values()) >= summary["n_patches"]
     assert summary["phyllotaxis"]["bases_side_by_side_front"] == pytest.approx(38.0, abs=0.5)
 
 
