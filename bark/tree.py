@@ -247,6 +247,7 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
       trunk facing a viewer (as in a photograph), averaged over ``n_lines`` heights and four sides.
     * ``bases_side_by_side_front``: half the circumference over a rhomboid's width — the bases seen in
       one horizontal row on that half; the paper reports ≈ 37 (observed) and ≈ 40 (its model).
+      ``None`` when rhomboids have no width (a divergence angle that stacks the bases in columns).
     """
     anchor = np.asarray(anchor, dtype=float)
     theta = np.arctan2(anchor[:, 1], anchor[:, 0])
@@ -267,7 +268,9 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     lines = np.linspace(np.quantile(z, 0.1), np.quantile(z, 0.9), n_lines)
     counts = [np.count_nonzero((low < h) & (h < high) & (np.cos(theta - side) > 0))
               for h in lines for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
+    # leaf bases of no width (a divergence angle that stacks them in columns) have no count side by side
+    side_by_side = float(np.mean(math.pi * radius_joined / width)) if np.all(width > 0) else None
     return {"parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
             "parastichy_directions_deg": [float(a) for a in angles],
             "bases_crossed_front": float(np.mean(counts)),
-            "bases_side_by_side_front": float(np.mean(math.pi * radius_joined / width))}
+            "bases_side_by_side_front": side_by_side}
