@@ -183,6 +183,8 @@ def window_summaries(sim, min_size: int) -> dict[str, Any] | None:
     from bark.analysis import patch_statistics, window_labels
 
     s = sim.state
+    if len(np.unique(sim.growth.region(s.anchor[:, 2]))) < 2:
+        return None  # asked first: a trunk of one region costs nothing here (not even scipy's import)
     labels = window_labels(s.x, s.pairs, s.intact, WINDOW)
     rows = patch_statistics(s.x, labels, min_size)
     regions = region_summaries(sim, rows)
