@@ -23,9 +23,9 @@ import zipfile
 from pathlib import Path
 from typing import Any, Callable
 
-from bark.units import metres
-
 import numpy as np
+
+from bark.units import metres
 
 __all__ = ["atomic_write", "write_csv", "write_json", "write_npz", "run_summary", "write_run"]
 
@@ -162,39 +162,37 @@ WINDOW = 0.5
 """Side of the windows of ``summary.json``'s ``windows`` (length units: 15 cm, a photograph's field)."""
 
 
-def region_summaries(sim, rows: list[dict]) -> dict[str, dict] | None:
-    """Pattern statistics per region of the trunk (``Growth.region`` of each patch's centroid height:
-    near bulges and away from them), or ``None`` when the trunk has one region."""
+def trunk_regions(sim) -> np.ndarray | None:
+    """The names of the trunk's regions (``Growth.region`` of every base's site), or ``None`` when it
+    has one region."""
+    every = np.unique(sim.growth.region(sim.state.anchor[:, 2]))
+    return every if len(every) >= 2 else None
+
+
+def region_summaries(sim, rows: list[dict], every: np.ndarray) -> dict[str, dict]:
+    """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk: each patch counted
+    in the region of its centroid's height (near bulges and away from them)."""
     from bark.analysis import pattern_summary
 
     names = sim.growth.region(np.array([r["z"] for r in rows], dtype=float))
-    every = np.unique(sim.growth.region(sim.state.anchor[:, 2]))
-    if len(every) < 2:
-        return None
     return {str(name): pattern_summary([r for r, n in zip(rows, names) if n == name]) for name in every}
 
 
-def window_summaries(sim, min_size: int) -> dict[str, Any] | None:
+def window_summaries(sim, every: np.ndarray, min_size: int) -> dict[str, Any]:
     """Pattern statistics per region as photographs of the trunk would give them: patches cut at the
     borders of ``WINDOW``-sized windows (``bark.analysis.window_labels``), each counted in the region
     of its centroid; and (``initial_trunk``, when bases joined during the run) the same over the
-    patches of bases that were there from the start, the trunk whose growth the whole run stretched.
-    ``None`` when the trunk has one region."""
+    patches of bases that were there from the start, the trunk whose growth the whole run stretched."""
     from bark.analysis import patch_statistics, window_labels
 
     s = sim.state
-    if len(np.unique(sim.growth.region(s.anchor[:, 2]))) < 2:
-        return None  # asked first: a trunk of one region costs nothing here (not even scipy's import)
     labels = window_labels(s.x, s.pairs, s.intact, WINDOW)
     rows = patch_statistics(s.x, labels, min_size)
-    regions = region_summaries(sim, rows)
-    if regions is None:
-        return None
-    first = s.born.min(initial=0.0)  # the trunk the run began with, apart from what grew on it since
-    initial = np.bincount(labels, weights=s.born > first, minlength=len(rows)) == 0
-    old = [r for r in rows if initial[r["patch"]]] if (s.born > first).any() else None
-    return {"window": WINDOW, "window_m": metres(WINDOW), "regions": regions,
-            "initial_trunk": None if old is None else region_summaries(sim, old)}
+    joined = s.born > s.born.min()  # grew on the trunk the run began with
+    initial = np.bincount(labels, weights=joined) == 0  # per window patch: none of its bases joined later
+    old = [r for r in rows if initial[r["patch"]]] if joined.any() else None
+    return {"window": WINDOW, "window_m": metres(WINDOW), "regions": region_summaries(sim, rows, every),
+            "initial_trunk": None if old is None else region_summaries(sim, old, every)}
 
 
 def _phyllotaxis(sim) -> dict | None:
@@ -213,6 +211,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
 
     stats = next((a.summary for a in analyses.values() if "n_patches" in a.summary), {})
     rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), None)
+    every = trunk_regions(sim) if rows is not None else None  # asked first: one region costs nothing more
     effects = scene.effects
     return {
         "bark_version": __version__,
@@ -240,8 +239,8 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "circular_sd_deg": stats.get("circular_sd_deg"),
         "mean_anisotropy": stats.get("mean_anisotropy"),
         "fraction_within_45_deg": stats.get("fraction_within_45_deg"),
-        "regions": region_summaries(sim, rows) if rows is not None else None,
-        "windows": window_summaries(sim, scene.run.min_patch_size) if rows is not None else None,
+        "regions": region_summaries(sim, rows, every) if every is not None else None,
+        "windows": window_summaries(sim, every, scene.run.min_patch_size) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
         "wall_time_s": wall_time_s,
