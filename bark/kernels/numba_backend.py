@@ -547,6 +547,8 @@ class _Frame:
     springs: tuple
     """Rest lengths, thresholds and ``1 / fmax`` in that order: copies made with the frame (a spring's
     rest length and threshold are set when it is made and never change; see ``bark.state``)."""
+    inv_fmax: np.ndarray
+    """``1 / fmax`` in id order (for ``measure``; the same array as ``springs[2]`` in id order)."""
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call: an undone step is replayed from them."""
@@ -578,29 +580,28 @@ class NumbaBackend(Backend):
         f = np.zeros_like(x, order="F")
         order = self._order.of(state.pairs)
         runs = self._order.runs()
+        inv_fmax = 1.0 / state.fmax
+        springs = (state.rest, state.fmax, inv_fmax) if order is None else (state.rest[order], state.fmax[order],
+                                                                             inv_fmax[order])
         longest = int(runs[1].max(initial=1))
         m = state.n_springs
         self._frame = _Frame(
             of=of, bases=(*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
                           *(a[:, i] for i in range(3)), d[:, 0], d[:, 1]),
-            order=order, runs=runs, springs=self._springs_in(state, order),
+            order=order, runs=runs, springs=springs, inv_fmax=inv_fmax,
             work=tuple(np.empty(longest) for _ in range(4)),
             start=tuple(np.empty_like(arr, order="F") for arr in (x, v, a)), live=np.empty(m, bool), log=(np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)),
         )
         return self._frame
 
-    @staticmethod
-    def _springs_in(state, order) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rest lengths, thresholds and ``1 / fmax`` in the kernel's spring order."""
-        rest, fmax = (state.rest, state.fmax) if order is None else (state.rest[order], state.fmax[order])
-        return rest, fmax, 1.0 / fmax
-
     def _live(self, state) -> np.ndarray:
         """The state's intact mask, in the kernel's order, into the frame's working copy."""
         fr = self.frame(state)
         if fr.order is None:
-            return np.copyto(fr.live, state.intact) or fr.live
-        return np.take(state.intact, fr.order, out=fr.live)
+            np.copyto(fr.live, state.intact)
+        else:
+            np.take(state.intact, fr.order, out=fr.live)
+        return fr.live
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         fr = self.frame(state)
@@ -611,7 +612,7 @@ class NumbaBackend(Backend):
 
     def measure(self, state, mech, out: np.ndarray) -> float:
         return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
-                              1.0 / state.fmax, state.intact, out))
+                              self.frame(state).inv_fmax, state.intact, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
