@@ -187,8 +187,8 @@ class BulgeGrowth(Growth):
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, dtype=float)
-        if self.compiled is not None:
-            return np.broadcast_to(bulge_radius(t, z, bulge_time(t, self.compiled_params())), z.shape)
+        if self.compiled is not None:  # the compiled form, as every law that has one is evaluated
+            return np.broadcast_to(super().radius(t, z), z.shape)
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:
