@@ -153,14 +153,14 @@ class Lattice:
         ``o`` where one end is new and both are present.  Ordered by offset, then by base — for a
         whole lattice, ``(i, i + o)`` for i = 0, 1, ... in each offset's block."""
         new = np.asarray(new, dtype=np.int64)
-        fresh = set(new.tolist())
         blocks = []
         for o in self.offsets:
             below = new - o  # springs down to a base that is present (new or not)
             below = below[below >= 0]
             below = below[np.fromiter((int(j) in present for j in below), bool, below.size)]
             above = new + o  # springs up to a base that was there before
-            above = above[np.fromiter((int(j) in present and int(j) not in fresh for j in above), bool, above.size)]
+            above = above[np.isin(above, new, invert=True)]
+            above = above[np.fromiter((int(j) in present for j in above), bool, above.size)]
             ends = np.concatenate([below, above - o])
             blocks.append(np.column_stack([np.sort(ends), np.sort(ends) + o]))
         return np.concatenate(blocks).astype(np.uint32) if blocks else np.empty((0, 2), np.uint32)

@@ -212,17 +212,23 @@ def leaf_corners(lattice: Lattice, radius) -> np.ndarray:
     base joined (one per base): the shape is fixed then and carried with its base.  With ``p``, ``q``
     whose lattice vectors span twice a base's area (34 and 144 on a golden-angle lattice), each
     rhomboid has exactly the area ``2πRh`` of one base, and together they partition the cylinder."""
+    u, v = _half_vectors(lattice, radius)
+    ccw = (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] > 0)[:, None, None]
+    return np.where(ccw, np.stack([u, v, -u, -v], axis=1), np.stack([u, -v, -u, v], axis=1))
+
+
+def _half_vectors(lattice: Lattice, radius) -> tuple[np.ndarray, np.ndarray]:
+    """Half the lattice vectors (arc length, height) to the partition neighbours ``p`` and ``q`` at
+    ``radius`` (one per base): the rhomboid's corners are ``±`` these."""
     radius = np.atleast_1d(np.asarray(radius, dtype=float))
     phi = math.radians(lattice.divergence_deg)
 
-    def half(o: int) -> np.ndarray:  # half the lattice vector to the base o further on
+    def half(o: int) -> np.ndarray:
         turn = math.remainder(o * phi, 2.0 * math.pi)
         return 0.5 * np.column_stack([radius * turn, np.full_like(radius, o * lattice.rise)])
 
     p, q = lattice.partition_offsets()
-    u, v = half(p), half(q)
-    ccw = (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0] > 0)[:, None, None]
-    return np.where(ccw, np.stack([u, v, -u, -v], axis=1), np.stack([u, -v, -u, v], axis=1))
+    return half(p), half(q)
 
 
 def join_radii(sim) -> np.ndarray:
@@ -253,21 +259,26 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     theta = np.arctan2(anchor[:, 1], anchor[:, 0])
     z = anchor[:, 2]
     r_site = np.hypot(anchor[:, 0], anchor[:, 1])
-    n = len(z)
     from bark.analysis import axial_difference, axial_mean
 
     angles = []
-    for o in sorted(lattice.offsets)[:2]:
-        i = np.arange(n - o)
-        arc = r_site[i] * (np.remainder(theta[i + o] - theta[i] + math.pi, 2 * math.pi) - math.pi)
-        angles.append(axial_mean(np.degrees(np.arctan2(z[i + o] - z[i], arc))))
-    corners = leaf_corners(lattice, radius_joined)
-    low = z + corners[:, :, 1].min(axis=1)
-    high = z + corners[:, :, 1].max(axis=1)
-    width = corners[:, :, 0].max(axis=1) - corners[:, :, 0].min(axis=1)
+    for o in sorted(lattice.offsets)[:2]:  # slices, not index arrays: 70 000 bases at a few MiB
+        arc = theta[o:] - theta[:-o]
+        arc += math.pi
+        np.remainder(arc, 2 * math.pi, out=arc)
+        arc -= math.pi
+        arc *= r_site[:-o]
+        rise = z[o:] - z[:-o]
+        angles.append(axial_mean(np.degrees(np.arctan2(rise, arc, out=arc), out=arc)))
+        del arc, rise
+    u, v = _half_vectors(lattice, radius_joined)  # the corners are ±u, ±v: extents without them
+    reach = np.maximum(np.abs(u[:, 1]), np.abs(v[:, 1]))
+    low, high = z - reach, z + reach
+    width = 2.0 * np.maximum(np.abs(u[:, 0]), np.abs(v[:, 0]))
+    del u, v, reach
     lines = np.linspace(np.quantile(z, 0.1), np.quantile(z, 0.9), n_lines)
-    counts = [np.count_nonzero((low < h) & (h < high) & (np.cos(theta - side) > 0))
-              for h in lines for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
+    facing = [np.cos(theta - side) > 0 for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
+    counts = [np.count_nonzero((low < h) & (h < high) & front) for h in lines for front in facing]
     # leaf bases of no width (a divergence angle that stacks them in columns) have no count side by side
     side_by_side = float(np.mean(math.pi * radius_joined / width)) if np.all(width > 0) else None
     return {"parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
