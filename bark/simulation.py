@@ -10,10 +10,9 @@ compute backend is :mod:`bark.kernels`'; the state is data.
 from __future__ import annotations
 
 import math
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 import attrs
-import networkx as nx
 import numpy as np
 
 from bark import kernels, stepping
@@ -25,7 +24,10 @@ from bark.state import State, cylinder_points
 from bark.stepping import Clock, Numerics
 from bark.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
 
-__all__ = ["Simulation", "Stop", "BreakLog", "LeafBaseGraph"]
+if TYPE_CHECKING:
+    from bark.graph import LeafBaseGraph
+
+__all__ = ["Simulation", "Stop", "BreakLog"]
 
 
 @attrs.frozen(kw_only=True)
@@ -82,20 +84,6 @@ class BreakLog:
         if not self._chunks:
             return {n: np.empty(0, dtype=float if n in ("t", "tension") else np.int64) for n in names}
         return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(names)}
-
-
-_NO_ATTRIBUTES: dict = {}
-
-
-class LeafBaseGraph(nx.Graph):
-    """The graph of record: bases as nodes, intact springs as edges, with no attribute dictionaries
-    (positions, sites and thresholds live in the state's arrays, by node and spring id).  Every node
-    and edge shares one empty mapping: 31 MiB at 70 000 bases against 71 MiB for a plain ``Graph``
-    carrying the old per-node and per-edge attributes (measured with tracemalloc).  Do not set
-    attributes on it; ``bark.output.write_graphml`` exports a copy with them."""
-
-    node_attr_dict_factory = staticmethod(lambda: _NO_ATTRIBUTES)
-    edge_attr_dict_factory = staticmethod(lambda: _NO_ATTRIBUTES)
 
 
 @attrs.define(eq=False, kw_only=True)
@@ -170,6 +158,8 @@ class Simulation:
             self.rng = np.random.default_rng(self.seed)
         self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
         self.forces = ForceField(self.mechanics, self.backend)
+        from bark.graph import LeafBaseGraph  # networkx: 0.13 s to import, paid when a simulation is built
+
         self.graph = LeafBaseGraph()
         if state is None:
             self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases)
@@ -177,8 +167,8 @@ class Simulation:
             self.join(*self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng))
         else:
             self.state, self._built = state, True
-            self.graph.add_nodes_from(range(state.n_bases))
-            self.graph.add_edges_from(state.pairs[state.intact].tolist())
+            self.graph.add_bases(state.n_bases)
+            self.graph.add_springs(state.pairs[state.intact])
             self._tension = np.zeros(state.n_springs)
         self.stability_limit, h = stepping.stable_step(self)
         self.clock = clock or Clock(h=h, levels=self.numerics.max_halvings if self.numerics.stepping == "adaptive" else 0)
@@ -313,7 +303,7 @@ class Simulation:
         x = cylinder_points(theta, z, np.broadcast_to(self.growth.radius(t, z), z.shape))
         ids = s.add_bases(x=x, v=np.zeros_like(x), anchor=x, anchor_dir=np.column_stack([np.cos(theta), np.sin(theta)]),
                           born=np.full(len(z), t))
-        self.graph.add_nodes_from(ids.tolist())
+        self.graph.add_bases(len(ids))
         pairs = self.lattice.new_pairs(ids, self.graph)
         if len(pairs):
             positions = np.ascontiguousarray(s.x)  # row-major, as the rest lengths were always measured
@@ -321,7 +311,7 @@ class Simulation:
             fmax = self.growth.adjust_thresholds(0.5 * (positions[pairs[:, 0], 2] + positions[pairs[:, 1], 2]),
                                                  self.mechanics.thresholds(len(pairs), self.rng))
             s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
-            self.graph.add_edges_from(pairs.tolist())
+            self.graph.add_springs(pairs)
         self._tension = np.resize(self._tension, s.n_springs)
         self._labels = None
         return ids
