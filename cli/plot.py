@@ -57,9 +57,13 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     ax.set_ylabel("height z (length units)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"))
     ax.set_title(title or f"t = {data.t:.2f}, r = {r:.4f}, {data.n_patches} patches, {data.n_broken} broken", fontsize=9)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight")
+    fig.savefig(buf, format="png", bbox_inches="tight", pil_kwargs=FAST_PNG)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
+
+FAST_PNG = {"compress_level": 1}
+"""zlib level of the pictures a run writes: the default (6) took a third of drawing a 3000-base
+pattern for a file no smaller (measured: 784 kB at 6, 745 kB at 1)."""
 
 RASTER_CELLS = 2_000_000
 """Most cells of the raster a large pattern is drawn as (more than the figure has pixels)."""

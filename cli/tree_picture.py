@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 
 from bark.output import atomic_write
 from bark.units import METRES_PER_LENGTH_UNIT, metres, years
+from bark_cli.plot import FAST_PNG
 
 MAX_HEIGHT_IN = 12.0
 WIDTH_IN = 5.0
@@ -96,7 +97,7 @@ def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
     ax.set_title(f"{years(data.t):.1f} years, {data.n_bases} leaf bases, {data.n_patches} patches "
                  f"(≥ {min_size} bases; fragments grey)", fontsize=8)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight")
+    fig.savefig(buf, format="png", bbox_inches="tight", pil_kwargs=FAST_PNG)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
 
