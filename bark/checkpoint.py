@@ -154,8 +154,8 @@ def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         return Damaged(f"{where} is damaged: {problem}")
 
     try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:  # our handle: numpy's own
+            arrays = {k: data[k] for k in data.files}                           # is left open on a bad zip
     except FileNotFoundError:
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:

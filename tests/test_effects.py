@@ -139,7 +139,7 @@ def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
     out = _simulate_small(tmp_path, 'want = ["anchors", "damping", "statistics-series"]\nseries_every = 2.0')
     import csv
 
-    rows = list(csv.DictReader((out / "statistics.csv").open()))
+    rows = list(csv.DictReader((out / "statistics.csv").read_text().splitlines()))
     # each row at the first step at or past its due time (0, 2, 4, 6, 8; steps are at most 0.3 long)
     t = np.array([float(r["t"]) for r in rows])
     due = np.array([0.0, 2.0, 4.0, 6.0, 8.0])

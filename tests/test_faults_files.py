@@ -380,7 +380,8 @@ def test_the_picture_stays_bounded(tmp_path, args):
     out = tmp_path / "out"
     result = _simulate("--until-time", "0.6", "--quiet", "--checkpoint-every", "0", *args, "--out", str(out))
     assert result.exit_code == 0, result.output
-    width, height = Image.open(out / "pattern.png").size
+    with Image.open(out / "pattern.png") as image:
+        width, height = image.size
     assert width <= 1100 and height <= 2200, (width, height)
 
 

@@ -49,7 +49,8 @@ def _wait_for(path: Path, proc: subprocess.Popen, limit_s: float = 120.0) -> Non
 def uninterrupted(tmp_path_factory):
     out = tmp_path_factory.mktemp("uninterrupted") / "out"
     proc = _start(out)
-    assert proc.wait() == 0, proc.stderr.read()
+    _, err = proc.communicate()  # (communicate: reads stderr to its end and closes it)
+    assert proc.returncode == 0, err
     return out
 
 
@@ -65,8 +66,8 @@ def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted,
     _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
     time.sleep(delay)
     proc.send_signal(sig)
-    code = proc.wait()
-    err = proc.stderr.read()
+    _, err = proc.communicate()
+    code = proc.returncode
     assert "Traceback" not in err, err
     if code == 0:
         pytest.skip(f"the run ended before the signal at {delay:.2f} s")
@@ -92,12 +93,14 @@ def test_stopped_twice_and_resumed_twice_is_byte_identical(tmp_path, uninterrupt
     proc = _start(out, "--checkpoint-every", "0.2")
     _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
     proc.send_signal(signal.SIGTERM)
-    assert proc.wait() in (0, 143)
+    proc.communicate()
+    assert proc.returncode in (0, 143)
     again = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", "--resume", str(out), "--quiet",
                               "--checkpoint-every", "0.2"], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
     time.sleep(0.4)
     again.send_signal(signal.SIGINT)
-    assert again.wait() in (0, 130)
+    again.communicate()
+    assert again.returncode in (0, 130)
     assert _resume(out).returncode in (0, 2)  # 2: it had already ended
     for name in COMPARED:
         assert (out / name).read_bytes() == (uninterrupted / name).read_bytes(), name
@@ -154,10 +157,12 @@ def test_a_signal_while_a_large_scene_is_built_stops_at_once(tmp_path):
     time.sleep(2.0)  # imports done, building the lattice and its graph (about 20 s at this size)
     proc.send_signal(signal.SIGTERM)
     try:
-        code = proc.wait(timeout=10)  # not the whole build
-    finally:
+        _, err = proc.communicate(timeout=10)  # not the whole build
+    except subprocess.TimeoutExpired:
         proc.kill()
-    err = proc.stderr.read()
+        proc.communicate()
+        raise
+    code = proc.returncode
     assert code == 143 and err == "bark: terminated before the run began: nothing was run\n", err
     assert not out.exists()
 
@@ -211,4 +216,4 @@ def test_the_drawing_process_does_not_outlive_a_killed_command(tmp_path):
     while left() and time.monotonic() < deadline:
         time.sleep(0.1)
     assert left() == []
-    proc.stderr.read()  # and nothing holds the command's stderr open
+    proc.communicate()  # and nothing holds the command's stderr open (this reads it to its end)

@@ -47,7 +47,7 @@ def test_example_plugin_is_selected_and_runs(plugin_path, tmp_path):
                    "--stepping", "fixed", "--dt", "0.05", "--n-bases", "400", "-G", "0.05", "--until-time", "8",
                    "--out", str(out), "--quiet")
     assert result.returncode == 0, result.stderr
-    per_step = Counter(row["step"] for row in csv.DictReader((out / "breaks.csv").open()))
+    per_step = Counter(row["step"] for row in csv.DictReader((out / "breaks.csv").read_text().splitlines()))
     assert sum(per_step.values()) > 20  # it cracked ...
     assert max(per_step.values()) == 1  # ... one spring per step, as the plugin's rule says
 
@@ -63,5 +63,5 @@ def test_threshold_breaker_breaks_batches_where_the_plugin_does_not(tmp_path):
     result = CliRunner().invoke(cli, ["simulate", "--stepping", "fixed", "--dt", "0.05", "--n-bases", "400", "-G", "0.05",
                                       "--until-time", "8", "--out", str(out), "--quiet"])
     assert result.exit_code == 0, result.output
-    per_step = Counter(row["step"] for row in csv.DictReader((out / "breaks.csv").open()))
+    per_step = Counter(row["step"] for row in csv.DictReader((out / "breaks.csv").read_text().splitlines()))
     assert max(per_step.values()) > 1
