@@ -158,10 +158,6 @@ def write_npz(path: str | Path, *, compress: bool = True, verify=None, keep=None
 PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
 
 
-WINDOW = 0.5
-"""Side of the windows of ``summary.json``'s ``windows`` (length units: 15 cm, a photograph's field)."""
-
-
 def trunk_regions(sim) -> np.ndarray | None:
     """The names of the trunk's regions (``Growth.region`` of every base's site), or ``None`` when it
     has one region."""
@@ -178,20 +174,20 @@ def region_summaries(sim, rows: list[dict], every: np.ndarray) -> dict[str, dict
     return {str(name): pattern_summary([r for r, n in zip(rows, names) if n == name]) for name in every}
 
 
-def window_summaries(sim, every: np.ndarray, min_size: int) -> dict[str, Any]:
+def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> dict[str, Any]:
     """Pattern statistics per region as photographs of the trunk would give them: patches cut at the
-    borders of ``WINDOW``-sized windows (``bark.analysis.window_labels``), each counted in the region
+    borders of ``window``-sized windows (``bark.analysis.window_labels``), each counted in the region
     of its centroid; and (``initial_trunk``, when bases joined during the run) the same over the
     patches of bases that were there from the start, the trunk whose growth the whole run stretched."""
     from bark.analysis import patch_statistics, window_labels
 
     s = sim.state
-    labels = window_labels(s.x, s.pairs, s.intact, WINDOW)
+    labels = window_labels(s.x, s.pairs, s.intact, window)
     rows = patch_statistics(s.x, labels, min_size)
     joined = s.born > s.born.min()  # grew on the trunk the run began with
     initial = np.bincount(labels, weights=joined) == 0  # per window patch: none of its bases joined later
     old = [r for r in rows if initial[r["patch"]]] if joined.any() else None
-    return {"window": WINDOW, "window_m": metres(WINDOW), "regions": region_summaries(sim, rows, every),
+    return {"window": window, "window_m": metres(window), "regions": region_summaries(sim, rows, every),
             "initial_trunk": None if old is None else region_summaries(sim, old, every)}
 
 
@@ -240,7 +236,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "mean_anisotropy": stats.get("mean_anisotropy"),
         "fraction_within_45_deg": stats.get("fraction_within_45_deg"),
         "regions": region_summaries(sim, rows, every) if every is not None else None,
-        "windows": window_summaries(sim, every, scene.run.min_patch_size) if every is not None else None,
+        "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
         "wall_time_s": wall_time_s,

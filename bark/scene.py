@@ -11,7 +11,7 @@ vertical regime of Table 2)::
     [breaker]     name = "threshold" + its fields
     [analyzer]    name = "patches" + its fields          (min_size)
     [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
-    [effects]     want = [...] (bark.effects), frame_every  (what is simulated and written)
+    [effects]     want = [...] (bark.effects), frame_every, series_every, window  (what is simulated and written)
     [dome]        bark.tree.Dome fields                  (shape, height, exponent, points: the apical dome)
 
 Unknown tables or keys, bad values and unknown strategy names raise :class:`~bark.errors.BarkError`
@@ -119,6 +119,9 @@ class EffectSettings:
     """With the ``animation`` effect: simulated time between frames."""
     series_every: float = attrs.field(default=10.0, validator=positive)
     """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    window: float = attrs.field(default=0.5, validator=positive)
+    """On a trunk with regions (bulges): side of the windows of summary.json's ``windows``, length
+    units (0.5 = 15 cm, a photograph's field of view)."""
 
 
 MEMORY = {"fixed": 300 * 2**20, "per_base": 800, "per_spring": 400, "per_base_image": 4000}
@@ -207,6 +210,8 @@ class Scene:
     """With the ``animation`` effect: simulated time between frames."""
     series_every: float = 10.0
     """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    window: float = 0.5
+    """Side of the windows of summary.json's ``windows`` (length units; ``EffectSettings.window``)."""
     dome: Dome = attrs.field(factory=Dome)
     """The apical dome's profile (``bark.tree.Dome``): drawn in tree.png."""
 
@@ -268,6 +273,7 @@ class Scene:
             wanted=tuple(wanted),
             frame_every=eff.frame_every,
             series_every=eff.series_every,
+            window=eff.window,
             **parts,
         )
 
@@ -329,7 +335,8 @@ class Scene:
             out[section] = {k: v for k, v in attrs.asdict(getattr(self, section)).items()}
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **_plain(strategy.params())}
-        out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every}
+        out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
+                          "window": self.window}
         return out
 
 

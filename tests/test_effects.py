@@ -106,6 +106,7 @@ def test_anchors_and_damping_off_when_not_asked():
     ({"effects": {"want": "fracture"}}, "want"),
     ({"effects": {"wanted": ["fracture"]}}, "wanted"),
     ({"effects": {"want": ["fracture"], "frame_every": 0}}, "frame_every"),
+    ({"effects": {"want": ["fracture"], "window": -1.0}}, "window"),
 ])
 def test_bad_effects_are_one_line(data, key):
     with pytest.raises(BarkError) as err:

@@ -71,6 +71,16 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
     assert summary["phyllotaxis"]["bases_side_by_side_front"] == pytest.approx(38.0, abs=0.5)
 
 
+def test_the_window_of_the_statistics_is_a_scene_setting(tmp_path):
+    from bark import runner
+
+    scene = Scene.from_toml(SCENES / "whole-tree-small.toml",
+                            {"effects": {"want": ["bulges", "anchors", "damping", "patch-statistics"], "window": 1.0},
+                             "run": {"until_time": 2.0}})
+    summary = runner.run(scene, tmp_path / "out").summary
+    assert summary["windows"]["window"] == 1.0 and summary["windows"]["window_m"] == pytest.approx(0.3)
+
+
 def test_the_small_whole_tree_interrupted_and_resumed_ends_bit_for_bit(tmp_path):
     scene = Scene.from_toml(SCENES / "whole-tree-small.toml")
     whole, part = tmp_path / "whole", tmp_path / "part"
