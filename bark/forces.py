@@ -93,18 +93,25 @@ class SpringOrder:
     the same order (the same bits).  Derived data: extended as springs are appended (a join costs
     one pass over the springs, not a sort), made again for springs it has not seen."""
 
-    pairs: np.ndarray = attrs.field(factory=lambda: np.empty((0, 2), np.int64))
-    """A copy of the springs it was made for."""
+    pairs: np.ndarray | None = None
+    """A copy of the springs it was made for, when they came without a state (see ``of``)."""
     keys: np.ndarray = attrs.field(factory=lambda: np.empty(0, np.uint64))
     """Their sort keys, in order."""
     ids: np.ndarray = attrs.field(factory=lambda: np.empty(0, np.int64))
     """Spring ids in order."""
+    state: object = None
+    """The state whose springs these are, when given: its springs are only ever appended."""
 
-    def of(self, pairs: np.ndarray) -> np.ndarray | None:
-        """Spring ids of ``pairs`` in summation order; ``None`` when that is id order."""
-        m, seen = len(pairs), len(self.pairs)
-        if not (seen <= m and np.array_equal(pairs[:seen], self.pairs)):
+    def of(self, pairs: np.ndarray, state=None) -> np.ndarray | None:
+        """Spring ids of ``pairs`` in summation order; ``None`` when that is id order.  With ``state``
+        (whose ``pairs`` these are), springs seen before are known to be unchanged — a state only
+        appends springs — and are not compared again: a join then costs its new springs only."""
+        m, seen = len(pairs), len(self.ids)
+        if state is not None and state is self.state and seen <= m:
+            pass
+        elif not (state is None and self.pairs is not None and seen <= m and np.array_equal(pairs[:seen], self.pairs)):
             seen, self.keys, self.ids = 0, np.empty(0, np.uint64), np.empty(0, np.int64)
+        self.state = state
         if m > seen:
             keys = _order_keys(pairs[seen:])
             new = np.argsort(keys, kind="stable")
@@ -112,7 +119,7 @@ class SpringOrder:
             at = np.searchsorted(self.keys, keys, side="right")  # after equal keys: ties stay in id order
             self.keys = np.insert(self.keys, at, keys)
             self.ids = np.insert(self.ids, at, new + seen)
-            self.pairs = np.array(pairs, dtype=np.int64)
+        self.pairs = np.array(pairs, dtype=np.int64) if state is None else None
         return None if bool(np.all(self.ids[1:] > self.ids[:-1])) else self.ids
 
     def runs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -33,7 +33,7 @@ BASE_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
     "born": ((), "float64"),          # time the base joined the mechanics
 }
 SPRING_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
-    "pairs": ((2,), "uint32"),        # the two bases (i, j); d = x_j − x_i
+    "pairs": ((2,), "uint32"),        # the two bases (i, j); d = x_j − x_i; never changed (springs are appended)
     "rest": ((), "float64"),          # rest length, taken when the spring was made; never changed
     "fmax": ((), "float64"),          # breaking threshold, per spring (never per base), set then too
     "intact": ((), "bool"),           # changed only by Simulation.break_springs
@@ -74,8 +74,8 @@ class State:
     ``intact`` (per spring) are views of the active rows; assigning into them (``state.x[:] = ...``)
     writes the state.  Integrators change ``x`` and ``v``; the simulation changes ``t``, applies the
     surface constraint, breaks springs and adds bases.  A spring's ``rest`` and ``fmax`` are its
-    material, set when it is made and never changed afterwards (backends keep derived copies of
-    them, made again only when springs are added).
+    material, set when it is made and never changed afterwards, and its ``pairs`` too: springs are only
+    appended (backends keep derived data of them, extended when springs are added).
     """
 
     n_bases: int = 0

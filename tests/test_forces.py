@@ -223,18 +223,29 @@ def test_incidence_puts_plus_on_first_end_minus_on_second():
 spring_pair = st.tuples(st.integers(0, 40), st.integers(0, 40))
 
 
-@given(st.lists(st.lists(spring_pair, max_size=12), min_size=1, max_size=6))
-def test_the_spring_order_extended_join_by_join_is_the_order_made_at_once(batches):
+@given(st.lists(st.lists(spring_pair, max_size=12), min_size=1, max_size=6), st.booleans())
+def test_the_spring_order_extended_join_by_join_is_the_order_made_at_once(batches, with_state):
     """Springs appended batch by batch (bases joining) are placed exactly where sorting all of them
-    at once puts them: by offset j − i, then by i, ties in id order."""
+    at once puts them: by offset j − i, then by i, ties in id order — whether the springs come alone
+    (compared with those seen before) or with the state that owns them (trusted: it only appends)."""
     order, pairs = SpringOrder(), np.empty((0, 2), np.int64)
+    owner = object() if with_state else None
     for batch in batches:
         pairs = np.concatenate([pairs, np.array(batch, np.int64).reshape(-1, 2)])
-        got = order.of(pairs)
+        got = order.of(pairs, owner)
         o, i = pairs[:, 1] - pairs[:, 0], pairs[:, 0]
         expected = np.lexsort((np.arange(len(pairs)), i, o))
         np.testing.assert_array_equal(np.arange(len(pairs)) if got is None else got, expected)
         assert (got is None) == bool(np.all(expected == np.arange(len(pairs))))
+
+
+def test_the_spring_order_starts_again_for_another_state_or_changed_springs():
+    order = SpringOrder()
+    first, second = object(), object()
+    np.testing.assert_array_equal(order.of(np.array([[0, 3], [0, 1]]), first), [1, 0])
+    assert order.of(np.array([[0, 1], [0, 3]]), second) is None  # another state: made again
+    assert order.of(np.array([[0, 3], [0, 1]])) is not None  # springs alone, unlike those seen: made again
+    assert order.of(np.array([[0, 1]])) is None  # fewer springs than seen: made again
 
 
 def test_the_incidence_sums_each_base_in_the_order_given():

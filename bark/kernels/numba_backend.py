@@ -570,6 +570,7 @@ class NumbaBackend(Backend):
     def __init__(self) -> None:
         self._frame: _Frame | None = None
         self._order = SpringOrder()
+        self._buffers: dict[str, np.ndarray] = {}
 
     def frame(self, state) -> _Frame:
         """The call frame for ``state``: reused while the state keeps its arrays and sizes."""
@@ -577,22 +578,33 @@ class NumbaBackend(Backend):
         if self._frame is not None and _same(self._frame.of, of):
             return self._frame
         x, v, a, d = state.x, state.v, state.anchor, state.anchor_dir
-        f = np.zeros_like(x, order="F")
-        order = self._order.of(state.pairs)
+        n, m = state.n_bases, state.n_springs
+        order = self._order.of(state.pairs, state)
         runs = self._order.runs()
         inv_fmax = 1.0 / state.fmax
         springs = (state.rest, state.fmax, inv_fmax) if order is None else (state.rest[order], state.fmax[order],
                                                                              inv_fmax[order])
         longest = int(runs[1].max(initial=1))
-        m = state.n_springs
+        f = self._space("f", (n, 3))
+        f[...] = 0.0
         self._frame = _Frame(
             of=of, bases=(*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
                           *(a[:, i] for i in range(3)), d[:, 0], d[:, 1]),
             order=order, runs=runs, springs=springs, inv_fmax=inv_fmax,
-            work=tuple(np.empty(longest) for _ in range(4)),
-            start=tuple(np.empty_like(arr, order="F") for arr in (x, v, a)), live=np.empty(m, bool), log=(np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m)),
+            work=tuple(self._space(f"work{i}", (longest,)) for i in range(4)),
+            start=tuple(self._space(f"start{i}", (n, 3)) for i in range(3)), live=self._space("live", (m,), bool),
+            log=(self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,))),
         )
         return self._frame
+
+    def _space(self, name: str, shape: tuple, dtype=float) -> np.ndarray:
+        """Work space ``name`` of ``shape`` (columns contiguous): the leading rows of a buffer kept
+        between frames and doubled when outgrown, so a join does not allocate (and fault in) it anew."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape[0] < shape[0]:
+            rows = max(shape[0], 2 * (0 if buf is None else buf.shape[0]), 64)
+            buf = self._buffers[name] = np.empty((rows, *shape[1:]), dtype=dtype, order="F")
+        return buf[:shape[0]]
 
     def _live(self, state) -> np.ndarray:
         """The state's intact mask, in the kernel's order, into the frame's working copy."""
