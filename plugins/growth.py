@@ -83,13 +83,16 @@ def bump(z, center, half_width):
     """The ``sin²`` profile of a bulge: 1 at ``center``, 0 with zero slope at ``center ± half_width``
     and 0 beyond.  One height (the compiled kernel, per base) takes the sine only inside the bulge;
     an array of heights takes it of 0 outside.  Both give the same bits."""
-    u = (z - center) / half_width
-    if isinstance(u, float):  # one height: most bases are outside every bulge, and cost a comparison
+    if isinstance(z, float):  # one height: most bases are outside every bulge, and cost a comparison
+        if not abs(z - center) < half_width:  # outside, without the division (the test below decides)
+            return 0.0
+        u = (z - center) / half_width
         if abs(u) < 1.0:
             return np.sin(0.5 * np.pi * (u + 1.0)) ** 2
         return 0.0
+    u = (z - center) / half_width
     inside = np.abs(u) < 1.0
-    u = inside * u + (1.0 - inside) * -1.0  # u inside (exactly), -1 outside
+    u = np.where(inside, u, -1.0)  # u inside, -1 outside (and for a NaN height, as one height gives)
     return np.sin(0.5 * np.pi * (u + 1.0)) ** 2 * inside
 
 

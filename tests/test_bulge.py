@@ -137,3 +137,15 @@ def test_a_growth_law_that_writes_radius_again_loses_the_inherited_compiled_form
             return 2 * super().radius(t, z)
 
     assert Wider.compiled is None and Wider.compiled_time is None
+
+
+@given(bulges, st.lists(st.floats(-1.0, 1.0, allow_nan=False), max_size=20))
+def test_one_height_and_an_array_of_heights_give_the_same_bits(b, offsets):
+    """The compiled kernel evaluates the profile one base at a time (skipping the division outside
+    the bulge), the numpy backend on arrays: the same values to the bit, at the edges too."""
+    from bark_plugins.growth import bump
+
+    edge = np.nextafter(b.half_width, [0.0, np.inf])  # a hair inside and outside the reach
+    z = np.concatenate([b.z + np.array(offsets) * 2 * b.half_width, b.z + edge, b.z - edge, [b.z, np.nan]])
+    one = np.array([bump(float(v), b.z, b.half_width) for v in z])
+    np.testing.assert_array_equal(one, bump(z, b.z, b.half_width))
