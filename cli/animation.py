@@ -16,7 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from bark.output import Frames, atomic_write
-from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, patch_colours
+from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, patch_colours, raster
 
 
 def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
@@ -36,12 +36,21 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
     ax.set_xlabel("arc length r·θ")
     ax.set_ylabel("height z")
     n = max(uv.shape[0] for _, _, uv, _ in frames.frames)
-    points = ax.scatter([], [], s=float(np.clip(3.0 * 3000 / n, 0.05, 3.0)), linewidths=0)
+    if n <= SPRINGS_UP_TO:
+        points = ax.scatter([], [], s=float(np.clip(3.0 * 3000 / n, 0.05, 3.0)), linewidths=0)
+    else:  # a large pattern as a raster (as pattern.png draws it): 5x faster a frame than 70,000 dots
+        cells = ax.imshow(np.zeros((1, 1, 4), np.uint8), origin="lower", interpolation="nearest", aspect="auto")
 
     def draw(i):
         t, r, uv, labels = frames.frames[i]
-        points.set_offsets(uv)
-        points.set_color(patch_colours(labels, min_size))
+        colours = patch_colours(labels, min_size)
+        if n <= SPRINGS_UP_TO:
+            points.set_offsets(uv)
+            points.set_color(colours)
+        else:
+            lo, hi = float(uv[:, 1].min()), float(uv[:, 1].max())
+            cells.set_data(raster(uv, colours, 2 * np.pi * r, lo, hi))
+            cells.set_extent((0.0, 2 * np.pi * r, lo, hi))
         count = int(np.count_nonzero(np.bincount(labels) >= min_size))
         ax.set_title(f"t = {t:.1f}   r = {r:.3f}   {count} patches", fontsize=9)
 
