@@ -253,7 +253,8 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
       trunk facing a viewer (as in a photograph), averaged over ``n_lines`` heights and four sides.
     * ``bases_side_by_side_front``: half the circumference over a rhomboid's width — the bases seen in
       one horizontal row on that half; the paper reports ≈ 37 (observed) and ≈ 40 (its model).
-      ``None`` when rhomboids have no width (a divergence angle that stacks the bases in columns).
+      ``None`` when rhomboids have no width (a divergence angle that stacks the bases in columns), or
+      too little for a finite count.
     """
     anchor = np.asarray(anchor, dtype=float)
     theta = np.arctan2(anchor[:, 1], anchor[:, 0])
@@ -280,7 +281,9 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     facing = [np.cos(theta - side) > 0 for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
     counts = [np.count_nonzero((low < h) & (h < high) & front) for h in lines for front in facing]
     # leaf bases of no width (a divergence angle that stacks them in columns) have no count side by side
-    side_by_side = float(np.mean(math.pi * radius_joined / width)) if np.all(width > 0) else None
+    with np.errstate(over="ignore"):  # rhomboids of almost no width: as many as to be uncountable
+        side_by_side = float(np.mean(math.pi * radius_joined / width)) if np.all(width > 0) else None
+    side_by_side = side_by_side if side_by_side is not None and math.isfinite(side_by_side) else None
     return {"parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
             "parastichy_directions_deg": [float(a) for a in angles],
             "bases_crossed_front": float(np.mean(counts)),

@@ -181,3 +181,15 @@ def test_the_phyllotaxis_checks_on_the_exact_lattice(radius):
     assert got["parastichy_angle_deg"] == pytest.approx(math.degrees(math.acos(cos)), abs=1e-6)
     assert got["bases_crossed_front"] == pytest.approx(72, abs=1.0)
     assert got["bases_side_by_side_front"] == pytest.approx(math.pi / abs(math.remainder(34 * phi, 2 * math.pi)))
+
+
+@pytest.mark.parametrize("divergence_deg, partition", [(90.0, (4, 8)), (1e-308, (13, 55))])
+def test_rhomboids_of_no_width_have_no_count_side_by_side(divergence_deg, partition):
+    """A divergence angle that stacks the bases in columns (or as near as a float gets) leaves no
+    finite count: ``None``, quietly (no overflow warning, no infinity in summary.json)."""
+    from bark.tree import phyllotaxis
+
+    lattice = Lattice(n_bases=2000, offsets=(21, 34), divergence_deg=divergence_deg, partition=partition)
+    theta, z = lattice.sites(0.2, np.random.default_rng(0), 0, lattice.n_bases)
+    sites = np.column_stack([0.2 * np.cos(theta), 0.2 * np.sin(theta), z])
+    assert phyllotaxis(lattice, sites, np.full(lattice.n_bases, 0.2))["bases_side_by_side_front"] is None
