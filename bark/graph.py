@@ -17,9 +17,9 @@ _NO_ATTRIBUTES: dict = {}
 class LeafBaseGraph(nx.Graph):
     """The graph of record: bases as nodes, intact springs as edges, with no attribute dictionaries
     (positions, sites and thresholds live in the state's arrays, by node and spring id).  Every node
-    and edge shares one empty mapping: 31 MiB at 70 000 bases against 71 MiB for a plain ``Graph``
-    carrying the old per-node and per-edge attributes (measured with tracemalloc).  Do not set
-    attributes on it; ``bark.output.write_graphml`` exports a copy with them."""
+    and edge shares one empty mapping, and each base is one int object: 22.6 MiB at 70 000 bases
+    against 71 MiB for a plain ``Graph`` carrying the old per-node and per-edge attributes (measured
+    with tracemalloc).  Do not set attributes on it; ``bark.output.write_graphml`` exports a copy with them."""
 
     node_attr_dict_factory = staticmethod(lambda: _NO_ATTRIBUTES)
     edge_attr_dict_factory = staticmethod(lambda: _NO_ATTRIBUTES)
