@@ -91,7 +91,8 @@ class SpringOrder:
     to the state (their ids follow the join), and this order places them among the others, so the
     compiled pass can take the springs in long runs of equal offset and the numpy backend sums in
     the same order (the same bits).  Derived data: extended as springs are appended (a join costs
-    one pass over the springs, not a sort), made again for springs it has not seen."""
+    a sort of its new springs and an insertion, not a sort of all), made again for springs it has not
+    seen."""
 
     pairs: np.ndarray | None = None
     """A copy of the springs it was made for, when they came without a state (see ``of``)."""
@@ -107,9 +108,9 @@ class SpringOrder:
         (whose ``pairs`` these are), springs seen before are known to be unchanged — a state only
         appends springs — and are not compared again: a join then costs its new springs only."""
         m, seen = len(pairs), len(self.ids)
-        if state is not None and state is self.state and seen <= m:
-            pass
-        elif not (state is None and self.pairs is not None and seen <= m and np.array_equal(pairs[:seen], self.pairs)):
+        known = (state is self.state) if state is not None else (
+            self.pairs is not None and seen <= m and np.array_equal(pairs[:seen], self.pairs))
+        if not (known and seen <= m):
             seen, self.keys, self.ids = 0, np.empty(0, np.uint64), np.empty(0, np.int64)
         self.state = state
         if m > seen:

@@ -23,7 +23,7 @@ from typing import Any
 import attrs
 import numpy as np
 
-__all__ = ["State", "BASE_FIELDS", "SPRING_FIELDS", "cylinder_points", "unit_xy"]
+__all__ = ["State", "BASE_FIELDS", "SPRING_FIELDS", "cylinder_points", "unit_xy", "grown"]
 
 BASE_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
     "x": ((3,), "float64"),           # position
@@ -51,6 +51,12 @@ def unit_xy(points: np.ndarray) -> np.ndarray:
     rho = np.hypot(points[:, 0], points[:, 1])
     safe = np.where(rho > 0.0, rho, 1.0)
     return np.where((rho > 0.0)[:, None], points[:, :2] / safe[:, None], [1.0, 0.0])
+
+
+def grown(capacity: int, needed: int) -> int:
+    """Rows to allocate when ``needed`` rows outgrow ``capacity``: at least double (amortised O(1) per
+    row added), never under ``MIN_CAPACITY``."""
+    return max(needed, 2 * capacity, MIN_CAPACITY)
 
 
 def _alloc(capacity: int, shape: tuple[int, ...], dtype: str) -> np.ndarray:
@@ -125,11 +131,11 @@ class State:
         capacity = self._store[next(iter(fields))].shape[0]
         if needed <= capacity:
             return
-        size = max(needed, 2 * capacity, MIN_CAPACITY)
+        size = grown(capacity, needed)
         for name, (shape, dtype) in fields.items():
-            grown = _alloc(size, shape, dtype)
-            grown[:count] = self._store[name][:count]
-            self._store[name] = grown
+            bigger = _alloc(size, shape, dtype)
+            bigger[:count] = self._store[name][:count]
+            self._store[name] = bigger
 
     def add_bases(self, **values: np.ndarray) -> np.ndarray:
         """Append bases with the given fields (every one of ``BASE_FIELDS``); returns their ids."""

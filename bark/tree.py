@@ -280,11 +280,10 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     lines = np.linspace(np.quantile(z, 0.1), np.quantile(z, 0.9), n_lines)
     facing = [np.cos(theta - side) > 0 for side in (0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi)]
     counts = [np.count_nonzero((low < h) & (h < high) & front) for h in lines for front in facing]
-    # leaf bases of no width (a divergence angle that stacks them in columns) have no count side by side
-    with np.errstate(over="ignore"):  # rhomboids of almost no width: as many as to be uncountable
-        side_by_side = float(np.mean(math.pi * radius_joined / width)) if np.all(width > 0) else None
-    side_by_side = side_by_side if side_by_side is not None and math.isfinite(side_by_side) else None
+    # rhomboids of no width (a divergence angle that stacks the bases in columns), or too little: no count
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        side_by_side = float(np.mean(math.pi * radius_joined / width))
     return {"parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
             "parastichy_directions_deg": [float(a) for a in angles],
             "bases_crossed_front": float(np.mean(counts)),
-            "bases_side_by_side_front": side_by_side}
+            "bases_side_by_side_front": side_by_side if math.isfinite(side_by_side) else None}

@@ -34,6 +34,7 @@ import numpy as np
 from bark import physics
 from bark.forces import SpringOrder
 from bark.kernels import Backend, Plan, Steps
+from bark.state import grown
 
 NAME = "numba"
 
@@ -602,7 +603,7 @@ class NumbaBackend(Backend):
         between frames and doubled when outgrown, so a join does not allocate (and fault in) it anew."""
         buf = self._buffers.get(name)
         if buf is None or buf.shape[0] < shape[0]:
-            rows = max(shape[0], 2 * (0 if buf is None else buf.shape[0]), 64)
+            rows = grown(0 if buf is None else buf.shape[0], shape[0])
             buf = self._buffers[name] = np.empty((rows, *shape[1:]), dtype=dtype, order="F")
         return buf[:shape[0]]
 
