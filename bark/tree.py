@@ -109,7 +109,10 @@ class Dome:
         p = np.array(self.points)
         c = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
         length = c[-1]
-        return CubicSpline(c / length, p, bc_type=((1, [0.0, length]), (1, [-length, 0.0])))
+        s = c / length
+        keep = np.ones(len(s), bool)  # a point within rounding of the one before (or of the tip) adds nothing
+        keep[1:-1] = (s[1:-1] > s[:-2]) & (s[1:-1] < 1.0)
+        return CubicSpline(s[keep], p[keep], bc_type=((1, [0.0, length]), (1, [-length, 0.0])))
 
     def tangent_at_join(self) -> np.ndarray:
         """Unit tangent ``(dρ, du)`` of the profile where it meets the trunk (``(0, 1)``: vertical)."""
