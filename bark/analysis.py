@@ -85,34 +85,16 @@ def axial_difference(a, b) -> np.ndarray:
 
 
 def patch_statistics(points: np.ndarray, labels: np.ndarray, min_size: int = 7) -> list[dict]:
-    """One row per patch of at least ``min_size`` points: size, centroid, orientation, anisotropy.
+    """One row per patch of at least ``min_size`` points: size, centroid, orientation, anisotropy
+    (``bark.pattern.Pattern.patch_table`` as rows).
 
     ``points`` are 3-D positions on the trunk (mapped per patch to its tangent plane) or 2-D
     positions already in a plane ``(horizontal, vertical)``.  The centroid is reported as
-    ``theta_deg`` (angle round the trunk, 3-D input only), ``x``/``y`` (plane or Cartesian) and ``z``.
+    ``theta_deg`` (angle round the trunk) and ``z`` for 3-D input, ``x``/``y`` for 2-D input.
     """
-    points = np.asarray(points, dtype=float)
-    labels = np.asarray(labels)
-    ids, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
-    order = np.argsort(inverse, kind="stable")
-    groups = np.split(order, np.cumsum(counts)[:-1])
-    rows = []
-    for pid, members in zip(ids, groups):
-        if members.size < min_size:
-            continue
-        p = points[members]
-        plane = tangent_plane(p) if points.shape[1] == 3 else p
-        orientation, anisotropy, l1, l2 = principal_axes(plane)
-        c = p.mean(axis=0)
-        row = {"patch": int(pid), "size": int(members.size)}
-        if points.shape[1] == 3:
-            row["theta_deg"] = float(np.degrees(np.arctan2(c[1], c[0])) % 360.0)
-            row["z"] = float(c[2])
-        else:
-            row["x"], row["y"] = float(c[0]), float(c[1])
-        row.update(orientation_deg=orientation, anisotropy=anisotropy, lambda1=l1, lambda2=l2)
-        rows.append(row)
-    return rows
+    from bark.pattern import Pattern
+
+    return Pattern(points=points, patches=labels).patch_table(min_size).rows()
 
 
 def window_labels(points: np.ndarray, pairs: np.ndarray, intact: np.ndarray, size: float) -> np.ndarray:

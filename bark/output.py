@@ -156,6 +156,19 @@ def write_npz(path: str | Path, *, compress: bool = True, verify=None, keep=None
 
 
 PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
+"""patches.csv's columns for a pattern on the trunk; a pattern in a plane has ``x, y`` in place of
+``theta_deg, z`` (``patch_columns``)."""
+
+
+def patch_columns(rows: list[dict]) -> list[str]:
+    """patches.csv's columns for ``rows``: the centroid as the rows give it (``theta_deg, z`` on the
+    trunk, ``x, y`` in a plane), then any further columns a custom analyzer added, none dropped."""
+    if not rows:
+        return PATCH_COLUMNS
+    first = rows[0]
+    where = ["theta_deg", "z"] if "theta_deg" in first else ["x", "y"] if "x" in first else []
+    known = ["patch", "size", *where, "orientation_deg", "anisotropy", "lambda1", "lambda2"]
+    return [c for c in known if c in first] + [c for c in first if c not in known]
 
 
 def trunk_regions(sim) -> np.ndarray | None:
@@ -254,7 +267,7 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
     analyses = sim.analyze()
     if scene.has("patch-statistics"):
         rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), [])
-        write_csv(out / "patches.csv", rows, PATCH_COLUMNS)
+        write_csv(out / "patches.csv", rows, patch_columns(rows))
     if scene.has("break-log"):
         log = sim.breaks.arrays()
         write_csv(

@@ -386,6 +386,11 @@ from bark_cli.bench import bench  # noqa: E402  (registers the `bench` group)
 
 cli.add_command(bench)
 
+from bark_cli.patterns import analyze, compare  # noqa: E402
+
+cli.add_command(analyze)
+cli.add_command(compare)
+
 
 def main() -> None:
     cli()

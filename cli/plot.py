@@ -56,8 +56,14 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     ax.set_xlabel("arc length r·θ (length units; θ increases to the right seen from outside)")
     ax.set_ylabel("height z (length units)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"))
     ax.set_title(title or f"t = {data.t:.2f}, r = {r:.4f}, {data.n_patches} patches, {data.n_broken} broken", fontsize=9)
+    return save_figure(fig, path)
+
+
+def save_figure(fig: Figure, path: str | Path, fast: bool = True) -> Path:
+    """Write ``fig`` as a PNG to ``path`` atomically (drawn whole in memory first: no half-written
+    picture); ``fast``: zlib level 1 (``FAST_PNG``)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight", pil_kwargs=FAST_PNG)
+    fig.savefig(buf, format="png", bbox_inches="tight", pil_kwargs=FAST_PNG if fast else None)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
 
@@ -156,6 +162,4 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
     fig.suptitle(f"bark work-precision — {title}; markers: dt (fixed) or overshoot tolerance (adaptive)", fontsize=11)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight")
-    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+    return save_figure(fig, path, fast=False)

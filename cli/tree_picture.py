@@ -10,7 +10,6 @@ it, at most ``MAX_HEIGHT_IN`` inches.
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import attrs
@@ -19,9 +18,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
-from bark.output import atomic_write
 from bark.units import METRES_PER_LENGTH_UNIT, metres, years
-from bark_cli.plot import FAST_PNG
+from bark_cli.plot import save_figure
 
 MAX_HEIGHT_IN = 12.0
 WIDTH_IN = 5.0
@@ -96,9 +94,7 @@ def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
     ax.set_ylabel("height (m)" + ("" if height_in < MAX_HEIGHT_IN else ", compressed"))
     ax.set_title(f"{years(data.t):.1f} years, {data.n_bases} leaf bases, {data.n_patches} patches "
                  f"(≥ {min_size} bases; fragments grey)", fontsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight", pil_kwargs=FAST_PNG)
-    return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
+    return save_figure(fig, path)
 
 
 __all__ = ["TreeData", "plot_tree", "METRES_PER_LENGTH_UNIT"]

@@ -1,0 +1,146 @@
+"""The paper's statistical figures, drawn from ``bark.pattern`` / ``bark.compare`` objects.
+
+* ``plot_radial``: orientation × anisotropy per patch on a polar plot (Fig. 6B / 7B): angle =
+  orientation (90° = up the trunk), radius = anisotropy 0–1, each patch drawn at θ and θ + 180° (an
+  axis has two ends), colour = patch size in leaf bases; mean, SD and SE printed.
+* ``plot_histogram``: the orientations in 10 bins of 18° (Fig. 6C / 7C), bar length = patches.
+* ``plot_quartets``: the quartet diagrams (Fig. 8D–G): four boxes, Hellinger distances with the two
+  shortest edges green, the third red, the three longest dotted; and the d_P edges, each box's
+  smallest outgoing d_P green.
+
+Matplotlib's object API on the Agg canvas (no pyplot), files written atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import LogNorm, Normalize
+from matplotlib.figure import Figure
+
+from bark.compare import QUANTITIES, Comparison
+from bark.pattern import PatternStatistics
+from bark_cli.plot import save_figure
+
+BINS = 10
+"""Histogram bins over [0°, 180°): 18° each, as in the paper."""
+
+
+def _caption(s: PatternStatistics) -> str:
+    o, a = s.orientation, s.anisotropy
+    text = f"μθ = {o.mean_deg:.1f}°  SD {o.sd_deg:.1f}°  SE {o.se_deg:.2f}°"
+    if a is not None:
+        text += f"\nμR = {a.mean:.3f}  SD {a.sd:.3f}  SE {a.se:.4f}"
+    return text + f"\n{s.n_patches} patches"
+
+
+def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:
+    """Fig. 6B / 7B for ``stats`` (which must have its patches) into ``path``."""
+    table = stats.patches
+    fig = Figure(figsize=(5.6, 5.0), dpi=130)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(projection="polar")
+    theta = np.radians(table.orientation_deg)
+    size = table.size.astype(float)
+    both = np.concatenate([theta, theta + np.pi])
+    lo, hi = size.min(initial=1.0), size.max(initial=1.0)
+    norm = LogNorm(lo, hi) if hi > 10 * lo else Normalize(lo, max(hi, lo + 1))  # a few huge patches: log scale
+    art = ax.scatter(both, np.concatenate([table.anisotropy] * 2), c=np.concatenate([size] * 2), cmap="viridis",
+                     norm=norm, s=18, edgecolors="k", linewidths=0.3)
+    mean = np.radians(stats.orientation.mean_deg)
+    if np.isfinite(mean):
+        ax.plot([mean, mean + np.pi], [1, 1], color="crimson", lw=1.2, label="mean axis")
+    ax.set_ylim(0, 1)
+    ax.set_yticks(np.linspace(0.1, 1.0, 10), labels=[""] * 9 + ["1"], fontsize=7)
+    ax.set_xticks(np.radians(np.arange(0, 360, 45)))
+    ax.tick_params(labelsize=7)
+    cb = fig.colorbar(art, ax=ax, shrink=0.7, pad=0.1)
+    cb.set_label("patch size (leaf bases)", fontsize=8)
+    ax.set_title(f"{stats.name}: orientation (angle, 90° = up the trunk) × anisotropy (radius)", fontsize=8)
+    fig.text(0.02, 0.02, _caption(stats), fontsize=7, family="monospace")
+    return save_figure(fig, path)
+
+
+def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
+    """Fig. 6C / 7C for ``stats`` into ``path``: patches per 18° bin of orientation."""
+    deg = stats.patches.orientation_deg
+    counts, edges = np.histogram(deg, bins=BINS, range=(0.0, 180.0))
+    fig = Figure(figsize=(5.6, 3.4), dpi=130)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(projection="polar")
+    ax.bar(np.radians(edges[:-1]), counts, width=np.radians(180.0 / BINS), align="edge", color="tab:blue",
+           edgecolor="k", linewidth=0.5)
+    ax.set_thetamin(0)
+    ax.set_thetamax(180)
+    top = max(int(counts.max(initial=0)), 1)
+    step = max(1, int(np.ceil(top / 5)))
+    ax.set_yticks(np.arange(step, top + 1, step))
+    ax.tick_params(labelsize=7)
+    ax.set_title(f"{stats.name}: patches per 18° of orientation (0° horizontal, 90° up the trunk)", fontsize=8)
+    fig.text(0.02, 0.02, _caption(stats), fontsize=7, family="monospace")
+    return save_figure(fig, path)
+
+
+_CORNERS = np.array([[0.0, 1.0], [1.0, 1.0], [0.0, 0.0], [1.0, 0.0]])  # P top left, Q top right, R, S
+
+
+def _boxes(ax, names) -> None:
+    for (x, y), name in zip(_CORNERS, names):
+        ax.text(x, y, name, ha="center", va="center", fontsize=7, wrap=True,
+                bbox={"boxstyle": "round", "fc": "lightyellow", "ec": "0.3"})
+    ax.set_xlim(-0.35, 1.35)
+    ax.set_ylim(-0.25, 1.25)
+    ax.set_axis_off()
+
+
+def _quartet_panel(ax, comparison: Comparison, quantity: str) -> None:
+    q = comparison.quartets[quantity]
+    _boxes(ax, comparison.names)
+    if q is None:
+        ax.set_title(f"{quantity}: no quartet (a pattern does not give it)", fontsize=8)
+        return
+    for rank, (i, j, dist) in enumerate(q.edges):
+        (x0, y0), (x1, y1) = _CORNERS[i], _CORNERS[j]
+        style = {0: ("green", "-"), 1: ("green", "-"), 2: ("red", "-")}.get(rank, ("0.6", ":"))
+        ax.plot([x0, x1], [y0, y1], color=style[0], ls=style[1], lw=2 if rank < 3 else 1, zorder=0)
+        t = 0.5 if (i, j) not in ((0, 3), (1, 2)) else (0.35 if (i, j) == (0, 3) else 0.65)
+        ax.text(x0 + t * (x1 - x0), y0 + t * (y1 - y0), f"{dist:.3f}", fontsize=7, ha="center", va="center",
+                color=style[0], bbox={"fc": "white", "ec": "none", "pad": 0.5})
+    verdict = "valid" if q.valid else "not valid"
+    ax.set_title(f"{quantity}, Hellinger distance: quartet {verdict}" + (" (tie)" if q.tied else ""), fontsize=8)
+
+
+def _pairing_panel(ax, comparison: Comparison, quantity: str) -> None:
+    dp, p = comparison.d_p[quantity], comparison.pairings[quantity]
+    _boxes(ax, comparison.names)
+    if p is None:
+        ax.set_title(f"{quantity}: no d_P pairing (a pattern does not give it)", fontsize=8)
+        return
+    for i in range(4):
+        for j in range(4):
+            if i == j:
+                continue
+            (x0, y0), (x1, y1) = _CORNERS[i], _CORNERS[j]
+            colour = "green" if p.nearest[i] == j else "0.55"
+            normal = np.array([y1 - y0, x0 - x1]) * 0.03  # the two directions of a pair side by side
+            a = np.array([x0, y0]) + normal + 0.18 * np.array([x1 - x0, y1 - y0])
+            b = np.array([x0, y0]) + normal + 0.82 * np.array([x1 - x0, y1 - y0])
+            ax.annotate("", xy=b, xytext=a, arrowprops={"arrowstyle": "->", "color": colour, "lw": 1.2})
+            label = a + 0.12 * (b - a) / max(np.hypot(*(b - a)), 1e-9) + normal * 2.5
+            ax.text(*label, f"{dp[i, j]:.2g}", fontsize=6, color=colour, ha="center", va="center")
+    ax.set_title(f"{quantity}, d_P (SE of the arrow's tail): pairing {'valid' if p.valid else 'not valid'}", fontsize=8)
+
+
+def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
+    """Fig. 8D–G for four patterns into ``path``: a row per quantity, Hellinger quartet then d_P."""
+    fig = Figure(figsize=(10.0, 9.0), dpi=120)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(QUANTITIES), 2)
+    for row, quantity in zip(axes, QUANTITIES):
+        _quartet_panel(row[0], comparison, quantity)
+        _pairing_panel(row[1], comparison, quantity)
+    fig.suptitle("quartet analysis (green: the two shortest edges / each pattern's nearest; red: the third; "
+                 "dotted: the three longest)", fontsize=9)
+    return save_figure(fig, path)

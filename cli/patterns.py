@@ -1,0 +1,158 @@
+"""``bark analyze`` and ``bark compare``: patterns measured and compared as in the paper.
+
+A PATTERN argument is a run's output folder (its state.npz), a state file (.npz), a CSV of leaf-base
+centres (simulated, or digitised from a photograph: the format is in ``bark.pattern``) or a TOML
+summary of a published pattern (``[pattern]``: n_patches, mean_orientation_deg, sd_orientation_deg,
+optionally mean_anisotropy and sd_anisotropy).  Every argument is read and checked before anything
+is written.
+"""
+
+from __future__ import annotations
+
+import math
+
+import click
+
+CONTEXT = {"help_option_names": ["-h", "--help"]}
+
+
+def _namer() -> None:
+    from bark_cli.options import NAMER, Provenance
+
+    NAMER.set(Provenance(aliases={(None, "out"): "--out"}).name)
+
+
+def _read_all(paths, min_size):
+    from bark.pattern import read
+
+    return [read(p, min_size) for p in paths]
+
+
+def _fmt(value, digits: int = 3) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "—"
+    if isinstance(value, float) and math.isinf(value):
+        return "∞"
+    return f"{value:.{digits}g}" if isinstance(value, float) else str(value)
+
+
+def _statistics_table(stats):
+    from rich.table import Table
+
+    table = Table("pattern", "patches", "orientation mean (°)", "SD (°)", "SE (°)", "within 45°",
+                  "anisotropy mean", "SD", "SE", title="patterns (orientation: 0° horizontal, 90° up the trunk)")
+    for s in stats:
+        a = s.anisotropy
+        table.add_row(s.name, str(s.n_patches), _fmt(s.orientation.mean_deg, 4), _fmt(s.orientation.sd_deg),
+                      _fmt(s.orientation.se_deg), _fmt(s.fraction_within_45, 2), *(
+                          ("—", "—", "—") if a is None else (_fmt(a.mean), _fmt(a.sd), _fmt(a.se))))
+    return table
+
+
+@click.command(context_settings=CONTEXT)
+@click.argument("pattern", type=click.Path(), metavar="PATTERN")
+@click.option("--min-size", type=click.IntRange(1, 10**9), default=None,
+              help="Patches with fewer leaf bases are left out. [default: the run's own, else 7]")
+@click.option("--out", default="bark-analysis", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for statistics.json, patches.csv, radial.png and histogram.png.")
+def analyze(pattern, min_size, out):
+    """Measure PATTERN (a run folder, a state .npz, a leaf-base .csv or a .toml summary): per-patch orientation and anisotropy (PCA), their
+    means, SDs and standard errors; draws the radial plot and the orientation histogram (the
+    paper's Fig. 6B, C / 7B, C)."""
+    from rich.console import Console
+
+    from bark.folder import writable_folder
+    from bark.output import patch_columns, write_csv, write_json
+
+    _namer()
+    (stats,) = _read_all([pattern], min_size)
+    folder = writable_folder(out)
+    Console(width=150).print(_statistics_table([stats]))
+    write_json(folder / "statistics.json", stats.as_dict())
+    written = ["statistics.json"]
+    if stats.patches is not None:
+        rows = stats.patches.rows()
+        write_csv(folder / "patches.csv", rows, patch_columns(rows))
+        written.append("patches.csv")
+        if stats.n_patches:
+            from bark_cli.figures import plot_histogram, plot_radial
+
+            plot_radial(stats, folder / "radial.png")
+            plot_histogram(stats, folder / "histogram.png")
+            written += ["radial.png", "histogram.png"]
+    click.echo(f"wrote {', '.join(written)} to {folder}")
+
+
+@click.command(context_settings=CONTEXT)
+@click.argument("patterns", nargs=-1, required=True, type=click.Path(), metavar="PATTERN...")
+@click.option("--min-size", type=click.IntRange(1, 10**9), default=None,
+              help="Patches with fewer leaf bases are left out. [default: each run's own, else 7]")
+@click.option("--mirror", "mirror", multiple=True, type=click.IntRange(1, None), metavar="N",
+              help="Compare the N-th PATTERN seen in a mirror held along the trunk (orientation o -> 180° - o): "
+                   "for trees whose phyllotactic spiral turns the other way. Repeatable.")
+@click.option("--out", default="bark-compare", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for comparison.json and, for four patterns, quartets.png.")
+def compare(patterns, min_size, mirror, out):
+    """Compare two or more PATTERNs (each a run folder, a state .npz, a leaf-base .csv or a .toml
+    summary): Hellinger distances and
+    d_P of orientation and of anisotropy (the paper's eqs. 12–15); for four, the quartet analyses
+    and their diagram (Fig. 8)."""
+    import attrs
+    from rich.console import Console
+    from rich.table import Table
+
+    from bark.compare import QUANTITIES, compare as compare_all
+    from bark.errors import BarkError
+    from bark.folder import writable_folder
+    from bark.output import write_json
+
+    _namer()
+    if len(patterns) < 2:
+        raise BarkError(f"compare needs at least two patterns, given {len(patterns)}")
+    if mirror and max(mirror) > len(patterns):
+        raise BarkError(f"--mirror {max(mirror)}: there are only {len(patterns)} patterns")
+    stats = [s.mirrored() if i + 1 in mirror else s for i, s in enumerate(_read_all(patterns, min_size))]
+    names = [s.name for s in stats]
+    if len(set(names)) != len(names):  # two runs both called "out": number them as given
+        stats = [attrs.evolve(s, name=f"{i + 1}:{s.name}") for i, s in enumerate(stats)]
+        names = [s.name for s in stats]
+    result = compare_all(stats)
+    folder = writable_folder(out)
+    console = Console(width=150)
+    console.print(_statistics_table(stats))
+    report = {"patterns": [s.as_dict() for s in stats]}
+    for quantity in QUANTITIES:
+        h, dp = result.hellinger[quantity], result.d_p[quantity]
+        table = Table("", *names, title=f"{quantity}: Hellinger distance (upper right) | d_P in SE of the row (lower left)")
+        for i, name in enumerate(names):
+            table.add_row(name, *("·" if i == j else _fmt(float(h[i, j] if j > i else dp[i, j]))
+                                  for j in range(len(names))))
+        console.print(table)
+        if len(names) > 2:
+            console.print(f"  d_P of the upper right: {', '.join(f'{names[i]}→{names[j]} {_fmt(float(dp[i, j]))}' for i in range(len(names)) for j in range(i + 1, len(names)))}")
+        entry = {"hellinger": h.tolist(), "d_p": dp.tolist()}
+        q, p = result.quartets[quantity], result.pairings[quantity]
+        if q is not None:
+            pairs = q.pairing
+            verdict = (f"valid: {names[pairs[0][0]]} with {names[pairs[0][1]]}, {names[pairs[1][0]]} with {names[pairs[1][1]]}"
+                       if pairs else f"not valid: the two closest pairs share {_shared(q, names)}")
+            console.print(f"  quartet ({quantity}): {verdict}" + ("  [yellow](second and third distances tie)[/yellow]" if q.tied else ""))
+            entry["quartet"] = {"edges": [[names[i], names[j], d] for i, j, d in q.edges], "valid": q.valid, "tied": q.tied}
+        if p is not None:
+            console.print(f"  d_P pairing ({quantity}): {'valid' if p.valid else 'not valid'} — nearest: "
+                          + ", ".join(f"{names[i]}→{names[j]}" for i, j in enumerate(p.nearest)))
+            entry["d_p_pairing"] = {"nearest": [names[j] for j in p.nearest], "valid": p.valid}
+        report[quantity] = entry
+    write_json(folder / "comparison.json", report)
+    written = ["comparison.json"]
+    if len(stats) == 4:
+        from bark_cli.figures import plot_quartets
+
+        plot_quartets(result, folder / "quartets.png")
+        written.append("quartets.png")
+    click.echo(f"wrote {', '.join(written)} to {folder}")
+
+
+def _shared(q, names) -> str:
+    (a, b, _), (c, d, _) = q.edges[:2]
+    return names[({a, b} & {c, d}).pop()]

@@ -1,0 +1,413 @@
+"""Patterns on their own (bark.pattern), their comparison (bark.compare), and the commands over them
+(bark analyze, bark compare)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bark.analysis import hellinger
+from bark.compare import compare, d_p, distances, pairing, quartet
+from bark.errors import BarkError
+from bark.output import patch_columns, write_csv
+from bark.pattern import Pattern, PatternStatistics, axial_se, read, wrapped_normal_se
+from bark_cli.main import cli
+
+finite = st.floats(-50, 50, allow_nan=False)
+sds = st.floats(0.05, 20)
+
+
+# -- Hellinger distance -----------------------------------------------------------------------------
+@settings(max_examples=60, deadline=None)
+@given(finite, sds, finite, sds)
+def test_hellinger_is_one_minus_the_bhattacharyya_integral(mp, sp, mq, sq):
+    """H² = 1 − ∫ √(p q) for two normals, the integral done numerically (scipy.integrate.quad)."""
+    from scipy import integrate, stats
+
+    lo = min(mp - 12 * sp, mq - 12 * sq)
+    hi = max(mp + 12 * sp, mq + 12 * sq)
+    points = sorted({round(mp, 6), round(mq, 6)})  # the peaks, as breakpoints (two that round together are one)
+    bc, _ = integrate.quad(lambda x: math.sqrt(stats.norm.pdf(x, mp, sp) * stats.norm.pdf(x, mq, sq)), lo, hi,
+                           points=points, limit=200, epsabs=1e-12, epsrel=1e-10)
+    expected = math.sqrt(max(0.0, 1.0 - bc))
+    assert hellinger(mp, sp, mq, sq) == pytest.approx(expected, abs=2e-6)
+
+
+def test_hellinger_is_zero_for_identical_and_tends_to_one_far_apart():
+    assert hellinger(3.0, 2.0, 3.0, 2.0) == 0.0
+    assert hellinger(0.0, 1.0, 1e3, 1.0) == pytest.approx(1.0, abs=1e-12)
+    assert hellinger(0.0, 1.0, 0.0, 1e6) > 0.99  # same mean, very different spread
+    far = [hellinger(0.0, 1.0, d, 1.0) for d in (0.5, 1.0, 2.0, 4.0, 8.0)]
+    assert far == sorted(far) and far[-1] > 0.999
+
+
+# -- circular statistics ----------------------------------------------------------------------------
+def _wrapped_normal(rng, centre, sd_deg, n):
+    """Axial orientations whose doubled angles are wrapped normal with circular SD ``sd_deg`` (axes)."""
+    return (centre + rng.normal(0.0, sd_deg, n)) % 180.0
+
+
+@pytest.mark.parametrize("centre", [0.5, 90.0, 179.5])
+def test_axial_standard_error_is_the_spread_of_the_mean_over_samples(centre):
+    """Fisher's SE of the axial mean agrees with the spread of means over repeated samples (Monte
+    Carlo, 4000 samples of 40 orientations; near the 0°/180° wrap too)."""
+    from bark.analysis import axial_difference, axial_mean
+
+    rng = np.random.default_rng(7)
+    samples = [_wrapped_normal(rng, centre, 20.0, 40) for _ in range(4000)]
+    means = np.array([axial_mean(s) for s in samples])
+    spread = float(np.sqrt(np.mean(axial_difference(means, centre) ** 2)))
+    se = float(np.mean([axial_se(s) for s in samples]))
+    assert se == pytest.approx(spread, rel=0.06)
+    assert wrapped_normal_se(20.0, 40) == pytest.approx(spread, rel=0.06)
+
+
+def test_axial_standard_error_of_one_orientation_is_unknown():
+    assert math.isnan(axial_se([30.0]))
+    assert axial_se([30.0, 30.0, 30.0]) == 0.0
+    assert axial_se([0.0, 90.0]) == math.inf  # opposite axes: no mean axis
+
+
+# -- PCA of synthetic patches -----------------------------------------------------------------------
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0, 179.9), st.floats(1.2, 8.0))
+def test_statistics_of_ellipse_patches_with_a_known_axis(angle, aspect):
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    a = np.radians(angle)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    pts = (np.column_stack([aspect * np.cos(t), np.sin(t)]) @ rot.T)
+    p = Pattern(points=np.vstack([pts, pts + 100]), patches=np.repeat([0, 1], 64), units="m")
+    s = p.statistics()
+    assert s.n_patches == 2
+    assert np.allclose(((s.patches.orientation_deg - angle + 90) % 180) - 90, 0.0, atol=1e-6)
+    assert np.allclose(s.patches.anisotropy, (aspect**2 - 1) / (aspect**2 + 1), atol=1e-9)
+    assert s.orientation.sd_deg == pytest.approx(0.0, abs=1e-5)
+    assert s.anisotropy.mean == pytest.approx((aspect**2 - 1) / (aspect**2 + 1), abs=1e-9)
+
+
+def test_a_patch_across_the_theta_seam_measures_as_away_from_it():
+    """A vertical strip of bases at θ = −3°..3° on the trunk (across the seam of arctan2) has the
+    same statistics as the same strip at θ = 87°..93°."""
+    r = 1.0
+    th = np.radians(np.linspace(-3, 3, 4))
+    z = np.linspace(0, 1.5, 12)
+    T, Z = np.meshgrid(th, z)
+    def strip(turn):
+        return np.column_stack([r * np.cos(T.ravel() + turn), r * np.sin(T.ravel() + turn), Z.ravel()])
+    seam = Pattern(points=strip(0.0), patches=np.zeros(T.size, int)).statistics()
+    away = Pattern(points=strip(np.pi / 2), patches=np.zeros(T.size, int)).statistics()
+    assert seam.patches.orientation_deg[0] == pytest.approx(90.0, abs=1e-9)
+    assert seam.patches.anisotropy[0] == pytest.approx(away.patches.anisotropy[0], abs=1e-12)
+    assert seam.patches.rows()[0]["theta_deg"] == pytest.approx(0.0, abs=1e-9) or \
+        seam.patches.rows()[0]["theta_deg"] == pytest.approx(360.0, abs=1e-9)
+
+
+# -- quartets ---------------------------------------------------------------------------------------
+def _matrix(pairs: dict) -> np.ndarray:
+    d = np.zeros((4, 4))
+    for (i, j), v in pairs.items():
+        d[i, j] = d[j, i] = v
+    return d
+
+
+def test_a_quartet_whose_two_closest_pairs_are_disjoint_is_valid():
+    d = _matrix({(0, 1): 0.1, (2, 3): 0.2, (0, 2): 0.5, (0, 3): 0.6, (1, 2): 0.7, (1, 3): 0.8})
+    q = quartet(d)
+    assert q.valid and q.pairing == ((0, 1), (2, 3)) and not q.tied
+    assert [e[:2] for e in q.edges] == [(0, 1), (2, 3), (0, 2), (0, 3), (1, 2), (1, 3)]
+
+
+def test_a_quartet_whose_two_closest_pairs_share_a_pattern_is_not_valid():
+    d = _matrix({(0, 1): 0.1, (0, 2): 0.2, (2, 3): 0.3, (0, 3): 0.6, (1, 2): 0.7, (1, 3): 0.8})
+    q = quartet(d)
+    assert not q.valid and q.pairing is None
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.permutations(range(4)), st.lists(st.floats(0.01, 1.0), min_size=6, max_size=6, unique=True))
+def test_quartet_verdict_does_not_depend_on_how_the_patterns_are_numbered(perm, values):
+    pairs = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    d = _matrix(dict(zip(pairs, values)))
+    p = np.array(perm)
+    assert quartet(d).valid == quartet(d[np.ix_(p, p)]).valid
+
+
+def test_d_p_pairing_is_valid_when_nearest_pointers_are_mutual():
+    d = np.array([[0, 1, 5, 6], [2, 0, 7, 8], [5, 6, 0, 1], [9, 9, 3, 0]], float)
+    assert pairing(d).valid and pairing(d).nearest == (1, 0, 3, 2)
+    d[3, 2], d[3, 0] = 9.0, 0.5
+    assert not pairing(d).valid
+
+
+def test_d_p_is_in_standard_errors_of_the_first_pattern():
+    a = PatternStatistics.of_summary("a", 16, 47.0, 34.4)
+    b = PatternStatistics.of_summary("b", 9, 90.0, 9.3)
+    m = d_p([a, b])
+    assert m[0, 1] == pytest.approx(43.0 / a.orientation.se_deg)
+    assert m[1, 0] == pytest.approx(43.0 / b.orientation.se_deg)
+    h = distances([a, b])
+    assert h[0, 1] == h[1, 0] == pytest.approx(hellinger(47.0, 34.4, 90.0, 9.3))
+
+
+def test_orientations_across_the_wrap_are_close():
+    a = PatternStatistics.of_summary("a", 20, 2.0, 5.0)
+    b = PatternStatistics.of_summary("b", 20, 178.0, 5.0)
+    assert distances([a, b])[0, 1] == pytest.approx(hellinger(0.0, 5.0, 4.0, 5.0))
+
+
+def test_compare_without_anisotropy_gives_no_anisotropy_quartet():
+    s = [PatternStatistics.of_summary(str(i), 10, 10.0 * i, 5.0 + i) for i in range(4)]
+    c = compare(s)
+    assert c.quartets["orientation"] is not None and c.quartets["anisotropy"] is None
+    assert np.isnan(c.hellinger["anisotropy"][0, 1])
+    with pytest.raises(BarkError, match="at least two"):
+        compare(s[:1])
+
+
+# -- the photograph CSV -----------------------------------------------------------------------------
+def _csv(tmp_path, text, name="bark.csv"):
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def _strip(x0, y_down, n=10, dx=0.0, dy=1.0, label="A"):
+    return "".join(f"{x0 + i * dx + (i % 2) * 0.01},{y_down + i * dy},{label}\n" for i in range(n))
+
+
+def test_image_y_down_is_turned_up(tmp_path):
+    """A strip drawn straight down the image is vertical (90°); one running down to the right in
+    the image runs down to the right on the bark too (135°)."""
+    p = _csv(tmp_path, "x,y,patch\n" + _strip(10, 0, label="v") + _strip(50, 0, dx=1.0, dy=1.0, label="d"))
+    s = read(p)
+    rows = {r["patch"]: r for r in s.patches.rows()}
+    assert s.patches.columns[2:4] == ["x", "y"]
+    assert rows[1]["orientation_deg"] == pytest.approx(90.0, abs=0.2)  # 'v' is label 1 ('d' sorts first)
+    assert rows[0]["orientation_deg"] == pytest.approx(135.0, abs=0.1)
+    assert rows[0]["y"] < 0  # up is positive: below the image's top edge
+
+
+def test_pixel_scale_gives_metres(tmp_path):
+    p = _csv(tmp_path, "# digitised\n# pixels_per_metre: 100\nX, Y ,Patch,extra\n"
+             + "".join(f"{i}.0,{2 * i}.0,1,whatever\n" for i in range(8)))
+    pattern = Pattern.from_csv(p)
+    assert pattern.units == "m"
+    assert pattern.points[:, 0].max() == pytest.approx(0.07)
+    assert pattern.points[:, 1].min() == pytest.approx(-0.14)
+
+
+def test_three_columns_on_the_trunk(tmp_path):
+    th = np.linspace(0, 0.2, 9)
+    text = "x,y,z,patch\n" + "".join(f"{np.cos(t)},{np.sin(t)},{0.3 * t},7\n" for t in th)
+    pattern = Pattern.from_csv(_csv(tmp_path, text))
+    assert pattern.on_trunk and pattern.statistics().patches.columns[2:4] == ["theta_deg", "z"]
+
+
+BAD_CSV = [
+    ("x,y,patch\n1,2,A\n1,abc,A\n", "line 3: y = 'abc' is not a number"),
+    ("x,y,patch\n1,2,A\nnan,2,A\n", "line 3: x = nan is not a finite number"),
+    ("x,y,patch\n1,2,A\n1,-inf,A\n", "line 3: y = -inf is not a finite number"),
+    ("x,y,patch\n1,1e309,A\n", "line 2: y = 1e309 is not a finite number"),
+    ("x,y,patch\n1,2\n", "line 2: 2 values, the header names 3"),
+    ("x,y,patch\n1,2,A,4\n", "line 2: 4 values, the header names 3"),
+    ("x,y,patch\n1,2, \n", "line 2: patch is empty"),
+    ("# only a comment\nx,patch\n1,A\n", "line 2: the header has no column y"),
+    ("x,y,x,patch\n1,2,3,A\n", "line 1: a column is named twice"),
+    ("x,y,patch\n", "a header but no leaf bases"),
+    ("", "no header and no rows"),
+    ("# pixels_per_metre: -3\nx,y,patch\n1,2,A\n", "line 1: pixels_per_metre must be > 0"),
+    ("# pixels_per_metre: lots\nx,y,patch\n1,2,A\n", "line 1: pixels_per_metre = 'lots' is not a number"),
+]
+
+
+@pytest.mark.parametrize("text,message", BAD_CSV)
+def test_csv_errors_name_their_line(tmp_path, text, message):
+    with pytest.raises(BarkError) as err:
+        Pattern.from_csv(_csv(tmp_path, text))
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_binary_file_is_not_a_csv(tmp_path):
+    p = tmp_path / "photo.csv"
+    p.write_bytes(b"\xff\xd8\xff\xe0JFIF\x00")
+    with pytest.raises(BarkError, match="not a text file"):
+        read(p)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(allow_nan=True, allow_infinity=True), st.floats(allow_nan=True, allow_infinity=True),
+                          st.text(min_size=0, max_size=4)), min_size=0, max_size=12))
+def test_any_csv_is_read_or_refused_in_one_line(tmp_path_factory, rows):
+    """Whatever the values (NaN, ±inf, 1e±308, odd labels), a CSV gives a pattern or one BarkError."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["x", "y", "patch"])
+    for x, y, label in rows:
+        w.writerow([repr(x), repr(y), label])
+    p = tmp_path_factory.mktemp("csv") / "p.csv"
+    p.write_text(buf.getvalue(), encoding="utf-8")
+    try:
+        s = read(p)
+    except BarkError as err:
+        assert "\n" not in str(err)
+    else:
+        assert np.isfinite(s.patches.orientation_deg).all()
+
+
+# -- summaries and files ----------------------------------------------------------------------------
+def test_the_papers_observed_summaries_read():
+    ret = read("examples/paper/observed-reticulate.toml")
+    elo = read("examples/paper/observed-elongated.toml")
+    assert (ret.n_patches, ret.orientation.mean_deg, ret.orientation.sd_deg) == (16, 47.0, 34.4)
+    assert (elo.n_patches, elo.orientation.sd_deg) == (9, 9.3)
+    assert ret.patches is None and ret.anisotropy is None
+
+
+@pytest.mark.parametrize("body,message", [
+    ("[pattern]\nn_patches = 3\nmean_orientation_deg = 1.0\n", "has no sd_orientation_deg"),
+    ("[pattern]\nn_patches = 0\nmean_orientation_deg = 1.0\nsd_orientation_deg = 1.0\n", "at least 1"),
+    ("[pattern]\nn_patches = 3\nmean_orientation_deg = nan\nsd_orientation_deg = 1.0\n", "a finite number"),
+    ("[pattern]\nn_patches = 3\nmean_orientation_deg = 1.0\nsd_orientation_deg = -1.0\n", "must be >= 0"),
+    ("[pattern]\nn_patches = 3.5\nmean_orientation_deg = 1.0\nsd_orientation_deg = 1.0\n", "a whole number"),
+    ("[pattern]\nn_patches = 3\nmean_orientation_deg = 1.0\nsd_orientation_deg = 1.0\nmean = 2\n", "unknown"),
+    ("[other]\n", "no [pattern] table"),
+    ("[pattern\n", "not valid TOML"),
+])
+def test_summary_errors(tmp_path, body, message):
+    p = tmp_path / "s.toml"
+    p.write_text(body)
+    with pytest.raises(BarkError, match=message.replace("[", r"\[")):
+        read(p)
+
+
+def test_patches_csv_keeps_the_columns_of_a_pattern_in_a_plane(tmp_path):
+    pts = np.random.default_rng(1).normal(size=(20, 2))
+    rows = Pattern(points=pts, patches=np.zeros(20, int)).patch_table().rows()
+    path = write_csv(tmp_path / "patches.csv", rows, patch_columns(rows))
+    header = path.read_text().splitlines()[0].split(",")
+    assert header == ["patch", "size", "x", "y", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
+    extra = [{**r, "colour": "red"} for r in rows]
+    assert patch_columns(extra)[-1] == "colour"
+
+
+def test_a_state_file_and_its_run_folder_give_the_same_statistics(broken_run):
+    a = read(broken_run)
+    b = read(broken_run / "state.npz", min_size=a_min(broken_run))
+    assert a.n_patches == b.n_patches > 0
+    assert a.orientation == b.orientation
+
+
+def a_min(folder):
+    return json.loads((folder / "summary.json").read_text())["settings"]["run"]["min_patch_size"]
+
+
+@pytest.mark.parametrize("bytes_", [b"", b"PK\x03\x04garbage", b"not a zip at all"])
+def test_a_damaged_state_file_is_one_line(tmp_path, bytes_):
+    p = tmp_path / "state.npz"
+    p.write_bytes(bytes_)
+    with pytest.raises(BarkError) as err:
+        read(p)
+    assert "state file" in str(err.value) and "\n" not in str(err.value)
+
+
+# -- the commands -----------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def broken_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "small"
+    r = CliRunner().invoke(cli, ["simulate", "--n-bases", "600", "-G", "0.014", "--until-patches", "12", "--until-time", "400", "--quiet",
+                                 "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+def test_analyze_writes_its_table_and_figures(broken_run, tmp_path):
+    out = tmp_path / "a"
+    r = CliRunner().invoke(cli, ["analyze", str(broken_run), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir()) == ["histogram.png", "patches.csv", "radial.png", "statistics.json"]
+    stats = json.loads((out / "statistics.json").read_text())
+    assert stats["n_patches"] == read(broken_run).n_patches
+    assert "orientation mean" in r.output
+
+
+def test_compare_four_patterns_with_a_summary(broken_run, tmp_path):
+    out = tmp_path / "c"
+    csv = _csv(tmp_path, "x,y,patch\n" + _strip(0, 0, label="a") + _strip(30, 0, dx=0.2, label="b"))
+    r = CliRunner().invoke(cli, ["compare", str(broken_run), str(csv), "examples/paper/observed-reticulate.toml",
+                                 "examples/paper/observed-elongated.toml", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir()) == ["comparison.json", "quartets.png"]
+    report = json.loads((out / "comparison.json").read_text())
+    assert "quartet" in report["orientation"] and "quartet" not in report["anisotropy"]
+    assert "quartet (orientation):" in r.output
+
+
+@pytest.mark.parametrize("bad", ["missing-folder", "nowhere.csv", "pattern.txt"])
+def test_compare_with_a_bad_pattern_writes_nothing(broken_run, tmp_path, bad):
+    out = tmp_path / "c"
+    (tmp_path / "pattern.txt").write_text("x")
+    r = CliRunner().invoke(cli, ["compare", str(broken_run), str(tmp_path / bad), "--out", str(out)])
+    assert r.exit_code == 2
+    assert r.output.count("\n") == 1 and r.output.startswith("bark: error: ")
+    assert not out.exists()
+
+
+def test_analyze_a_run_without_its_state(tmp_path):
+    run = tmp_path / "r"
+    run.mkdir()
+    r = CliRunner().invoke(cli, ["analyze", str(run), "--out", str(tmp_path / "a")])
+    assert r.exit_code == 2 and "state-snapshot" in r.output and not (tmp_path / "a").exists()
+
+
+def test_analyze_refuses_an_out_that_is_a_file(broken_run, tmp_path):
+    f = tmp_path / "file"
+    f.write_text("")
+    r = CliRunner().invoke(cli, ["analyze", str(broken_run), "--out", str(f)])
+    assert r.exit_code == 2 and "--out" in r.output
+
+
+def test_names_given_twice_are_numbered(broken_run, tmp_path):
+    r = CliRunner().invoke(cli, ["compare", str(broken_run), str(broken_run), "--out", str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    report = json.loads((tmp_path / "c" / "comparison.json").read_text())
+    assert [p["name"] for p in report["patterns"]] == ["1:small", "2:small"]
+    assert report["orientation"]["hellinger"][0][1] == 0.0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.booleans())
+def test_mirroring_the_statistics_is_measuring_the_mirrored_pattern(seed, on_trunk):
+    rng = np.random.default_rng(seed)
+    n = 60
+    if on_trunk:
+        th, z = rng.uniform(-np.pi, np.pi, n), rng.uniform(0, 2, n)
+        pts = np.column_stack([np.cos(th), np.sin(th), z])
+    else:
+        pts = rng.normal(size=(n, 2)) * [3.0, 1.0]
+    p = Pattern(points=pts, patches=rng.integers(0, 4, n))
+    a, b = p.statistics().mirrored(), p.mirrored().statistics()
+    assert np.allclose(((a.patches.orientation_deg - b.patches.orientation_deg + 90) % 180) - 90, 0, atol=1e-7)
+    assert float(((a.orientation.mean_deg - b.orientation.mean_deg + 90) % 180) - 90) == pytest.approx(0, abs=1e-7)
+    assert a.orientation.sd_deg == pytest.approx(b.orientation.sd_deg, abs=1e-9)
+    assert np.allclose(a.patches.centroid, b.patches.centroid)
+    assert np.all((a.patches.orientation_deg >= 0) & (a.patches.orientation_deg < 180))
+
+
+def test_compare_mirror_flips_one_pattern(broken_run, tmp_path):
+    r = CliRunner().invoke(cli, ["compare", "examples/paper/observed-reticulate.toml",
+                                 "examples/paper/observed-elongated.toml", "--mirror", "1", "--out", str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    report = json.loads((tmp_path / "c" / "comparison.json").read_text())
+    assert report["patterns"][0]["mean_orientation_deg"] == pytest.approx(133.0)
+    assert report["patterns"][0]["name"] == "observed reticulate (mirrored)"
+    r = CliRunner().invoke(cli, ["compare", str(broken_run), str(broken_run), "--mirror", "3", "--out", str(tmp_path / "d")])
+    assert r.exit_code == 2 and "--mirror 3" in r.output and not (tmp_path / "d").exists()
