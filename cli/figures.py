@@ -144,3 +144,48 @@ def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
     fig.suptitle("quartet analysis (green: the two shortest edges / each pattern's nearest; red: the third; "
                  "dotted: the three longest)", fontsize=9)
     return save_figure(fig, path)
+
+
+def plot_montage(plan, points, table, path: str | Path) -> Path | None:
+    """The sweep's patterns on one sheet, like the paper's Fig. 9: the first axis across (its values
+    growing to the right), the second up (growing upwards), the first seed's run in each cell,
+    patches coloured, with its patch count and mean orientation.  ``None`` when no run is in the
+    table yet.  The sheet stays within 16 × 16 inches whatever the grid."""
+    from bark_cli.plot import patch_colours, raster
+
+    first = {p.index: p for p in reversed(points)}  # the first seed of each grid point
+    shape = plan.shape + (1,) * (2 - len(plan.shape))
+    ncols, nrows = shape[0], shape[1]
+    cell = min(2.4, 16.0 / max(ncols, nrows))
+    fig = Figure(figsize=(cell * ncols + 0.8, cell * 1.25 * nrows + 0.8), dpi=110)
+    FigureCanvasAgg(fig)
+    axes = np.atleast_2d(fig.subplots(nrows, ncols, squeeze=False))
+    min_size = 7
+    drawn = 0
+    for index, p in first.items():
+        i, j = (index + (0, 0))[:2]
+        ax = axes[nrows - 1 - j, i]  # the second axis grows upwards
+        ax.set_xticks([])
+        ax.set_yticks([])
+        got = table.pattern(p.key)
+        (row,) = table.rows([p.key]) or [None]
+        if got is None or row is None:
+            ax.text(0.5, 0.5, "not run", ha="center", va="center", fontsize=7, color="0.5")
+            continue
+        uv, labels = got
+        width = 2 * np.pi * row["radius"]
+        z_lo, z_hi = float(uv[:, 1].min()), float(uv[:, 1].max())
+        ax.imshow(raster(uv, patch_colours(labels, min_size), width, z_lo, z_hi), origin="lower",
+                  extent=(0, width, z_lo, z_hi), interpolation="nearest", aspect="auto")
+        mean = row["mean_orientation_deg"]
+        ax.set_title(f"{row['n_patches']} patches" + ("" if mean is None else f", {mean:.0f}°"), fontsize=6)
+        drawn += 1
+    for i, v in enumerate(plan.axes[0].values):
+        axes[-1, i].set_xlabel(f"{plan.axes[0].key} = {v:g}" if isinstance(v, float) else f"{plan.axes[0].key} = {v}", fontsize=7)
+    if len(plan.axes) == 2:
+        for j, v in enumerate(plan.axes[1].values):
+            axes[nrows - 1 - j, 0].set_ylabel(f"{plan.axes[1].key} = {v:g}" if isinstance(v, float) else f"{plan.axes[1].key} = {v}",
+                                              fontsize=7)
+    fig.suptitle("bark sweep: the unwrapped trunk of each run (arc length across, height up; patches coloured, "
+                 "fragments grey)", fontsize=8)
+    return save_figure(fig, path) if drawn else None

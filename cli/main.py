@@ -391,6 +391,10 @@ from bark_cli.patterns import analyze, compare  # noqa: E402
 cli.add_command(analyze)
 cli.add_command(compare)
 
+from bark_cli.sweep import sweep  # noqa: E402
+
+cli.add_command(sweep)
+
 
 def main() -> None:
     cli()

@@ -209,6 +209,8 @@ class Provenance:
         if source == "--set":
             item = f"--set {self.set_items[(ref.section, ref.top_key)]}"
             return f"{ref.key} = {show(ref.value)} in {item}" if nested else item
+        if source == "--grid":  # one value of a swept setting
+            return f"--grid {ref.section}.{ref.key}={_cli_value(ref.value)}"
         option = self.aliases.get((ref.section, ref.top_key)) or option_for(ref.section, ref.top_key)
         if option is None or nested:
             return str(ref)

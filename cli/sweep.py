@@ -1,0 +1,196 @@
+"""``bark sweep``: a grid over scene settings, run on local processes or a Dask cluster, into one
+SQLite table, with a montage of the patterns laid out like the paper's Fig. 9."""
+
+from __future__ import annotations
+
+import shlex
+import signal
+import sys
+
+import click
+
+from bark.errors import BarkError
+
+CONTEXT = {"help_option_names": ["-h", "--help"]}
+
+
+def parse_grid(items: tuple[str, ...]):
+    """``--grid growth.G=0.007,0.011,0.014`` or ``--grid growth.G=0.005:0.015:5`` (5 values from
+    0.005 to 0.015) → :class:`bark.sweep.Axis` es, and the tables they touch (for messages)."""
+    import tomllib
+
+    import numpy as np
+
+    from bark.sweep import Axis
+
+    axes, layer = [], {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        section, dot, name = key.strip().partition(".")
+        if not sep or not dot or not section or not name or not text.strip():
+            raise BarkError(f"--grid {shlex.quote(item)}: expected SECTION.KEY=V1,V2,... or SECTION.KEY=START:STOP:N, "
+                            "e.g. --grid growth.G=0.007,0.011,0.014")
+        parts = text.split(":")
+        if len(parts) == 3:
+            try:
+                start, stop, n = float(parts[0]), float(parts[1]), int(parts[2])
+            except ValueError:
+                raise BarkError(f"--grid {shlex.quote(item)}: START:STOP:N needs two numbers and a whole number") from None
+            if not (np.isfinite(start) and np.isfinite(stop)) or not 1 <= n <= 10_000:
+                raise BarkError(f"--grid {shlex.quote(item)}: START and STOP must be finite, N from 1 to 10000")
+            # to 12 digits: 0.01:0.03:3 is 0.01, 0.02, 0.03 as typed, not linspace's 0.019999999999999997
+            values = [float(f"{v:.12g}") for v in np.linspace(start, stop, n)] if n > 1 else [start]
+        else:
+            values = []
+            for word in text.split(","):
+                try:
+                    values.append(tomllib.loads(f"v = {word.strip()}")["v"])
+                except tomllib.TOMLDecodeError:
+                    values.append(word.strip())  # a bare word, e.g. a strategy name
+        axis = Axis(f"{section.strip()}.{name.strip()}", tuple(values))
+        axes.append(axis)
+        layer.setdefault(axis.section, {})[axis.name] = list(values)
+    return axes, layer
+
+
+@click.command(context_settings=CONTEXT)
+@click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
+              help="Scene TOML file each point starts from [default: the default scene, Table 2's vertical regime].")
+@click.option("--grid", "grids", multiple=True, metavar="SECTION.KEY=V1,V2,...",
+              help="A swept setting and its values (or START:STOP:N); repeat for more axes. "
+                   "[default: the paper's Fig. 9: --grid growth.G=0.007,0.011,0.014 --grid mechanics.f_max=0.0028,0.005,0.008]")
+@click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Any other scene setting, for every point.")
+@click.option("--seeds", type=click.IntRange(1, 10_000), default=1, show_default=True, help="Runs per point, seeds 0, 1, ...")
+@click.option("--workers", type=click.IntRange(1, 4096), default=None,
+              help="Local worker processes. [default: 1]")
+@click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
+              help="Run on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:8786) instead.")
+@click.option("--out", default="bark-sweep", show_default=True, type=click.Path(file_okay=False),
+              help="Folder for sweep.sqlite (the table) and montage.png. A sweep run again into it goes on where it stopped.")
+@click.option("--quiet", is_flag=True, help="No progress bar and no table.")
+def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
+    """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
+    (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
+    Killed or stopped, the same command goes on without running a finished point again."""
+    from bark.folder import writable_folder
+    from bark.scene import merge, read_toml
+    from bark.sweep import FIG9_AXES, Axis, Sweep, WorkerDied, run_sweep
+    from bark_cli.main import _parse_set
+    from bark_cli.options import NAMER, Provenance
+
+    prov = Provenance(aliases={(None, "out"): "--out", (None, "workers"): "--workers"})
+    NAMER.set(prov.name)
+    if dask_address is not None and workers is not None:
+        raise BarkError("--workers and --dask: local processes or a Dask cluster, not both")
+    set_layer, prov.set_items = _parse_set(sets)
+    base = prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {}
+    base = merge(base, prov.add("--set", set_layer))
+    if grids:
+        axes, layer = parse_grid(grids)
+    else:
+        axes, layer = [Axis(k, v) for k, v in FIG9_AXES], {}
+        for k, v in FIG9_AXES:
+            layer.setdefault(k.partition(".")[0], {})[k.partition(".")[2]] = list(v)
+    prov.add("--grid", layer)
+    plan = Sweep(base=base, axes=axes, seeds=range(seeds))
+    plan.points()  # every point checked: a bad value is one line before anything is written
+    client = _dask_client(dask_address) if dask_address is not None else None
+    folder = writable_folder(out)
+    bar = None if quiet or not sys.stdout.isatty() else _bar()
+    stopped = _stop_on_signals()
+    try:
+        counts = run_sweep(plan, folder / "sweep.sqlite", workers=workers or 1, client=client,
+                           progress=bar.update if bar is not None else None)
+    except WorkerDied as err:
+        click.echo(f"bark: {err}", err=True)
+        sys.exit(1)
+    except KeyboardInterrupt:
+        from bark.sweep import SweepTable
+
+        with SweepTable(folder / "sweep.sqlite") as table:
+            n = len(table.done() & {p.key for p in plan.points()})
+        signum = stopped.get("signum", signal.SIGINT)
+        click.echo(f"bark: sweep stopped by {signal.Signals(signum).name}: {n} of {len(plan.points())} runs are in "
+                   f"{folder / 'sweep.sqlite'}; the same command goes on", err=True)
+        sys.exit(128 + int(signum))
+    finally:
+        for sig, handler in stopped["previous"].items():
+            signal.signal(sig, handler)
+        if bar is not None:
+            bar.close()
+        if client is not None:
+            client.close()
+    _finish(plan, folder, counts, quiet)
+
+
+def _stop_on_signals() -> dict:
+    """SIGTERM and SIGHUP stop the sweep as Ctrl-C does (between commits: a run is in the table whole
+    or not at all); returns where the signal's number will be noted."""
+    seen: dict = {}
+
+    def handle(signum, frame):
+        seen.setdefault("signum", signum)
+        raise KeyboardInterrupt
+
+    seen["previous"] = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    return seen
+
+
+def _dask_client(address: str):
+    try:
+        from distributed import Client
+    except ImportError:
+        raise BarkError("--dask: Dask's distributed is not installed (pip install 'bark[dask]')") from None
+    try:
+        return Client(address, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as err:
+        raise BarkError(f"--dask {address}: no Dask scheduler answers there ({type(err).__name__}: {err})") from None
+
+
+class _bar:
+    """A rich progress bar over the sweep's runs."""
+
+    def __init__(self) -> None:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        self.progress = Progress(TextColumn("sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                 TimeRemainingColumn(), TextColumn("{task.fields[last]}"))
+        self.task = None
+
+    def update(self, done: int, total: int, point) -> None:
+        if self.task is None:
+            self.progress.start()
+            self.task = self.progress.add_task("runs", total=total, completed=done, last="")
+        last = "" if point is None else ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                                                  for k, v in point.settings.items()) + f", seed {point.seed}"
+        self.progress.update(self.task, completed=done, last=last)
+
+    def close(self) -> None:
+        self.progress.stop()
+
+
+def _finish(plan, folder, counts: dict, quiet: bool) -> None:
+    from bark.sweep import SweepTable
+    from bark_cli.figures import plot_montage
+
+    points = plan.points()
+    with SweepTable(folder / "sweep.sqlite") as table:
+        rows = table.rows([p.key for p in points])
+        drawn = plot_montage(plan, points, table, folder / "montage.png") if len(plan.axes) <= 2 else None
+    if not quiet:
+        from rich.console import Console
+        from rich.table import Table
+
+        t = Table(*[a.key for a in plan.axes], "seed", "patches", "orientation (°)", "SD (°)", "anisotropy", "t", "wall (s)",
+                  title=f"bark sweep: {counts['ran']} runs now, {counts['skipped']} already in the table")
+        for p, r in zip(points, rows):
+            t.add_row(*[f"{v:g}" if isinstance(v, float) else str(v) for v in p.settings.values()], str(p.seed),
+                      str(r["n_patches"]), _g(r["mean_orientation_deg"]), _g(r["circular_sd_deg"]), _g(r["mean_anisotropy"]),
+                      _g(r["t"]), _g(r["wall_s"]))
+        Console(width=150).print(t)
+    click.echo(f"bark: {counts['total']} runs in {folder / 'sweep.sqlite'} ({counts['ran']} run now, "
+               f"{counts['skipped']} already there)" + (f"; montage in {drawn}" if drawn else "; no montage for more than two axes"))
+
+
+def _g(v) -> str:
+    return "—" if v is None else f"{v:.4g}"

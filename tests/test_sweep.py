@@ -1,0 +1,213 @@
+"""bark sweep: grids, the SQLite table, resuming after a killed worker or sweep, Dask."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from bark.errors import BarkError
+from bark.sweep import Axis, Sweep, SweepTable, run_sweep
+from bark_cli.main import cli
+
+TINY = {"lattice": {"n_bases": 300}, "run": {"until_time": 20.0}}
+"""Runs of a fraction of a second (300 bases; the default scene's mechanics)."""
+TINY_SET = ["--set", "lattice.n_bases=300", "--set", "run.until_time=20"]
+SLOW_SET = ["--set", "lattice.n_bases=3000", "--set", "run.backend='numpy'", "--set", "run.stepping='fixed'",
+            "--set", "run.dt=0.01", "--set", "run.until_time=40"]
+"""Runs of about a second each: long enough to stop a sweep in the middle."""
+VOLATILE = ("wall_s", "finished")
+
+
+def _rows(db) -> list[dict]:
+    with SweepTable(db) as t:
+        return [{k: v for k, v in r.items() if k not in VOLATILE} for r in t.rows()]
+
+
+def _grid(n=2):
+    return (Axis("growth.G", [0.01 + 0.01 * i for i in range(n)]), Axis("mechanics.f_max", (0.003, 0.006)))
+
+
+# -- the grid ---------------------------------------------------------------------------------------
+def test_points_cover_the_grid_and_seeds_with_distinct_keys():
+    points = Sweep(base=TINY, axes=_grid(3), seeds=(0, 1)).points()
+    assert len(points) == 3 * 2 * 2
+    assert len({p.key for p in points}) == len(points)
+    assert points[0].settings == {"growth.G": 0.01, "mechanics.f_max": 0.003} and points[0].seed == 0
+    assert points[1].seed == 1 and points[1].scene["run"]["seed"] == 1
+    again = Sweep(base=TINY, axes=_grid(3), seeds=(0, 1)).points()
+    assert [p.key for p in again] == [p.key for p in points]  # the key is the scene's, not the order's
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda: Axis("G", (1.0,)), "expected SECTION.KEY"),
+    (lambda: Axis("growth.G", ()), "no values"),
+    (lambda: Axis("growth.G", (1.0, 1.0)), "given twice"),
+    (lambda: Sweep(base={}, axes=(Axis("growth.G", (1.0,)), Axis("growth.G", (2.0,)))), "an axis is given twice"),
+    (lambda: Sweep(base={}, axes=(Axis("run.seed", (1, 2)),)), "seeds are not an axis"),
+    (lambda: Sweep(base={}, axes=(Axis("growth.G", (0.01, -1.0)),)).points(), "G"),
+    (lambda: Sweep(base={}, axes=(Axis("growth.G", (0.01, float("nan"))),)).points(), "G"),
+    (lambda: Sweep(base={}, axes=(Axis("mechanics.nonsense", (1.0,)),)).points(), "nonsense"),
+])
+def test_a_bad_grid_is_one_line_before_any_run(make, message):
+    with pytest.raises(BarkError) as err:
+        make()
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+# -- the table and resuming -------------------------------------------------------------------------
+def test_a_sweep_run_again_runs_nothing_again(tmp_path):
+    db = tmp_path / "s.sqlite"
+    plan = Sweep(base=TINY, axes=_grid(2))
+    first = run_sweep(plan, db, workers=2)
+    assert first == {"total": 4, "skipped": 0, "ran": 4}
+    assert run_sweep(plan, db, workers=2) == {"total": 4, "skipped": 4, "ran": 0}
+    bigger = Sweep(base=TINY, axes=_grid(3))  # one more column of points: only those run
+    assert run_sweep(bigger, db, workers=1) == {"total": 6, "skipped": 4, "ran": 2}
+    con = sqlite3.connect(db)  # any SQL client reads it
+    got = con.execute('SELECT "growth.G", "mechanics.f_max", n_patches, n_broken FROM runs ORDER BY 1, 2').fetchall()
+    con.close()
+    assert len(got) == 6 and all(r[3] >= 0 for r in got)
+
+
+def test_the_table_does_not_depend_on_the_number_of_workers(tmp_path):
+    plan = Sweep(base=TINY, axes=_grid(2), seeds=(0, 1))
+    run_sweep(plan, tmp_path / "one.sqlite", workers=1)
+    run_sweep(plan, tmp_path / "two.sqlite", workers=2)
+    assert _rows(tmp_path / "one.sqlite") == _rows(tmp_path / "two.sqlite")
+
+
+def test_the_same_sweep_on_dask_gives_the_same_table(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    plan = Sweep(base=TINY, axes=_grid(2), seeds=(0, 1))
+    run_sweep(plan, tmp_path / "local.sqlite", workers=2)
+    grid = [*TINY_SET, "--grid", "growth.G=0.01,0.02", "--grid", "mechanics.f_max=0.003,0.006", "--seeds", "2", "--quiet"]
+    r = CliRunner().invoke(cli, ["sweep", *grid, "--workers", "2", "--out", str(tmp_path / "cli-local")])
+    assert r.exit_code == 0, r.output
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        counts = run_sweep(plan, tmp_path / "dask.sqlite", client=client)
+        assert counts["ran"] == 8
+        r = CliRunner().invoke(cli, ["sweep", *grid, "--dask", cluster.scheduler_address, "--out", str(tmp_path / "cli-dask")])
+        assert r.exit_code == 0, r.output
+    assert _rows(tmp_path / "local.sqlite") == _rows(tmp_path / "dask.sqlite")
+    assert _rows(tmp_path / "cli-local" / "sweep.sqlite") == _rows(tmp_path / "cli-dask" / "sweep.sqlite")
+    assert len(_rows(tmp_path / "cli-dask" / "sweep.sqlite")) == 8
+
+
+def test_a_damaged_database_is_one_line(tmp_path):
+    db = tmp_path / "s.sqlite"
+    db.write_bytes(b"this is not sqlite, but long enough to look like a file header" * 4)
+    with pytest.raises(BarkError, match="not a sweep database"):
+        run_sweep(Sweep(base=TINY, axes=_grid(1)), db)
+
+
+# -- the command ------------------------------------------------------------------------------------
+def test_sweep_command_writes_its_table_and_montage(tmp_path):
+    out = tmp_path / "s"
+    r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--grid", "growth.G=0.01:0.03:3", "--grid", "mechanics.f_max=0.003,0.006",
+                                 "--workers", "2", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir() if not p.name.endswith(("-wal", "-shm"))) == ["montage.png", "sweep.sqlite"]
+    rows = _rows(out / "sweep.sqlite")
+    assert sorted({r["growth.G"] for r in rows}) == [0.01, 0.02, 0.03]
+    assert json.loads(rows[0]["scene"])["lattice"]["n_bases"] == 300
+    assert "6 run now, 0 already there" in r.output
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--grid", "growth.G=-1,0.01"], "--grid growth.G=-1"),
+    (["--grid", "growth.G"], "expected SECTION.KEY=V1,V2"),
+    (["--grid", "growth.G=1:2:x"], "START:STOP:N"),
+    (["--grid", "growth.G=1:inf:3"], "must be finite"),
+    (["--grid", "growth.G=0.01,0.01"], "given twice"),
+    (["--workers", "2", "--dask", "tcp://127.0.0.1:1"], "not both"),
+    (["--dask", "tcp://127.0.0.1:1"], "--dask tcp://127.0.0.1:1: no Dask scheduler"),
+    (["--set", "lattice.n_bases=-5"], "--set lattice.n_bases=-5"),
+])
+def test_bad_sweep_options_are_one_line_and_write_nothing(tmp_path, args, message):
+    out = tmp_path / "s"
+    r = CliRunner().invoke(cli, ["sweep", *args, "--out", str(out), "--quiet"])
+    assert r.exit_code == 2, r.output
+    assert message in r.output and r.output.count("\n") == 1
+    assert not out.exists()
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        kids += [int(k) for k in (task / "children").read_text().split()]
+    return kids
+
+
+def _start_slow_sweep(out: Path, workers: int) -> subprocess.Popen:
+    args = [sys.executable, "-m", "bark_cli", "sweep", *SLOW_SET, "--grid", "growth.G=0.010:0.020:6",
+            "--grid", "mechanics.f_max=0.003", "--workers", str(workers), "--out", str(out), "--quiet"]
+    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _wait_for_runs(db: Path, at_least: int, proc: subprocess.Popen, limit_s: float = 240.0) -> int:
+    end = time.monotonic() + limit_s
+    while time.monotonic() < end:
+        if db.exists():
+            try:
+                n = len(_rows(db))
+            except BarkError:
+                n = 0
+            if n >= at_least:
+                return n
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.05)
+    raise AssertionError("the sweep did not get going")
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc to find the worker processes")
+def test_a_killed_worker_loses_no_finished_run_and_the_rerun_finishes(tmp_path):
+    out = tmp_path / "s"
+    proc = _start_slow_sweep(out, workers=2)
+    try:
+        _wait_for_runs(out / "sweep.sqlite", 1, proc)
+        workers = [k for k in _children(proc.pid) if "python" in Path(f"/proc/{k}/cmdline").read_bytes().decode(errors="replace")]
+        os.kill(workers[-1], signal.SIGKILL)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    done = len(_rows(out / "sweep.sqlite"))
+    assert proc.returncode == 1, err
+    assert "worker died" in err and err.count("\n") == 1
+    assert 1 <= done < 6
+    r = CliRunner().invoke(cli, ["sweep", *SLOW_SET, "--grid", "growth.G=0.010:0.020:6", "--grid", "mechanics.f_max=0.003",
+                                 "--out", str(out), "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert f"({6 - done} run now, {done} already there)" in r.output
+    assert len(_rows(out / "sweep.sqlite")) == 6
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_a_sweep_stopped_halfway_goes_on_without_running_a_finished_point_again(tmp_path, sig):
+    out = tmp_path / "s"
+    proc = _start_slow_sweep(out, workers=1)
+    try:
+        _wait_for_runs(out / "sweep.sqlite", 2, proc)
+        (os.killpg if sig == signal.SIGKILL else os.kill)(proc.pid, sig)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 128 + signal.SIGTERM and "stopped by SIGTERM" in err and err.count("\n") == 1
+    done = len(_rows(out / "sweep.sqlite"))
+    assert 2 <= done < 6
+    r = CliRunner().invoke(cli, ["sweep", *SLOW_SET, "--grid", "growth.G=0.010:0.020:6", "--grid", "mechanics.f_max=0.003",
+                                 "--out", str(out), "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert f"({6 - done} run now, {done} already there)" in r.output
