@@ -8,25 +8,23 @@ not shared with its neighbours — so bases that have moved apart show the crack
 A base's rhomboid is fixed when it joins the trunk (:func:`bark.tree.leaf_corners`, at the radius it
 joined at) and carried with it: its corners keep their arc length and height offsets from the base's
 centre, and lie on the trunk's surface at their own heights.  Patches of fewer than ``min_size``
-bases (fragments) are grey; every other patch gets a colour of its own from the golden-ratio hue
-sequence, so patches with neighbouring ids differ.
+bases (fragments) are grey; no two neighbouring patches share a colour (``bark.pattern.patch_colours``,
+the colouring of every picture bark draws).
 """
 
 from __future__ import annotations
 
-import colorsys
-import math
 from pathlib import Path
 
 import numpy as np
 
 from bark.output import atomic_write
+from bark.pattern import simulation_colours
 from bark.tree import join_radii, leaf_corners
 
-__all__ = ["leaf_quads", "patch_colours", "write_mesh", "MESH_FILES"]
+__all__ = ["leaf_quads", "write_mesh", "MESH_FILES"]
 
 MESH_FILES = ("tree.vtu", "tree.ply")
-GREY = (150, 150, 150)
 
 
 def leaf_quads(sim) -> np.ndarray:
@@ -42,17 +40,6 @@ def leaf_quads(sim) -> np.ndarray:
     return np.stack([r * np.cos(angle), r * np.sin(angle), z], axis=-1)
 
 
-def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
-    """An RGB colour (uint8) per base: its patch's, or grey for a fragment of fewer than ``min_size``."""
-    labels = np.asarray(labels)
-    sizes = np.bincount(labels)
-    rgb = np.full((sizes.size, 3), GREY, dtype=np.uint8)
-    golden = (math.sqrt(5.0) - 1.0) / 2.0
-    for label in np.flatnonzero(sizes >= min_size):
-        rgb[label] = np.round(255 * np.array(colorsys.hsv_to_rgb((label * golden) % 1.0, 0.65, 0.9)))
-    return rgb[labels]
-
-
 def write_mesh(sim, out: str | Path, min_size: int = 7) -> list[Path]:
     """Write ``tree.vtu`` and ``tree.ply`` into ``out``; returns their paths."""
     import meshio
@@ -60,7 +47,7 @@ def write_mesh(sim, out: str | Path, min_size: int = 7) -> list[Path]:
     quads = leaf_quads(sim)
     n = len(quads)
     labels = sim.patch_labels()
-    colours = np.repeat(patch_colours(labels, min_size), 4, axis=0)
+    colours = np.repeat(simulation_colours(sim, min_size), 4, axis=0)
     points = quads.reshape(-1, 3)
     cells = [("quad", np.arange(4 * n, dtype=np.int32).reshape(n, 4))]
     colour_data = {name: colours[:, k] for k, name in enumerate(("red", "green", "blue"))}

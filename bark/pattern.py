@@ -38,7 +38,8 @@ import numpy as np
 from bark.analysis import axial_mean, axial_sd, axial_difference, principal_axes, tangent_plane
 from bark.errors import BarkError
 
-__all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE"]
+__all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
+           "PALETTE", "FRAGMENT_GREY", "simulation_colours"]
 
 MIN_PATCH_SIZE = 7
 """Patches with fewer leaf bases are fragments, left out of the statistics (the paper: 7)."""
@@ -468,3 +469,48 @@ def _run_min_size(folder: Path) -> int:
         return int(value) if isinstance(value, int) and value >= 1 else MIN_PATCH_SIZE
     except (OSError, ValueError, KeyError, TypeError):
         return MIN_PATCH_SIZE
+
+
+PALETTE = np.array([
+    (31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+    (227, 119, 194), (188, 189, 34), (23, 190, 207),
+    (174, 199, 232), (255, 187, 120), (152, 223, 138), (255, 152, 150), (197, 176, 213), (196, 156, 148),
+    (247, 182, 210), (219, 219, 141), (158, 218, 229),
+], dtype=np.uint8)
+"""The patch colours, RGB: matplotlib's tab20 without its two greys, the strong nine first (a map
+coloured greedily needs few, and the pale ones are close to the fragments' grey)."""
+FRAGMENT_GREY = np.array([179, 179, 179], dtype=np.uint8)
+"""The colour of fragments (patches under the minimum size), in every picture and mesh."""
+
+
+def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = None,
+                  intact: np.ndarray | None = None) -> np.ndarray:
+    """An RGB colour (uint8) per base: its patch's, :data:`FRAGMENT_GREY` for fragments of fewer
+    than ``min_size`` bases.  With the springs (``pairs`` and their ``intact`` mask) no two
+    neighbouring patches share a colour: the patches that a broken spring joins are neighbours, and
+    the graph of neighbours is coloured greedily (``networkx.greedy_color``, largest first; a map
+    needs few colours).  Without them a patch's colour follows its label, stable from frame to frame
+    of an animation."""
+    labels = np.asarray(labels, dtype=np.int64)
+    sizes = np.bincount(labels) if labels.size else np.zeros(0, np.int64)
+    index = np.arange(sizes.size) % len(PALETTE)
+    if pairs is not None and labels.size:
+        import networkx as nx
+
+        pairs = np.asarray(pairs, dtype=np.int64)
+        big = sizes >= min_size
+        across = labels[pairs[~np.asarray(intact, dtype=bool)]]
+        across = across[(across[:, 0] != across[:, 1]) & big[across[:, 0]] & big[across[:, 1]]]
+        graph = nx.Graph()
+        graph.add_nodes_from(np.flatnonzero(big).tolist())
+        graph.add_edges_from(np.unique(np.sort(across, axis=1), axis=0).tolist())
+        for label, colour in nx.greedy_color(graph, strategy="largest_first").items():
+            index[label] = colour % len(PALETTE)
+    rgb = PALETTE[index]
+    rgb[sizes < min_size] = FRAGMENT_GREY
+    return rgb[labels]
+
+
+def simulation_colours(sim, min_size: int) -> np.ndarray:
+    """:func:`patch_colours` of a simulation's patches now, neighbours never sharing a colour."""
+    return patch_colours(sim.patch_labels(), min_size, sim.state.pairs, sim.state.intact)

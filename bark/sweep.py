@@ -145,7 +145,7 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
     its final pattern.  Pure: the same scene gives the same row, wherever it runs."""
     from bark import runner
     from bark.output import unwrap
-    from bark.pattern import Pattern
+    from bark.pattern import Pattern, simulation_colours
     from bark.scene import Scene
 
     sc = Scene.from_dict(scene)
@@ -158,8 +158,8 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
            "n_broken": sim.n_broken, **{k: stats.get(k) for k in RESULT_COLUMNS if k in stats},
            "stop_reason": outcome.stop_reason}
     r = sim.radius
-    return {"key": key, "row": row, "wall_s": wall,
-            "uv": unwrap(sim.state.x, r).astype(np.float32), "labels": sim.patch_labels().astype(np.int32)}
+    return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, r).astype(np.float32),
+            "labels": sim.patch_labels().astype(np.int32), "colours": simulation_colours(sim, sc.run.min_patch_size)}
 
 
 class SweepTable:
@@ -177,7 +177,7 @@ class SweepTable:
                     + ", ".join(f"{c} {t}" for c, t in RESULT_COLUMNS.items())
                     + ", wall_s REAL, finished TEXT, bark_version TEXT, scene TEXT NOT NULL)")
                 self.con.execute("CREATE TABLE IF NOT EXISTS patterns (key TEXT PRIMARY KEY REFERENCES runs(key), "
-                                 "n INTEGER NOT NULL, uv BLOB NOT NULL, labels BLOB NOT NULL)")
+                                 "n INTEGER NOT NULL, uv BLOB NOT NULL, labels BLOB NOT NULL, colours BLOB NOT NULL)")
         except sqlite3.DatabaseError as err:
             raise BarkError(f"{self.path}: not a sweep database ({err})") from None
 
@@ -216,8 +216,9 @@ class SweepTable:
         with self.con:
             self.con.execute(f"INSERT OR REPLACE INTO runs ({names}) VALUES ({', '.join('?' * len(row))})",
                              list(row.values()))
-            self.con.execute("INSERT OR REPLACE INTO patterns VALUES (?, ?, ?, ?)",
-                             (point.key, int(result["labels"].shape[0]), result["uv"].tobytes(), result["labels"].tobytes()))
+            self.con.execute("INSERT OR REPLACE INTO patterns VALUES (?, ?, ?, ?, ?)",
+                             (point.key, int(result["labels"].shape[0]), result["uv"].tobytes(), result["labels"].tobytes(),
+                              np.ascontiguousarray(result["colours"], dtype=np.uint8).tobytes()))
 
     def rows(self, keys: Sequence[str] | None = None) -> list[dict]:
         """The table's rows as dicts (those of ``keys`` in that order, else all, by key)."""
@@ -226,13 +227,15 @@ class SweepTable:
         rows = {r[0]: dict(zip(names, r)) for r in cur}
         return [rows[k] for k in keys if k in rows] if keys is not None else list(rows.values())
 
-    def pattern(self, key: str) -> tuple[np.ndarray, np.ndarray] | None:
-        """A run's final pattern: unwrapped positions (arc length, height; float32) and patch labels."""
-        got = self.con.execute("SELECT n, uv, labels FROM patterns WHERE key = ?", (key,)).fetchone()
+    def pattern(self, key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """A run's final pattern: unwrapped positions (arc length, height; float32), patch labels and
+        colours (RGB uint8, ``bark.pattern.patch_colours``)."""
+        got = self.con.execute("SELECT n, uv, labels, colours FROM patterns WHERE key = ?", (key,)).fetchone()
         if got is None:
             return None
-        n, uv, labels = got
-        return np.frombuffer(uv, np.float32).reshape(n, 2), np.frombuffer(labels, np.int32)
+        n, uv, labels, colours = got
+        return (np.frombuffer(uv, np.float32).reshape(n, 2), np.frombuffer(labels, np.int32),
+                np.frombuffer(colours, np.uint8).reshape(n, 3))
 
 
 def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=None,

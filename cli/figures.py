@@ -151,16 +151,15 @@ def plot_montage(plan, points, table, path: str | Path) -> Path | None:
     growing to the right), the second up (growing upwards), the first seed's run in each cell,
     patches coloured, with its patch count and mean orientation.  ``None`` when no run is in the
     table yet.  The sheet stays within 16 × 16 inches whatever the grid."""
-    from bark_cli.plot import patch_colours, raster
+    from bark_cli.plot import raster, rgba
 
     first = {p.index: p for p in reversed(points)}  # the first seed of each grid point
     shape = plan.shape + (1,) * (2 - len(plan.shape))
     ncols, nrows = shape[0], shape[1]
     cell = min(2.4, 16.0 / max(ncols, nrows))
-    fig = Figure(figsize=(cell * ncols + 0.8, cell * 1.25 * nrows + 0.8), dpi=110)
+    fig = Figure(figsize=(cell * ncols + 0.8, cell * 1.25 * nrows + 0.8), dpi=110, layout="constrained")
     FigureCanvasAgg(fig)
     axes = np.atleast_2d(fig.subplots(nrows, ncols, squeeze=False))
-    min_size = 7
     drawn = 0
     for index, p in first.items():
         i, j = (index + (0, 0))[:2]
@@ -172,13 +171,14 @@ def plot_montage(plan, points, table, path: str | Path) -> Path | None:
         if got is None or row is None:
             ax.text(0.5, 0.5, "not run", ha="center", va="center", fontsize=7, color="0.5")
             continue
-        uv, labels = got
+        uv, _, colours = got
         width = 2 * np.pi * row["radius"]
         z_lo, z_hi = float(uv[:, 1].min()), float(uv[:, 1].max())
-        ax.imshow(raster(uv, patch_colours(labels, min_size), width, z_lo, z_hi), origin="lower",
+        ax.imshow(raster(uv, rgba(colours), width, z_lo, z_hi), origin="lower",
                   extent=(0, width, z_lo, z_hi), interpolation="nearest", aspect="auto")
         mean = row["mean_orientation_deg"]
-        ax.set_title(f"{row['n_patches']} patches" + ("" if mean is None else f", {mean:.0f}°"), fontsize=6)
+        count = row["n_patches"]
+        ax.set_title(f"{count} patch{'' if count == 1 else 'es'}" + ("" if mean is None else f", {mean:.0f}°"), fontsize=6)
         drawn += 1
     for i, v in enumerate(plan.axes[0].values):
         axes[-1, i].set_xlabel(f"{plan.axes[0].key} = {v:g}" if isinstance(v, float) else f"{plan.axes[0].key} = {v}", fontsize=7)

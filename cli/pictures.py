@@ -31,6 +31,8 @@ class PatternData:
 
     uv: np.ndarray
     labels: np.ndarray
+    colours: np.ndarray
+    """RGB (uint8) per base: neighbouring patches never share one (``bark.pattern.patch_colours``)."""
     springs: np.ndarray
     n_bases: int
     radius: float
@@ -41,7 +43,10 @@ class PatternData:
     @classmethod
     def of(cls, sim, min_size: int) -> "PatternData":
         s, r = sim.state, sim.radius
-        return cls(uv=unwrap(s.x, r), labels=sim.patch_labels(), springs=np.asarray(s.pairs[s.intact]),
+        from bark.pattern import simulation_colours
+
+        return cls(uv=unwrap(s.x, r), labels=sim.patch_labels(), colours=simulation_colours(sim, min_size),
+                   springs=np.asarray(s.pairs[s.intact]),
                    n_bases=s.n_bases, radius=r, t=s.t, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
 
 

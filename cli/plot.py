@@ -28,9 +28,16 @@ SPRINGS_UP_TO = 50_000
 
 
 def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = None) -> Path:
-    """Draw ``data`` (a ``bark_cli.pictures.PatternData``) into ``path``."""
-    uv, labels, r = data.uv, data.labels, data.radius
-    colours = patch_colours(labels, min_size)
+    """Draw ``data`` (a ``bark_cli.pictures.PatternData``) into ``path``: lengths in metres, time in
+    years (the model's units beside them), neighbouring patches in different colours, fragments in
+    the grey the legend names."""
+    from matplotlib.patches import Patch
+
+    from bark.pattern import FRAGMENT_GREY
+    from bark.units import METRES_PER_LENGTH_UNIT, years
+
+    uv, r = data.uv * METRES_PER_LENGTH_UNIT, data.radius * METRES_PER_LENGTH_UNIT  # metres from here on
+    colours = rgba(data.colours)  # neighbouring patches never share a colour
     width = 2 * np.pi * r
     z_lo, z_hi = float(uv[:, 1].min()), float(uv[:, 1].max())
     height = (z_hi - z_lo) or width
@@ -50,12 +57,17 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     else:
         ax.imshow(raster(uv, colours, width, z_lo, z_hi), origin="lower", extent=(0, width, z_lo, z_hi),
                   interpolation="nearest", aspect="auto")
+    if (np.bincount(data.labels)[data.labels] < min_size).any():
+        ax.legend(handles=[Patch(color=FRAGMENT_GREY / 255.0, label=f"fragments (< {min_size} bases)")],
+                  loc="upper right", fontsize=7, framealpha=0.9)
     ax.set_xlim(0, width)
     ax.set_ylim(z_lo - pad, z_hi + pad)
     ax.set_aspect(shown / aspect)
-    ax.set_xlabel("arc length r·θ (length units; θ increases to the right seen from outside)")
-    ax.set_ylabel("height z (length units)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"))
-    ax.set_title(title or f"t = {data.t:.2f}, r = {r:.4f}, {data.n_patches} patches, {data.n_broken} broken", fontsize=9)
+    ax.set_xlabel(f"arc length r·θ (m; 1 length unit = {METRES_PER_LENGTH_UNIT} m; θ increases to the right seen from outside)",
+                  fontsize=8)
+    ax.set_ylabel("height z (m)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"), fontsize=8)
+    ax.set_title(title or f"{years(data.t):.1f} years (t = {data.t:.4g}), radius {100 * r:.1f} cm ({data.radius:.4g} length "
+                 f"units), {data.n_patches} patches of ≥ {min_size} bases, {data.n_broken} broken springs", fontsize=8)
     return save_figure(fig, path)
 
 
@@ -99,19 +111,18 @@ def raster(uv: np.ndarray, colours: np.ndarray, width: float, z_lo: float, z_hi:
     return image
 
 
-def _tab20():
-    from matplotlib import colormaps
-
-    return colormaps["tab20"].colors
+def rgba(rgb: np.ndarray) -> np.ndarray:
+    """RGB uint8 (``bark.pattern.patch_colours``) as matplotlib's RGBA floats."""
+    rgb = np.asarray(rgb)
+    return np.column_stack([rgb / 255.0, np.ones(len(rgb))])
 
 
 def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
-    """RGBA per base: one colour per patch of at least ``min_size`` bases (by label, so stable across
-    frames and runs), light grey for smaller fragments."""
-    sizes = np.bincount(labels)
-    big = sizes[labels] >= min_size
-    palette = np.array([[*c, 1.0] for i, c in enumerate(_tab20()) if i not in (14, 15)])  # no greys
-    return np.where(big[:, None], palette[labels % len(palette)], [0.7, 0.7, 0.7, 1.0])
+    """RGBA per base by patch label (stable from frame to frame: the animation's colouring), fragment
+    grey under ``min_size``; ``bark.pattern.patch_colours``."""
+    from bark.pattern import patch_colours as rgb
+
+    return rgba(rgb(labels, min_size))
 
 
 def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None, title=""):

@@ -45,7 +45,8 @@ class TreeData:
 
     @classmethod
     def of(cls, sim, min_size: int, dome) -> "TreeData":
-        from bark.mesh import leaf_quads, patch_colours
+        from bark.mesh import leaf_quads
+        from bark.pattern import simulation_colours
         from bark.tree import Apex
 
         quads = leaf_quads(sim)
@@ -53,7 +54,7 @@ class TreeData:
         shown = np.flatnonzero(depth > 0.0)
         shown = shown[np.argsort(depth[shown])]  # far (small y) first
         polygons = metres(quads[shown][..., [0, 2]])
-        colours = patch_colours(sim.patch_labels(), min_size)[shown]
+        colours = simulation_colours(sim, min_size)[shown]
         z = sim.state.anchor[:, 2]
         zs = np.linspace(float(z.min()), float(z.max()), 400)
         r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)

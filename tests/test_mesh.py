@@ -11,7 +11,8 @@ import pytest
 
 from bark import runner
 from bark.lattice import Lattice
-from bark.mesh import GREY, leaf_quads, patch_colours
+from bark.mesh import leaf_quads
+from bark.pattern import FRAGMENT_GREY, patch_colours, simulation_colours
 from bark.scene import Scene
 from bark.tree import leaf_corners
 
@@ -56,8 +57,8 @@ def test_a_bad_partition_is_refused_in_one_line(bad):
 def test_patch_colours_grey_fragments_and_one_colour_per_patch():
     labels = np.array([0, 0, 0, 1, 2, 2, 2, 0, 1])
     rgb = patch_colours(labels, min_size=3)
-    assert tuple(rgb[3]) == GREY and tuple(rgb[8]) == GREY
-    assert (rgb[0] == rgb[7]).all() and not (rgb[0] == rgb[4]).all() and tuple(rgb[4]) != GREY
+    assert tuple(rgb[3]) == tuple(FRAGMENT_GREY) and tuple(rgb[8]) == tuple(FRAGMENT_GREY)
+    assert (rgb[0] == rgb[7]).all() and not (rgb[0] == rgb[4]).all() and tuple(rgb[4]) != tuple(FRAGMENT_GREY)
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +86,7 @@ def test_the_mesh_is_read_back_by_meshio_with_a_quad_per_base(meshed):
         assert mesh.points.shape == (4 * n, 3)
         assert [(c.type, c.data.shape) for c in mesh.cells] == [("quad", (n, 4))]
         colours = np.column_stack([mesh.point_data[c] for c in ("red", "green", "blue")])
-        assert (colours[::4] == patch_colours(labels, 7)).all()
+        assert (colours[::4] == simulation_colours(sim, 7)).all()
     vtu = meshio.read(out / "tree.vtu")
     assert (vtu.cell_data["patch"][0] == labels).all()
     assert (vtu.cell_data["base"][0] == np.arange(n)).all()

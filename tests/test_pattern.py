@@ -411,3 +411,45 @@ def test_compare_mirror_flips_one_pattern(broken_run, tmp_path):
     assert report["patterns"][0]["name"] == "observed reticulate (mirrored)"
     r = CliRunner().invoke(cli, ["compare", str(broken_run), str(broken_run), "--mirror", "3", "--out", str(tmp_path / "d")])
     assert r.exit_code == 2 and "--mirror 3" in r.output and not (tmp_path / "d").exists()
+
+
+# -- colours ----------------------------------------------------------------------------------------
+def _neighbours_differ(labels, pairs, intact, rgb, min_size):
+    sizes = np.bincount(labels)
+    a, b = labels[pairs[~intact, 0]], labels[pairs[~intact, 1]]
+    across = (a != b) & (sizes[a] >= min_size) & (sizes[b] >= min_size)
+    i, j = pairs[~intact][across].T
+    return bool((rgb[i] != rgb[j]).any(axis=1).all()), int(across.sum())
+
+
+def test_no_two_neighbouring_patches_of_a_run_share_a_colour(broken_run):
+    from bark.pattern import patch_colours
+
+    with np.load(broken_run / "state.npz") as d:
+        labels, pairs, intact = d["labels"], d["pairs"], d["intact"]
+    rgb = patch_colours(labels, 7, pairs, intact)
+    differ, n_across = _neighbours_differ(labels, pairs, intact, rgb, 7)
+    assert differ and n_across > 50
+    assert len({tuple(c) for c in rgb}) <= 10  # a map needs few colours (and fragments are grey)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.05, 0.6), st.integers(1, 9))
+def test_greedy_patch_colouring_on_random_cracks(seed, broken, min_size):
+    """Any lattice with any springs broken: neighbouring patches (joined by a broken spring) never
+    share a colour, and fragments are grey."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from bark.pattern import FRAGMENT_GREY, patch_colours
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    pairs = np.array([(i, i + d) for d in (1, 20, 21) for i in range(n - d)])
+    intact = rng.random(len(pairs)) > broken
+    p = pairs[intact]
+    labels = connected_components(coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n)), directed=False)[1]
+    rgb = patch_colours(labels, min_size, pairs, intact)
+    assert _neighbours_differ(labels, pairs, intact, rgb, min_size)[0]
+    small = np.bincount(labels)[labels] < min_size
+    assert (rgb[small] == FRAGMENT_GREY).all() and not (rgb[~small] == FRAGMENT_GREY).all(axis=1).any()
