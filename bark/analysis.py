@@ -124,26 +124,17 @@ def window_labels(points: np.ndarray, pairs: np.ndarray, intact: np.ndarray, siz
 
 
 def pattern_summary(rows: list[dict]) -> dict:
-    """Summary over patches: count, axial mean and SD of orientation, mean anisotropy, and the share
-    of patches whose orientation lies within 45° of the mean axis."""
-    if not rows:
-        nan = float("nan")
-        return {
-            "n_patches": 0,
-            "mean_orientation_deg": nan,
-            "circular_sd_deg": nan,
-            "mean_anisotropy": nan,
-            "fraction_within_45_deg": nan,
-        }
-    deg = np.array([r["orientation_deg"] for r in rows])
-    mean = axial_mean(deg)
-    return {
-        "n_patches": len(rows),
-        "mean_orientation_deg": mean,
-        "circular_sd_deg": axial_sd(deg),
-        "mean_anisotropy": float(np.mean([r["anisotropy"] for r in rows])),
-        "fraction_within_45_deg": float(np.mean(np.abs(axial_difference(deg, mean)) <= 45.0)),
-    }
+    """Summary over patches (``bark.pattern.PatternStatistics`` as the values of summary.json):
+    count, axial mean, SD and standard error of orientation, mean, SD and standard error of
+    anisotropy, and the share of patches whose orientation lies within 45° of the mean axis (NaN
+    where there are no patches)."""
+    from bark.pattern import PatternStatistics
+
+    stats = PatternStatistics.of_values([r["orientation_deg"] for r in rows], [r["anisotropy"] for r in rows])
+    summary = {k: v for k, v in stats.as_dict().items() if k not in ("name", "source")}
+    if summary["fraction_within_45_deg"] is None:
+        summary["fraction_within_45_deg"] = float("nan")
+    return summary
 
 
 def hellinger(mean_p: float, sd_p: float, mean_q: float, sd_q: float, axial: bool = False) -> float:

@@ -171,6 +171,11 @@ def patch_columns(rows: list[dict]) -> list[str]:
     return [c for c in known if c in first] + [c for c in first if c not in known]
 
 
+PATTERN_KEYS = ("mean_orientation_deg", "circular_sd_deg", "orientation_se_deg", "mean_anisotropy", "anisotropy_sd",
+                "anisotropy_se", "fraction_within_45_deg")
+"""The pattern statistics summary.json takes from the analyzer's summary (``bark.analysis.pattern_summary``)."""
+
+
 def trunk_regions(sim) -> np.ndarray | None:
     """The names of the trunk's regions (``Growth.region`` of every base's site), or ``None`` when it
     has one region."""
@@ -244,10 +249,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "n_springs": sim.state.n_springs,
         "n_broken": sim.n_broken,
         "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size) if "fracture" in effects else None),
-        "mean_orientation_deg": stats.get("mean_orientation_deg"),
-        "circular_sd_deg": stats.get("circular_sd_deg"),
-        "mean_anisotropy": stats.get("mean_anisotropy"),
-        "fraction_within_45_deg": stats.get("fraction_within_45_deg"),
+        **{k: stats.get(k) for k in PATTERN_KEYS},
         "regions": region_summaries(sim, rows, every) if every is not None else None,
         "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),

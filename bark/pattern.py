@@ -341,15 +341,21 @@ class PatternStatistics:
 
     @classmethod
     def of_table(cls, table: PatchTable, name: str = "", source: str = "") -> "PatternStatistics":
-        deg = table.orientation_deg
-        n = len(table)
+        return cls.of_values(table.orientation_deg, table.anisotropy, name=name, patches=table, source=source)
+
+    @classmethod
+    def of_values(cls, orientation_deg: np.ndarray, anisotropy: np.ndarray, name: str = "",
+                  patches: PatchTable | None = None, source: str = "") -> "PatternStatistics":
+        """The statistics of patches with these orientations and anisotropies (one each)."""
+        deg = np.asarray(orientation_deg, dtype=float)
+        n = int(deg.size)
         if n == 0:
             nan = math.nan
             return cls(name=name, n_patches=0, orientation=Axial(0, nan, nan, nan), anisotropy=_linear(deg),
-                       patches=table, fraction_within_45=None, source=source)
+                       patches=patches, fraction_within_45=None, source=source)
         mean = axial_mean(deg)
         return cls(name=name, n_patches=n, orientation=Axial(n, mean, axial_sd(deg), axial_se(deg)),
-                   anisotropy=_linear(table.anisotropy), patches=table,
+                   anisotropy=_linear(np.asarray(anisotropy, dtype=float)), patches=patches,
                    fraction_within_45=float(np.mean(np.abs(axial_difference(deg, mean)) <= 45.0)), source=source)
 
     @classmethod

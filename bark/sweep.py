@@ -50,7 +50,8 @@ RESULT_COLUMNS = {
     "mean_anisotropy": "REAL", "anisotropy_sd": "REAL", "anisotropy_se": "REAL", "fraction_within_45_deg": "REAL",
     "stop_reason": "TEXT",
 }
-"""What the table holds of each run besides its identity, by SQLite type."""
+"""What the table holds of each run besides its identity, by SQLite type: the keys of the run's
+summary (summary.json) of these names."""
 
 
 class WorkerDied(RuntimeError):
@@ -145,7 +146,7 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
     its final pattern.  Pure: the same scene gives the same row, wherever it runs."""
     from bark import runner
     from bark.output import unwrap
-    from bark.pattern import Pattern, simulation_colours
+    from bark.pattern import simulation_colours
     from bark.scene import Scene
 
     sc = Scene.from_dict(scene)
@@ -153,12 +154,8 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
     outcome = runner.run(sc, None)
     wall = time.perf_counter() - start
     sim = outcome.sim
-    stats = Pattern.of_simulation(sim).statistics(sc.run.min_patch_size).as_dict()
-    row = {"n_bases": sim.state.n_bases, "t": sim.state.t, "radius": sim.radius, "steps": sim.step_count,
-           "n_broken": sim.n_broken, **{k: stats.get(k) for k in RESULT_COLUMNS if k in stats},
-           "stop_reason": outcome.stop_reason}
-    r = sim.radius
-    return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, r).astype(np.float32),
+    row = {k: outcome.summary.get(k) for k in RESULT_COLUMNS}  # the run's own summary: its analyzer's statistics
+    return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, sim.radius).astype(np.float32),
             "labels": sim.patch_labels().astype(np.int32), "colours": simulation_colours(sim, sc.run.min_patch_size)}
 
 
