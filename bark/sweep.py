@@ -25,6 +25,7 @@ comes back).  A run is a pure function of its scene and seed, so both give the s
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import itertools
 import json
@@ -124,7 +125,12 @@ class Sweep:
 
     def points(self) -> list[Point]:
         """Every run, grid point by grid point (the first axis slowest), seeds innermost; each scene
-        checked (``Scene.from_dict``) so a bad value stops the sweep before any run."""
+        checked (``Scene.from_dict``) so a bad value stops the sweep before any run.  Built once a
+        sweep (a few ms a point), however often asked."""
+        return list(self._points)
+
+    @functools.cached_property
+    def _points(self) -> tuple[Point, ...]:
         from bark.scene import Scene, merge
 
         out = []
@@ -138,7 +144,7 @@ class Sweep:
                 Scene.from_dict(scene)  # a bad value: one line, before anything runs
                 key = hashlib.sha256(_canonical({"scene": scene, "seed": seed}).encode()).hexdigest()[:20]
                 out.append(Point(index=index, settings=settings, seed=seed, scene=scene, key=key))
-        return out
+        return tuple(out)
 
 
 def run_point(scene: dict, key: str) -> dict[str, Any]:

@@ -146,11 +146,12 @@ def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
     return save_figure(fig, path)
 
 
-def plot_montage(plan, points, table, path: str | Path) -> Path | None:
+def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | None:
     """The sweep's patterns on one sheet, like the paper's Fig. 9: the first axis across (its values
     growing to the right), the second up (growing upwards), the first seed's run in each cell,
     patches coloured, with its patch count and mean orientation.  ``None`` when no run is in the
-    table yet.  The sheet stays within 16 × 16 inches whatever the grid."""
+    table yet.  ``rows``: the table's rows by key (read once); ``table`` gives the patterns.  The
+    sheet stays within 16 × 16 inches whatever the grid."""
     from bark_cli.plot import raster, rgba
 
     first = {p.index: p for p in reversed(points)}  # the first seed of each grid point
@@ -167,7 +168,7 @@ def plot_montage(plan, points, table, path: str | Path) -> Path | None:
         ax.set_xticks([])
         ax.set_yticks([])
         got = table.pattern(p.key)
-        (row,) = table.rows([p.key]) or [None]
+        row = rows.get(p.key)  # the table's rows by key, read once
         if got is None or row is None:
             ax.text(0.5, 0.5, "not run", ha="center", va="center", fontsize=7, color="0.5")
             continue

@@ -176,7 +176,8 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
     points = plan.points()
     with SweepTable(folder / "sweep.sqlite") as table:
         rows = table.rows([p.key for p in points])
-        drawn = plot_montage(plan, points, table, folder / "montage.png") if len(plan.axes) <= 2 else None
+        by_key = {r["key"]: r for r in rows}
+        drawn = plot_montage(plan, points, by_key, table, folder / "montage.png") if len(plan.axes) <= 2 else None
     if not quiet:
         from rich.console import Console
         from rich.table import Table
