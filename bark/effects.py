@@ -38,6 +38,8 @@ EFFECTS: dict[str, Effect] = {
                ("patch-statistics",)),
         Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",)),
         Effect("break-log", "every break recorded as it happens: breaks.csv", ("fracture",)),
+        Effect("fracture-history", "broken springs, cracks, patches and the damping's power against time, every "
+               "history_every: fracture.csv, fracture.png, summary.json's initial fractures", ("break-log",)),
         Effect("state-snapshot", "the mechanical state at the end: state.npz"),
         Effect("checkpoints", "checkpoint.npz: periodic, on Ctrl-C and at the end (for --resume)"),
         Effect("graphml", "the leaf-base graph of intact springs at the end: graph.graphml"),

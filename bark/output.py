@@ -219,7 +219,8 @@ def _phyllotaxis(sim) -> dict | None:
     return phyllotaxis(sim.lattice, sim.state.anchor, join_radii(sim))
 
 
-def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s: float | None = None) -> dict[str, Any]:
+def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s: float | None = None,
+                extra: dict | None = None) -> dict[str, Any]:
     """Everything summary.json holds about a finished (or stopped) run; ``analyses`` from ``sim.analyze()``."""
     from bark import __version__
 
@@ -254,13 +255,15 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
+        **(extra or {}),
         "wall_time_s": wall_time_s,
         "conventions": "orientation: degrees from horizontal in [0, 180), 90 = along the trunk axis; "
         "horizontal = increasing theta seen from outside; anisotropy = 2A - 1",
     }
 
 
-def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None) -> dict:
+def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None,
+              extra: dict | None = None) -> dict:
     """Write what the scene's effects ask for into ``out_dir``: summary.json always; patches.csv
     (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml),
     tree.vtu and tree.ply (mesh)."""
@@ -290,7 +293,7 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
         from bark.mesh import write_mesh
 
         write_mesh(sim, out, scene.run.min_patch_size)
-    summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s)
+    summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
     write_json(out / "summary.json", summary)
     return summary
 

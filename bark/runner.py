@@ -37,6 +37,7 @@ import attrs
 from bark import checkpoint
 from bark.errors import BarkError, NonFiniteStateError
 from bark.folder import OutputFolder
+from bark.fracture import Dissipation
 from bark.output import Frames, StatisticsSeries, run_summary, write_run
 
 __all__ = ["Outcome", "run", "resume", "STOPPED_BY_SIGNAL"]
@@ -126,12 +127,19 @@ def _outputs_complete(folder: Path, meta: dict) -> bool:
     return isinstance(summary, dict) and summary.get("steps") == meta["step_count"]
 
 
+def _extra(by_name: dict) -> dict:
+    """What the recorders add to summary.json: the fracture history's summary."""
+    rec = by_name.get("dissipation")
+    return {"fracture": rec.result.summary()} if rec is not None and rec.result is not None else {}
+
+
 def _recorders(scene, sim, recorded: dict) -> list:
     """The along-the-way recorders the scene asks for, on their triggers, with what a checkpoint
     recorded restored and their triggers brought up to the simulation's time."""
     from bark.triggers import Every
 
-    wanted = [(StatisticsSeries, "statistics-series", scene.series_every), (Frames, "animation", scene.frame_every)]
+    wanted = [(StatisticsSeries, "statistics-series", scene.series_every), (Frames, "animation", scene.frame_every),
+              (Dissipation, "fracture-history", scene.history_every)]
     recorders = []
     for cls, effect, every in wanted:
         if not scene.has(effect):
@@ -178,7 +186,10 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
     if out is None:
         for rec in recorders:
             rec.record(sim)
-        summary = run_summary(sim, scene, sim.analyze(), reason, wall)
+        by_name = {rec.name: rec for rec in recorders}
+        if "dissipation" in by_name:
+            by_name["dissipation"].analyse(sim, scene.run.min_patch_size)
+        summary = run_summary(sim, scene, sim.analyze(), reason, wall, _extra(by_name))
         return Outcome(out=None, scene=scene, sim=sim, stop_reason=reason, summary=summary, error=error)
     (out / "summary.json").unlink(missing_ok=True)  # stale from here on: written again last
     if save and scene.has("checkpoints"):
@@ -189,7 +200,9 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
     by_name = {rec.name: rec for rec in recorders}
     if "series" in by_name:
         by_name["series"].write(out / "statistics.csv")
-    summary = write_run(sim, scene, out, reason, wall)
+    if "dissipation" in by_name:
+        by_name["dissipation"].write(out / "fracture.csv", sim, scene.run.min_patch_size)
+    summary = write_run(sim, scene, out, reason, wall, _extra(by_name))
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error)
     for effect, (name, draw) in (pictures or {}).items():
         if not scene.has(effect):

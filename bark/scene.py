@@ -119,6 +119,9 @@ class EffectSettings:
     """With the ``animation`` effect: simulated time between frames."""
     series_every: float = attrs.field(default=10.0, validator=positive)
     """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    history_every: float = attrs.field(default=0.5, validator=positive)
+    """With the ``fracture-history`` effect: simulated time between two samples of fracture.csv (the
+    dissipation rate is a mean over these samples: keep them several to the initial fracture phase)."""
     window: float = attrs.field(default=0.5, validator=positive)
     """On a trunk with regions (bulges): side of the windows of summary.json's ``windows``, length
     units (0.5 = 15 cm, a photograph's field of view)."""
@@ -210,6 +213,8 @@ class Scene:
     """With the ``animation`` effect: simulated time between frames."""
     series_every: float = 10.0
     """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    history_every: float = 0.5
+    """With the ``fracture-history`` effect: simulated time between two samples of fracture.csv."""
     window: float = 0.5
     """Side of the windows of summary.json's ``windows`` (length units; ``EffectSettings.window``)."""
     dome: Dome = attrs.field(factory=Dome)
@@ -263,6 +268,10 @@ class Scene:
             names[section] = name
         if "bulges" in resolved and names["growth"] != "bulge":
             raise BarkError("the effect 'bulges' needs {0} with its bulges", Ref("growth", "name", "bulge"))
+        if "fracture-history" in resolved and len(parts["lattice"].offsets) != 2:
+            raise BarkError("{0}: the effect 'fracture-history' counts cracks in the lattice's cells, which takes two "
+                            "spring offsets",
+                            Ref("lattice", "offsets", list(parts["lattice"].offsets)))
         _check_feasible(parts["lattice"], run, strategies["growth"], resolved)
         _place("dome", lambda: parts["dome"].table)  # a curve through points that leaves the trunk's width
         return cls(
@@ -273,6 +282,7 @@ class Scene:
             wanted=tuple(wanted),
             frame_every=eff.frame_every,
             series_every=eff.series_every,
+            history_every=eff.history_every,
             window=eff.window,
             **parts,
         )
@@ -336,7 +346,7 @@ class Scene:
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **_plain(strategy.params())}
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
-                          "window": self.window}
+                          "history_every": self.history_every, "window": self.window}
         return out
 
 

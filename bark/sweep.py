@@ -49,10 +49,12 @@ RESULT_COLUMNS = {
     "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
     "n_patches": "INTEGER", "mean_orientation_deg": "REAL", "circular_sd_deg": "REAL", "orientation_se_deg": "REAL",
     "mean_anisotropy": "REAL", "anisotropy_sd": "REAL", "anisotropy_se": "REAL", "fraction_within_45_deg": "REAL",
-    "stop_reason": "TEXT",
+    "stop_reason": "TEXT", "first_break_t": "REAL", "initial_fractures": "INTEGER", "dissipation_rate": "REAL",
+    "growth_dissipation": "REAL",
 }
 """What the table holds of each run besides its identity, by SQLite type: the keys of the run's
-summary (summary.json) of these names."""
+summary (summary.json) of these names, and of its ``fracture`` part (the ``fracture-history`` effect;
+else empty)."""
 
 
 class WorkerDied(RuntimeError):
@@ -160,7 +162,8 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
     outcome = runner.run(sc, None)
     wall = time.perf_counter() - start
     sim = outcome.sim
-    row = {k: outcome.summary.get(k) for k in RESULT_COLUMNS}  # the run's own summary: its analyzer's statistics
+    found = {**outcome.summary, **(outcome.summary.get("fracture") or {})}  # fracture: with the fracture-history effect
+    row = {k: found.get(k) for k in RESULT_COLUMNS}  # the run's own summary: its analyzer's statistics
     return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, sim.radius).astype(np.float32),
             "labels": sim.patch_labels().astype(np.int32), "colours": simulation_colours(sim, sc.run.min_patch_size)}
 
@@ -181,6 +184,10 @@ class SweepTable:
                     + ", wall_s REAL, finished TEXT, bark_version TEXT, scene TEXT NOT NULL)")
                 self.con.execute("CREATE TABLE IF NOT EXISTS patterns (key TEXT PRIMARY KEY REFERENCES runs(key), "
                                  "n INTEGER NOT NULL, uv BLOB NOT NULL, labels BLOB NOT NULL, colours BLOB NOT NULL)")
+                have = set(self.columns())
+                for c, t in RESULT_COLUMNS.items():  # a table of an earlier bark: the columns added since
+                    if c not in have:
+                        self.con.execute(f"ALTER TABLE runs ADD COLUMN {c} {t}")
         except sqlite3.DatabaseError as err:
             raise BarkError(f"{self.path}: not a sweep database ({err})") from None
 

@@ -190,3 +190,65 @@ def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | No
     fig.suptitle("bark sweep: the unwrapped trunk of each run (arc length across, height up; patches coloured, "
                  "fragments grey)", fontsize=8)
     return save_figure(fig, path) if drawn else None
+
+
+def plot_fracture_history(history, path: str | Path) -> Path:
+    """A run's fracture history (``bark.fracture.FractureHistory``): broken springs and cracks (top),
+    patches and the damping's power per base (bottom) against time in years; the initial fractures
+    (the most cracks at once) and the initial fracture phase marked."""
+    from bark.units import years
+
+    s = history.samples
+    t = years(s["t"])
+    fig = Figure(figsize=(7.0, 5.6), dpi=130)
+    FigureCanvasAgg(fig)
+    top, bottom = fig.subplots(2, 1, sharex=True)
+    top.plot(t, s["n_broken"], color="0.3", lw=1.2, label="broken springs")
+    top.plot(t, s["n_cracks"], color="crimson", lw=1.2, label="cracks")
+    if history.first_break_t is not None:
+        for ax in (top, bottom):
+            ax.axvspan(years(history.first_break_t), years(history.initial_fractures_t), color="gold", alpha=0.25, lw=0)
+        top.plot([years(history.initial_fractures_t)], [history.initial_fractures], "o", color="crimson", ms=4,
+                 label=f"initial fractures: {history.initial_fractures}")
+    top.set_ylabel("count")
+    top.legend(fontsize=7, frameon=False)
+    bottom.plot(t, s["n_patches"], color="tab:blue", lw=1.2)
+    bottom.set_ylabel("patches", color="tab:blue")
+    from matplotlib.ticker import MaxNLocator
+
+    bottom.yaxis.set_major_locator(MaxNLocator(integer=True))
+    power = bottom.twinx()
+    power.plot(t, s["dissipation"], color="tab:orange", lw=1.0)
+    power.set_ylabel("damping power per base", color="tab:orange")
+    if history.dissipation_rate is not None:
+        power.axhline(history.dissipation_rate, color="tab:orange", ls=":", lw=1.0)
+    bottom.set_xlabel("time (years)")
+    top.set_title("fracture history (shaded: first break to the most cracks)", fontsize=9)
+    return save_figure(fig, path)
+
+
+def plot_power_law(x: np.ndarray, y: np.ndarray, groups: np.ndarray, fit, path: str | Path, group_label: str,
+                   xlabel: str) -> Path:
+    """Initial fractures against the dissipation rate on log–log axes, one colour per value of
+    ``groups`` (a swept setting), with the fitted power law ``fit`` (``bark.fracture.PowerLaw``)."""
+    fig = Figure(figsize=(6.0, 4.6), dpi=130)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    values = sorted(set(groups.tolist()))
+    from matplotlib import colormaps
+
+    cmap = colormaps["viridis"]
+    for k, g in enumerate(values):
+        on = groups == g
+        ax.plot(x[on], y[on], "o", ms=5, color=cmap(k / max(len(values) - 1, 1)), label=f"{group_label} = {g:g}")
+    ok = (x > 0) & (y > 0)
+    xs = np.geomspace(x[ok].min(), x[ok].max(), 50)
+    lo, hi = fit.ci
+    ax.plot(xs, fit.prefactor * xs**fit.exponent, "k-", lw=1.0,
+            label=f"fit: exponent {fit.exponent:.3f} ({fit.level:.0%} CI {lo:.3f} to {hi:.3f}), R² {fit.r2:.3f}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("initial fractures (most cracks at once)")
+    ax.legend(fontsize=7, frameon=False)
+    return save_figure(fig, path)

@@ -184,8 +184,12 @@ def _pictures(signals: Signals, painter) -> dict:
         with signals.draw():
             painter().draw("tree", data, path, scene.run.min_patch_size)
 
+    def fracture(sim, scene, recorded, path):
+        with signals.draw():
+            painter().draw("fracture", recorded["dissipation"].result, path, scene.run.min_patch_size)
+
     return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation),
-            "tree-image": ("tree.png", tree)}
+            "tree-image": ("tree.png", tree), "fracture-history": ("fracture.png", fracture)}
 
 
 def _painter():
@@ -268,7 +272,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
 
         bar = ProgressBar()
     painter = _Lazy(_painter)
-    if resume is None and any(scene.has(e) for e in ("pattern-image", "animation", "tree-image")):
+    if resume is None and any(scene.has(e) for e in ("pattern-image", "animation", "tree-image", "fracture-history")):
         painter()  # start it now: matplotlib loads on the other core while the run goes on
     with Signals() as signals:
         hooks = dict(checkpoint_every=checkpoint_every, observe=bar, interrupted=signals.reason,

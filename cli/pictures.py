@@ -55,6 +55,10 @@ def _draw(kind: str, data, path: str, min_size: int) -> None:
         from bark_cli.plot import plot_pattern
 
         plot_pattern(data, path, min_size)
+    elif kind == "fracture":
+        from bark_cli.figures import plot_fracture_history
+
+        plot_fracture_history(data, path)
     elif kind == "tree":
         from bark_cli.tree_picture import plot_tree
 
@@ -71,7 +75,7 @@ def _serve(conn, commands_end) -> None:
     commands_end.close()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)  # the command decides; it kills the painter if it must
-    for module in ("bark_cli.plot", "bark_cli.animation", "bark_cli.tree_picture"):  # matplotlib, now: this is the point
+    for module in ("bark_cli.plot", "bark_cli.animation", "bark_cli.tree_picture", "bark_cli.figures"):  # matplotlib, now: this is the point
         importlib.import_module(module)
 
     while True:

@@ -77,4 +77,6 @@ def print_summary(summary: dict, out: Path) -> None:
                 "mean_anisotropy", "fraction_within_45_deg", "wall_time_s"):
         value = summary.get(key)
         table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
+    for key, value in (summary.get("fracture") or {}).items():  # the fracture-history effect
+        table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
     Console().print(table)

@@ -107,7 +107,7 @@ SCENE_KEYS = [("lattice", k) for k in ("n_bases", "divergence_deg", "rise", "off
     [("mechanics", k) for k in ("k", "c", "b", "m", "f_max", "fmax_spread", "fmax_weibull_shape")] + \
     [("run", k) for k in ("dt", "seed", "until_time", "until_radius", "until_patches", "min_patch_size",
                           "degenerate_fraction", "on_degenerate", "stepping", "overshoot_tol", "max_halvings", "backend")] + \
-    [("effects", k) for k in ("want", "frame_every", "series_every", "window")] + [("scene", "name"), ("growth", "G")]
+    [("effects", k) for k in ("want", "frame_every", "series_every", "history_every", "window")] + [("scene", "name"), ("growth", "G")]
 BULGE_KEYS = ("z", "half_width", "magnitude", "decay", "G", "f_max")
 
 

@@ -110,6 +110,24 @@ def test_a_damaged_database_is_one_line(tmp_path):
         run_sweep(Sweep(base=TINY, axes=_grid(1)), db)
 
 
+def test_a_table_of_an_earlier_bark_gets_the_columns_added_since(tmp_path):
+    import sqlite3
+
+    from bark.sweep import RESULT_COLUMNS, SweepTable
+
+    db = tmp_path / "old.sqlite"
+    con = sqlite3.connect(db)
+    con.execute("CREATE TABLE runs (key TEXT PRIMARY KEY, point TEXT NOT NULL, seed INTEGER NOT NULL, n_patches INTEGER, "
+                "wall_s REAL, finished TEXT, bark_version TEXT, scene TEXT NOT NULL)")
+    con.commit()
+    con.close()
+    with SweepTable(db) as table:
+        assert set(RESULT_COLUMNS) <= set(table.columns())
+    plan = Sweep(base=TINY, axes=_grid(1))
+    run_sweep(plan, db)
+    assert len(_rows(db)) == len(plan.points())
+
+
 # -- the command ------------------------------------------------------------------------------------
 def test_sweep_command_writes_its_table_and_montage(tmp_path):
     out = tmp_path / "s"
