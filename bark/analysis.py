@@ -30,6 +30,7 @@ __all__ = [
     "axial_sd",
     "axial_difference",
     "patch_statistics",
+    "components",
     "window_labels",
     "pattern_summary",
     "hellinger",
@@ -97,16 +98,24 @@ def patch_statistics(points: np.ndarray, labels: np.ndarray, min_size: int = 7) 
     return Pattern(points=points, patches=labels).patch_table(min_size).rows()
 
 
+def components(n: int, pairs: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """A label per base of ``0 .. n − 1``: the connected components of the springs ``pairs[kept]``
+    (``scipy.sparse.csgraph``'s numbering: by each component's smallest base), int32."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    p = np.asarray(pairs, dtype=np.int64)[np.asarray(kept, bool)]
+    adjacency = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n))
+    return connected_components(adjacency, directed=False)[1].astype(np.int32)
+
+
 def window_labels(points: np.ndarray, pairs: np.ndarray, intact: np.ndarray, size: float) -> np.ndarray:
     """Patches as photographs of the trunk show them: the surface unrolled (arc length × height) is
     cut into windows about ``size`` × ``size`` (rows of height ``size``; in each row, a whole number
     of equal windows round the trunk at the row's mean radius, the first at θ = 0), and a patch is a
     connected component of the intact springs whose two bases lie in the same window.  A network of
     strands that joins far away is, in a window, the strands it shows.  Returns a label per base
-    (components numbered as ``scipy.sparse.csgraph`` numbers them)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
+    (numbered as :func:`components` numbers them)."""
     points = np.asarray(points, dtype=float)
     n = len(points)
     radius = np.hypot(points[:, 0], points[:, 1])
@@ -117,10 +126,7 @@ def window_labels(points: np.ndarray, pairs: np.ndarray, intact: np.ndarray, siz
     across = np.maximum(1, np.rint(2.0 * np.pi * mean_radius / size)).astype(np.int64)[inverse]
     window = inverse * (int(across.max(initial=1)) + 1) + np.minimum((turn * across).astype(np.int64), across - 1)
     pairs = np.asarray(pairs, dtype=np.int64)
-    kept = np.asarray(intact, bool) & (window[pairs[:, 0]] == window[pairs[:, 1]])
-    p = pairs[kept]
-    adjacency = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n))
-    return connected_components(adjacency, directed=False)[1].astype(np.int32)
+    return components(n, pairs, np.asarray(intact, bool) & (window[pairs[:, 0]] == window[pairs[:, 1]]))
 
 
 def pattern_summary(rows: list[dict]) -> dict:

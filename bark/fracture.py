@@ -79,13 +79,9 @@ def crack_counts(broken: np.ndarray, pairs: np.ndarray, offsets: tuple[int, ...]
 
 def patch_count(n_bases: int, pairs: np.ndarray, intact: np.ndarray, min_size: int) -> int:
     """Patches of at least ``min_size`` of bases ``0 .. n_bases − 1`` over the ``intact`` springs."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
+    from bark.analysis import components
 
-    ends = pairs[intact]
-    graph = sp.coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(n_bases, n_bases))
-    _, labels = connected_components(graph, directed=False)
-    return int(np.count_nonzero(np.bincount(labels) >= min_size))
+    return int(np.count_nonzero(np.bincount(components(n_bases, pairs, intact)) >= min_size))
 
 
 @attrs.frozen
@@ -124,7 +120,7 @@ def history(log: dict[str, np.ndarray], pairs: np.ndarray, offsets: tuple[int, .
     dissipation = np.asarray(dissipation, dtype=float)
     cracks = crack_counts(ids, pairs, offsets)
     done = np.searchsorted(when, times, side="right")  # breaks by each sample time
-    at_sample = np.where(done > 0, cracks[np.maximum(done - 1, 0)] if cracks.size else 0, 0)
+    at_sample = np.concatenate([[0], cracks])[done]  # cracks after the last of them (none before any)
     pairs = np.asarray(pairs, dtype=np.int64)
     spring_top = np.maximum(pairs[:, 0], pairs[:, 1])
     broke_at = np.full(len(pairs), np.inf)
@@ -133,7 +129,7 @@ def history(log: dict[str, np.ndarray], pairs: np.ndarray, offsets: tuple[int, .
     for t in times.tolist():
         n = bases_at(t)
         patches.append(patch_count(n, pairs, (spring_top < n) & (broke_at > t), min_size))
-    samples = {"t": times, "n_broken": done.astype(np.int64), "n_cracks": np.asarray(at_sample, dtype=np.int64),
+    samples = {"t": times, "n_broken": done.astype(np.int64), "n_cracks": at_sample.astype(np.int64),
                "n_patches": np.array(patches, dtype=np.int64), "dissipation": dissipation}
     if not ids.size:
         return FractureHistory(samples, None, 0, None, None)
@@ -185,11 +181,11 @@ class Dissipation:
         self.result = found
         return found
 
-    def write(self, path, sim, min_size: int):
-        """``analyse``, then write its samples as ``fracture.csv`` at ``path``."""
+    def write(self, path):
+        """The history ``analyse`` made, as ``fracture.csv`` at ``path``."""
         from bark.output import write_csv
 
-        return write_csv(path, self.analyse(sim, min_size).rows(), COLUMNS)
+        return write_csv(path, self.result.rows(), COLUMNS)
 
 
 def growth_dissipation(sim, t: float) -> float:
@@ -198,8 +194,7 @@ def growth_dissipation(sim, t: float) -> float:
     z = sim.state.anchor[:, 2]
     h = 1e-4 * max(t, 1.0)
     lo = max(t - h, 0.0)
-    rate = (np.mean(np.broadcast_to(sim.growth.radius(t + h, z), z.shape))
-            - np.mean(np.broadcast_to(sim.growth.radius(lo, z), z.shape))) / (t + h - lo)
+    rate = (sim.growth.mean_radius(t + h, z) - sim.growth.mean_radius(lo, z)) / (t + h - lo)
     return float(sim.mechanics.b * rate * rate)
 
 

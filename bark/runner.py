@@ -127,6 +127,17 @@ def _outputs_complete(folder: Path, meta: dict) -> bool:
     return isinstance(summary, dict) and summary.get("steps") == meta["step_count"]
 
 
+def _record_end(sim, scene, recorders: list) -> dict:
+    """The state at the stop recorded, once, by every recorder, and the fracture history made from
+    what was recorded; the recorders by name."""
+    for rec in recorders:
+        rec.record(sim)
+    by_name = {rec.name: rec for rec in recorders}
+    if "dissipation" in by_name:
+        by_name["dissipation"].analyse(sim, scene.run.min_patch_size)
+    return by_name
+
+
 def _extra(by_name: dict) -> dict:
     """What the recorders add to summary.json: the fracture history's summary."""
     rec = by_name.get("dissipation")
@@ -184,24 +195,18 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
 def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wall: float, resumed: bool, error,
             pictures, save: bool = True) -> Outcome:
     if out is None:
-        for rec in recorders:
-            rec.record(sim)
-        by_name = {rec.name: rec for rec in recorders}
-        if "dissipation" in by_name:
-            by_name["dissipation"].analyse(sim, scene.run.min_patch_size)
+        by_name = _record_end(sim, scene, recorders)
         summary = run_summary(sim, scene, sim.analyze(), reason, wall, _extra(by_name))
         return Outcome(out=None, scene=scene, sim=sim, stop_reason=reason, summary=summary, error=error)
     (out / "summary.json").unlink(missing_ok=True)  # stale from here on: written again last
     if save and scene.has("checkpoints"):
         why = "interrupted" if reason in STOPPED_BY_SIGNAL else "end"
         checkpoint.save(out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall}, recorders)
-    for rec in recorders:  # the state at the stop, once (after the checkpoint: a resumed run records
-        rec.record(sim)    # only what the uninterrupted run would)
-    by_name = {rec.name: rec for rec in recorders}
-    if "series" in by_name:
+    by_name = _record_end(sim, scene, recorders)  # after the checkpoint: a resumed run records only what
+    if "series" in by_name:                        # the uninterrupted run would
         by_name["series"].write(out / "statistics.csv")
     if "dissipation" in by_name:
-        by_name["dissipation"].write(out / "fracture.csv", sim, scene.run.min_patch_size)
+        by_name["dissipation"].write(out / "fracture.csv")
     summary = write_run(sim, scene, out, reason, wall, _extra(by_name))
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error)
     for effect, (name, draw) in (pictures or {}).items():

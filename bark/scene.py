@@ -161,7 +161,7 @@ def _check_feasible(lattice: Lattice, run: RunSettings, growth, resolved: dict) 
                         Ref("lattice", "n_bases", lattice.n_bases))
     if run.until_radius is not None:
         z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
-        mean_radius = lambda t: float(np.mean(np.broadcast_to(growth.radius(t, z), z.shape)))  # noqa: E731
+        mean_radius = lambda t: growth.mean_radius(t, z)  # noqa: E731
         start = mean_radius(0.0)
         if run.until_radius <= start:
             raise BarkError(f"{{0}} is not above the trunk's initial mean radius {start:.6g}: the run would stop before it starts",

@@ -350,8 +350,7 @@ class Simulation:
     @property
     def radius(self) -> float:
         """Mean trunk radius now (at the anchors' heights)."""
-        z = self.state.anchor[:, 2]
-        return float(np.mean(np.broadcast_to(self.growth.radius(self.state.t, z), z.shape)))
+        return self.growth.mean_radius(self.state.t, self.state.anchor[:, 2])
 
     @property
     def n_broken(self) -> int:

@@ -238,7 +238,7 @@ def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
         n = min(n, _first(times >= stop.until_time - 1e-9 * sim.clock.h) + 1)
     if stop is not None and stop.until_radius is not None:
         z = sim.state.anchor[:, 2]
-        radii = np.array([np.mean(np.broadcast_to(sim.growth.radius(t, z), z.shape)) for t in times[:n].tolist()])
+        radii = np.array([sim.growth.mean_radius(t, z) for t in times[:n].tolist()])
         n = min(n, _first(radii >= stop.until_radius) + 1)
     return max(n, 1)
 

@@ -125,6 +125,12 @@ class Growth(Strategy):
         """The ``params`` array of the compiled form."""
         return np.empty(0)
 
+    def mean_radius(self, t: float, z: np.ndarray) -> float:
+        """The mean of ``radius(t, z)`` over the heights ``z`` (derived from ``radius``: a law that
+        gives one radius for all heights counts it once for each)."""
+        z = np.asarray(z, dtype=float)
+        return float(np.mean(np.broadcast_to(self.radius(t, z), z.shape)))
+
     def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
         """Breaking thresholds of springs whose midpoints are at heights ``z`` (called when springs
         are made).  The default leaves them as they are; a law with regions of their own material

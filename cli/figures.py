@@ -16,9 +16,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm, Normalize
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from bark.compare import QUANTITIES, Comparison
 from bark.pattern import PatternStatistics
@@ -214,8 +216,6 @@ def plot_fracture_history(history, path: str | Path) -> Path:
     top.legend(fontsize=7, frameon=False)
     bottom.plot(t, s["n_patches"], color="tab:blue", lw=1.2)
     bottom.set_ylabel("patches", color="tab:blue")
-    from matplotlib.ticker import MaxNLocator
-
     bottom.yaxis.set_major_locator(MaxNLocator(integer=True))
     power = bottom.twinx()
     power.plot(t, s["dissipation"], color="tab:orange", lw=1.0)
@@ -235,8 +235,6 @@ def plot_power_law(x: np.ndarray, y: np.ndarray, groups: np.ndarray, fit, path: 
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     values = sorted(set(groups.tolist()))
-    from matplotlib import colormaps
-
     cmap = colormaps["viridis"]
     for k, g in enumerate(values):
         on = groups == g

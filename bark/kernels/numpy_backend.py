@@ -120,11 +120,9 @@ class NumpyBackend(Backend):
 
     def patch_labels(self, state) -> np.ndarray:
         """Connected components of the intact springs (scipy.sparse.csgraph)."""
-        from scipy.sparse.csgraph import connected_components
+        from bark.analysis import components
 
-        p = state.pairs[state.intact].astype(np.int64)
-        adj = sp.coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(state.n_bases, state.n_bases))
-        return connected_components(adj, directed=False)[1].astype(np.int32)
+        return components(state.n_bases, state.pairs, state.intact)
 
 
 BACKEND_CLASS = NumpyBackend
