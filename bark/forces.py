@@ -27,7 +27,7 @@ from bark.errors import BarkError, Ref
 if TYPE_CHECKING:
     import scipy.sparse as sp
 
-__all__ = ["Mechanics", "ForceField", "SpringOrder", "spring_geometry", "incidence", "stiffness_matvec"]
+__all__ = ["Mechanics", "ForceField", "SpringOrder", "order_keys", "spring_geometry", "incidence", "stiffness_matvec"]
 
 
 @attrs.frozen(kw_only=True)
@@ -78,7 +78,7 @@ def spring_geometry(x: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.nd
     return d, np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
-def _order_keys(pairs: np.ndarray) -> np.ndarray:
+def order_keys(pairs: np.ndarray) -> np.ndarray:
     """Sort keys of springs ``(i, j)``: by offset ``j − i``, then by ``i`` (one unsigned integer each)."""
     i, j = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
     return ((j - i + 2**31).astype(np.uint64) << np.uint64(32)) | i.astype(np.uint64)
@@ -114,7 +114,7 @@ class SpringOrder:
             seen, self.keys, self.ids = 0, np.empty(0, np.uint64), np.empty(0, np.int64)
         self.state = state
         if m > seen:
-            keys = _order_keys(pairs[seen:])
+            keys = order_keys(pairs[seen:])
             new = np.argsort(keys, kind="stable")
             keys = keys[new]
             at = np.searchsorted(self.keys, keys, side="right")  # after equal keys: ties stay in id order

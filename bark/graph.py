@@ -31,6 +31,12 @@ class LeafBaseGraph(nx.Graph):
         self.add_nodes_from(new)
         keys.extend(new)
 
+    def has_bases(self, ids: np.ndarray) -> np.ndarray:
+        """Whether each of ``ids`` is a node: the nodes are the ids 0 … n-1 (``add_bases`` adds them in
+        order, and bases never leave)."""
+        ids = np.asarray(ids)
+        return (ids >= 0) & (ids < len(self._node))
+
     def add_springs(self, pairs: np.ndarray) -> None:
         """Edges for the springs ``pairs`` (rows of base ids), keyed by the node objects themselves: one
         int object per base rather than one per spring end, 7.5 MiB less at 70 000 bases."""

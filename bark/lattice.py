@@ -157,10 +157,21 @@ class Lattice:
         for o in self.offsets:
             below = new - o  # springs down to a base that is present (new or not)
             below = below[below >= 0]
-            below = below[np.fromiter((int(j) in present for j in below), bool, below.size)]
+            below = below[_present(present, below)]
             above = new + o  # springs up to a base that was there before
             above = above[np.isin(above, new, invert=True)]
-            above = above[np.fromiter((int(j) in present for j in above), bool, above.size)]
+            above = above[_present(present, above)]
             ends = np.concatenate([below, above - o])
             blocks.append(np.column_stack([np.sort(ends), np.sort(ends) + o]))
         return np.concatenate(blocks).astype(np.uint32) if blocks else np.empty((0, 2), np.uint32)
+
+
+def _present(present, ids: np.ndarray) -> np.ndarray:
+    """Which of ``ids`` are in ``present``: a range or the graph of record (``has_bases``) at once,
+    any other container one id at a time."""
+    if isinstance(present, range) and present.step == 1:
+        return (ids >= present.start) & (ids < present.stop)
+    has = getattr(present, "has_bases", None)
+    if has is not None:
+        return has(ids)
+    return np.fromiter((int(j) in present for j in ids), bool, ids.size)

@@ -20,7 +20,7 @@ from bark._validate import MISSING, in_range, int_in, one_of, optional, positive
 from bark.errors import BarkError, NonFiniteStateError, Ref
 from bark.forces import ForceField, Mechanics, spring_geometry
 from bark.lattice import Lattice
-from bark.state import State, cylinder_points
+from bark.state import State, cylinder_points, grown
 from bark.stepping import Clock, Numerics
 from bark.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
 
@@ -306,13 +306,15 @@ class Simulation:
         self.graph.add_bases(len(ids))
         pairs = self.lattice.new_pairs(ids, self.graph)
         if len(pairs):
-            positions = np.ascontiguousarray(s.x)  # row-major, as the rest lengths were always measured
-            _, rest = spring_geometry(positions, pairs)
-            fmax = self.growth.adjust_thresholds(0.5 * (positions[pairs[:, 0], 2] + positions[pairs[:, 1], 2]),
+            ends, local = np.unique(pairs.ravel(), return_inverse=True)
+            local = local.reshape(pairs.shape)
+            positions = np.ascontiguousarray(s.x[ends])  # the springs' ends, row-major, as rest lengths are measured
+            _, rest = spring_geometry(positions, local)
+            fmax = self.growth.adjust_thresholds(0.5 * (positions[local[:, 0], 2] + positions[local[:, 1], 2]),
                                                  self.mechanics.thresholds(len(pairs), self.rng))
             s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
             self.graph.add_springs(pairs)
-        self._tension = np.resize(self._tension, s.n_springs)
+        self._tension = _rows(self._tension, s.n_springs)
         self._labels = None
         return ids
 
@@ -391,6 +393,17 @@ class Simulation:
         if data.get("_built"):
             object.__setattr__(self, "_built", False)
             self.build(data["state"], data["clock"])
+
+
+def _rows(a: np.ndarray, n: int) -> np.ndarray:
+    """The first ``n`` entries of ``a``'s buffer, grown (doubled, the new ones zero) when too short:
+    an array that follows the number of springs without a copy at every join."""
+    own = a.base is not None and a.base.ndim == 1 and a.base.ctypes.data == a.ctypes.data
+    buffer = a.base if own else a
+    if len(buffer) < n:
+        buffer = np.zeros(grown(len(buffer), n))
+        buffer[:len(a)] = a
+    return buffer[:n]
 
 
 _MADE_BY_BUILD = ("state", "graph", "clock", "backend", "forces", "stability_limit")

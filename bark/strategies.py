@@ -37,7 +37,11 @@ strategy in Python once per step.  The function is the definition: the verb is d
   the radius does not depend on height; ``radius(t, z)`` then follows from it.  A law whose radius
   has parts that depend on time alone (a fading bulge's ``exp``) may also give
   ``compiled_time(t, params) -> q``: computed once a step, and ``compiled`` is then called with ``q``
-  in place of ``params`` (per base, only what depends on height is left).
+  in place of ``params`` (per base, only what depends on height is left).  If its radius is a sum
+  of such parts weighted by functions of height, ``r = q[0] + w_0(z)·q[1] + w_1(z)·q[2] + ...``
+  (evaluated left to right), it may give ``compiled_weights(z, params) -> w`` (an array of heights
+  in, one row of weights per term out): the anchors, whose heights never change, then have their
+  weights taken once and their radii summed each step, not computed by a call each.
 
 The functions must be importable by name (module-level functions or static methods) to be cached
 on disk; others are compiled once per process.  Written with numpy ufuncs (``np.sqrt``), one
@@ -57,8 +61,8 @@ from bark.physics import as_given
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS"]
 
 
-_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "update": None, "rule": None,
-                                  "overload_only": False}
+_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "compiled_weights": None,
+                                  "update": None, "rule": None, "overload_only": False}
 
 
 def _form_owner(strategy, form: str) -> type | None:
@@ -106,7 +110,7 @@ class Growth(Strategy):
     """Secondary growth: how the trunk radius changes with time (and, for bulges, with height)."""
 
     kind: ClassVar[str] = "growth"
-    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time")
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time", "compiled_weights")
     compiled: ClassVar[Callable | None] = None
     """Compiled form ``compiled(t, z, params) -> r`` (see the module's docstring), or ``None``."""
     uniform: ClassVar[bool] = False
@@ -114,6 +118,17 @@ class Growth(Strategy):
     compiled_time: ClassVar[Callable | None] = None
     """Optional per-step part of the compiled form, ``compiled_time(t, params) -> q``: what depends
     on time alone, computed once a step; ``compiled`` then receives ``q`` in place of ``params``."""
+    compiled_weights: ClassVar[Callable | None] = None
+    """Optional, beside ``compiled_time``: ``compiled_weights(z, params) -> w``, shape ``(K, len(z))``,
+    such that ``compiled(t, z, q)`` is ``q[0] + w[0]·q[1] + ... + w[K-1]·q[K]`` to the bit (summed left
+    to right; ``q = compiled_time(t, params)``).  The anchors' radii are then sums of weights taken once
+    per anchor (checked against ``compiled`` then).  A subclass that gives ``compiled`` or
+    ``compiled_time`` of its own and not this loses it."""
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if ("compiled" in vars(cls) or "compiled_time" in vars(cls)) and "compiled_weights" not in vars(cls):
+            cls.compiled_weights = None
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
         """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""

@@ -12,7 +12,7 @@ from bark._validate import construct, non_negative, optional, positive
 from bark.errors import BarkError, Ref
 from bark.strategies import Growth
 
-__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth"]
+__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth", "bulge_radius", "bulge_time", "bulge_weights"]
 
 
 def sqrt_radius(t, z, p):
@@ -100,32 +100,41 @@ def bulge_time(t, p):
     """The per-step part of :class:`BulgeGrowth`'s compiled form (``compiled_time``): everything that
     depends on time alone, once per step.  From ``p = (kind, r0, G, n, z_1, half_width_1,
     magnitude_1, decay_1, G_1 or NaN, ...)`` (kind 0: sqrt law, 1: linear) it makes ``q = (r_base(t),
-    n, z_1, half_width_1, extra_1(t), ...)``, where a bulge's ``extra`` is its fading magnitude plus
-    what its own growth constant adds to the base law."""
+    extra_1(t), ..., extra_n(t), z_1, half_width_1, ..., z_n, half_width_n, n)``, where a bulge's
+    ``extra`` is its fading magnitude plus what its own growth constant adds to the base law: the
+    radius is ``q[0] + s_1(z)·q[1] + ... + s_n(z)·q[n]`` (``bulge_weights`` gives the ``s_b``)."""
     ft = np.sqrt(t) if p[0] == 0.0 else t * 1.0
     base = p[1] + p[2] * ft
     n = int(p[3])
     q = np.empty(2 + 3 * n)
     q[0] = base
-    q[1] = p[3]
+    q[-1] = p[3]
     for b in range(n):
         o = 4 + 5 * b
         extra = p[o + 2] * math.exp(-p[o + 3] * t)  # a scalar: the C library's exp in numpy and numba alike
         if not np.isnan(p[o + 4]):
             extra = extra + (p[1] + p[o + 4] * ft) - base
-        q[2 + 3 * b] = p[o]
-        q[3 + 3 * b] = p[o + 1]
-        q[4 + 3 * b] = extra
+        q[1 + b] = extra
+        q[1 + n + 2 * b] = p[o]
+        q[2 + n + 2 * b] = p[o + 1]
     return q
 
 
 def bulge_radius(t, z, q):
     """The per-base part of :class:`BulgeGrowth`'s compiled form: ``r_base + Σ_b s_b(z)·extra_b`` with
     ``q`` from :func:`bulge_time`."""
+    n = int(q[-1])
     r = q[0]
-    for b in range(int(q[1])):
-        r = r + bump(z, q[2 + 3 * b], q[3 + 3 * b]) * q[4 + 3 * b]
+    for b in range(n):
+        r = r + bump(z, q[1 + n + 2 * b], q[2 + n + 2 * b]) * q[1 + b]
     return r
+
+
+def bulge_weights(z, p):
+    """:class:`BulgeGrowth`'s ``compiled_weights``: each bulge's profile ``s_b`` at heights ``z``, one
+    row per bulge (``p`` as for :func:`bulge_time`)."""
+    z = np.asarray(z, dtype=float)
+    return np.array([bump(z, p[4 + 5 * b], p[5 + 5 * b]) for b in range(int(p[3]))]).reshape(-1, z.size)
 
 
 _BASE_KINDS = {sqrt_radius: 0.0, linear_radius: 1.0}
@@ -180,6 +189,11 @@ class BulgeGrowth(Growth):
     def compiled_time(self):
         """``bulge_time`` (the fading and the growth constants, once per step) beside ``compiled``."""
         return bulge_time if self.compiled is not None else None
+
+    @property
+    def compiled_weights(self):
+        """``bulge_weights`` (each bulge's profile, once per anchor) beside ``compiled``."""
+        return bulge_weights if self.compiled is not None else None
 
     def compiled_params(self) -> np.ndarray:
         """``(kind of the base law, r0, G, number of bulges, then z, half_width, magnitude, decay, G or

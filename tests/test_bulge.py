@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import attrs
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from bark import Stop
 from bark.errors import BarkError
 from bark.scene import Scene
 from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
+from conftest import build_sim
 
 bulges = st.builds(
     Bulge,
@@ -124,6 +127,44 @@ def test_the_bulge_law_per_base_and_on_arrays_gives_the_same_bits():
         one_by_one = np.array([bulge_radius(t, float(v), q) for v in z])
         assert np.array_equal(one_by_one, bulge_radius(t, z, q))
         assert np.array_equal(one_by_one, growth.radius(t, z))
+
+
+@given(z=st.lists(st.floats(-1.0, 2.0, allow_nan=False), min_size=1, max_size=50),
+       t=st.floats(0.0, 1e4, allow_nan=False))
+def test_the_bulge_laws_weights_give_its_radius_to_the_bit(z, t):
+    """``compiled_weights``: the anchors' radii as ``q[0] + s_1(z)·q[1] + s_2(z)·q[2]`` (the kernel
+    sums them with each anchor's profiles taken once) are the compiled radius exactly, inside, outside
+    and at the edges of overlapping bulges."""
+    from bark_plugins.growth import Bulge, BulgeGrowth, bulge_time, bulge_weights
+
+    growth = BulgeGrowth(base={"name": "sqrt", "r0": 0.35, "G": 0.04},
+                         bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.1, decay=0.03, G=0.02),
+                                 Bulge(z=0.5, half_width=0.05, magnitude=0.02)])
+    assert growth.compiled_weights is bulge_weights
+    z = np.array(z + [0.2, 0.6, 0.45, 0.55])
+    w, q = bulge_weights(z, growth.compiled_params()), bulge_time(t, growth.compiled_params())
+    assert w.shape == (2, len(z))
+    assert np.array_equal((q[0] + w[0] * q[1]) + w[1] * q[2], growth.radius(t, z))
+
+
+def test_weights_that_are_not_the_radius_are_refused_at_the_first_step():
+    """A law whose ``compiled_weights`` break their promise would move its anchors wrongly without a
+    trace: the backend checks each anchor's weights against the compiled radius when it takes them."""
+    from bark_plugins.growth import Bulge, BulgeGrowth, bulge_weights
+
+    def off_by_one_ulp(z, p):
+        return np.nextafter(bulge_weights(z, p), 2.0)
+
+    @attrs.frozen(kw_only=True)
+    class Careless(BulgeGrowth):
+        @property
+        def compiled_weights(self):
+            return off_by_one_ulp
+
+    growth = Careless(base={"name": "sqrt", "G": 0.05}, bulges=[Bulge(z=0.1, half_width=0.05, magnitude=0.01)])
+    sim = build_sim(n_bases=300, growth=growth, backend="numba")
+    with pytest.raises(BarkError, match="compiled_weights"):
+        sim.run(Stop(until_time=0.5))
 
 
 def test_a_growth_law_that_writes_radius_again_loses_the_inherited_compiled_forms():

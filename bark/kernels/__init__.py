@@ -83,6 +83,10 @@ class Plan:
     step): the call ends after such a step whose load is at most 1, so the clock can double the step
     there, as it would after a call of one step (default: never)."""
 
+    weights: Callable | None = None
+    """The growth law's ``compiled_weights(z, params) -> w`` (``bark.strategies.Growth``), or ``None``:
+    the anchors' radii as weighted sums (their heights never change), in place of a call per anchor."""
+
     def relax_flags(self) -> np.ndarray:
         """``relax`` as one bool per step."""
         return np.zeros(len(self.times), bool) if self.relax is None else np.ascontiguousarray(self.relax, dtype=bool)

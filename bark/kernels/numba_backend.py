@@ -32,8 +32,9 @@ import numba.extending
 import numpy as np
 
 from bark import physics
-from bark.forces import SpringOrder
+from bark.forces import SpringOrder, order_keys
 from bark.kernels import Backend, Plan, Steps
+from bark.errors import BarkError
 from bark.state import grown
 
 NAME = "numba"
@@ -150,18 +151,18 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before, from_radius):
+def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before, from_radius, heights):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
     step the anchors are ``r_before · direction`` (the last step's radius; written back once, at the end
     of the call — the very products, so the bits do not depend on where calls end); else each is placed
-    at its own radius, every step (``_base_pass_per_base_radius``).  Returns whether every coordinate
+    at its own radius, every step (``_base_pass_per_base_radius``, with the anchors' ``heights``).  Returns whether every coordinate
     stayed finite.
     One coordinate per vector: this loop runs in SIMD lanes."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     if not uniform:
-        return _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params)
+        return _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, heights)
     bad = 0
     for q in range(x0.shape[0]):
         anchor_x = r_before * dx[q] if from_radius else ax[q]
@@ -191,13 +192,18 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
 
 
 @inline
-def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params):
-    """``_base_pass`` for a radius that depends on height, in two loops: the forces and the update
-    (no calls: SIMD lanes), then the surface at each base's own radius and its anchor at its site's
-    (a call of the growth law each, which keeps a loop scalar).  Per base the same operations in the
-    same order as one loop: the same bits."""
+def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, heights):
+    """``_base_pass`` for a radius that depends on height, in loops: the forces and the update (no
+    calls: SIMD lanes), then the surface at each base's own radius (a call of the growth law each,
+    which keeps that loop scalar), then the anchors at their sites' radii.  The anchors' heights never
+    change, so a law that gives ``compiled_weights`` has each anchor's radius as ``q[0] + w_0 q[1] +
+    w_1 q[2] + ...`` with its weights ``w`` taken once (``heights = (weights, stride)``: weight k of
+    base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
+    (stride 0), a call per anchor.  Per base the same operations in the same order as one loop: the
+    same bits."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
-    for q in range(x0.shape[0]):
+    n = x0.shape[0]
+    for q in range(n):
         g0 = _base_force(f0[q], x0[q], ax[q], v0[q], c, b)
         g1 = _base_force(f1[q], x1[q], ay[q], v1[q], c, b)
         g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
@@ -207,8 +213,10 @@ def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params):
         x0[q], v0[q] = update(x0[q], v0[q], g0, hm, h)
         x1[q], v1[q] = update(x1[q], v1[q], g1, hm, h)
         x2[q], v2[q] = update(x2[q], v2[q], g2, hm, h)
+    weights, stride = heights
+    by_weights = stride > 0
     bad = 0
-    for q in range(x0.shape[0]):
+    for q in range(n):
         px, py, pz = x0[q], x1[q], x2[q]
         r = radius(t, pz, params)
         scale = _surface_scale(px, py, r)
@@ -220,15 +228,27 @@ def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params):
         vr = _radial_speed(v0[q], v1[q], px, py, 1.0 / (r * r))
         v0[q] = v0[q] - vr * px
         v1[q] = v1[q] - vr * py
-        ra = radius(t, az[q], params)
-        ax[q] = ra * dx[q]
-        ay[q] = ra * dy[q]
+        if not by_weights:
+            ra = radius(t, az[q], params)
+            ax[q] = ra * dx[q]
+            ay[q] = ra * dy[q]
+    if by_weights:  # ax holds each anchor's radius while it is summed
+        for q in range(n):
+            ax[q] = params[0]
+        for k in range(weights.shape[0] // stride):
+            w, coefficient = weights[k * stride:k * stride + n], params[1 + k]
+            for q in range(n):
+                ax[q] = ax[q] + w[q] * coefficient
+        for q in range(n):
+            ra = ax[q]
+            ax[q] = ra * dx[q]
+            ay[q] = ra * dy[q]
     return bad == 0
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, update,
-                  rule, radius, prepare):
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
+                  update, rule, radius, prepare):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
@@ -261,7 +281,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
         finite = _base_pass(bases, c, b, hm, h, t, update, radius, q, uniform, r_now, r_before,
-                            uniform and step > 0)
+                            uniform and step > 0, heights)
         r_before = r_now
         before = n_log
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work,
@@ -319,9 +339,9 @@ _prepare = inline({prepare})
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log):
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights):
     return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log,
-                         _update, _rule, _radius, _prepare)
+                         heights, _update, _rule, _radius, _prepare)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
 
@@ -392,9 +412,9 @@ def specialized(update, rule, radius, prepare=physics.as_given):
         u, r, g, p = (inline(fn) for fn in key)
 
         @numba.njit(nogil=True, error_model="numpy")
-        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log):
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
-                                 log, u, r, g, p)
+                                 log, heights, u, r, g, p)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -531,34 +551,84 @@ def _radii(r) -> np.ndarray:
     return np.ascontiguousarray(r)
 
 
+SLACK_RUN = 64
+"""A run of at least this many springs gets as many free positions again after it, where springs
+that extend it later (the next base of the same offset, as bases join) go without moving any other."""
+
+
 @attrs.define(eq=False)
 class _Frame:
-    """What a kernel call is given besides the state: the state's columns as vectors, and work space
-    kept between calls (derived data: rebuilt whenever the state's arrays are replaced or resized)."""
+    """What a kernel call is given besides the state: the state's columns as vectors, its springs in
+    the kernel's order, and work space kept between calls (derived data of one state, extended as its
+    bases and springs are appended: a join costs its new springs, not a copy of all).
 
-    of: tuple
-    """The state's sizes and stored arrays this frame was made for (compared by identity)."""
+    The springs are laid out by run (``SpringOrder.runs``), each run at its own *position* in the
+    per-spring arrays and followed by free positions (``SLACK_RUN``), so that a joining base's springs,
+    which continue the runs of their offsets, are written in place; springs that continue no run
+    with room make the frame again.  Positions are the kernel's spring indices (it logs them);
+    ``ids`` maps them back to spring ids."""
+
+    state: object
+    """The state it was made for (compared by identity)."""
+    sizes: tuple
+    """``(n_bases, n_springs)`` it covers, and the stored arrays whose columns ``bases`` are."""
     bases: tuple
     """The 14 base vectors the kernel takes: x, v, f, anchor (3 each), anchor direction (2)."""
-    order: np.ndarray | None
-    """Spring ids in the order the kernel takes them (:class:`bark.forces.SpringOrder`; ``None``: id
-    order).  The kernel's per-spring arrays are in this order; it logs positions in it."""
     runs: tuple
-    """The springs in that order as runs (``SpringOrder.runs``)."""
+    """``(position, length, first i, offset o)`` of each run, in summation order (lengths grow in place)."""
+    room: np.ndarray
+    """Positions each run may fill (its length plus its free positions)."""
+    first_keys: np.ndarray
+    """Each run's first spring's sort key (``bark.forces.order_keys``), to place appended springs."""
     springs: tuple
-    """Rest lengths, thresholds and ``1 / fmax`` in that order: copies made with the frame (a spring's
-    rest length and threshold are set when it is made and never change; see ``bark.state``)."""
-    inv_fmax: np.ndarray
-    """``1 / fmax`` in id order (for ``measure``; the same array as ``springs[2]`` in id order)."""
+    """Rest lengths, thresholds and ``1 / fmax`` by position (a spring's rest length and threshold are
+    set when it is made and never change; see ``bark.state``)."""
+    ids: np.ndarray
+    """Spring id at each position (``-1``: a free one)."""
+    live: np.ndarray
+    """The intact mask by position (free positions ``False``): the kernel's working copy, kept in step
+    with the state's ``intact`` (see ``NumbaBackend._live``)."""
+    n_live: int
+    """How many are ``True``."""
+    pending: np.ndarray
+    """Springs the last call broke (ids): the state has them broken once the simulation has taken them."""
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call: an undone step is replayed from them."""
-    live: np.ndarray
     log: tuple
 
 
-def _frame_of(state) -> tuple:
-    return (state.n_bases, state.n_springs, *state._store.values())
+@attrs.define(eq=False)
+class _Weights:
+    """The anchors' weights (``Growth.compiled_weights``) for one state and growth law."""
+
+    key: tuple
+    state: object
+    table: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 0)))
+    """Weight k of base i at ``[k, i]``; capacity for more bases in its columns."""
+    count: int = 0
+    """Bases done."""
+
+
+_NO_WEIGHTS = (np.empty(0), 0)
+
+
+def _check_weights(plan: Plan, t: float, z: np.ndarray, weights: np.ndarray) -> None:
+    """The promise of ``compiled_weights``: at heights ``z``, ``q[0] + w_0 q[1] + w_1 q[2] + ...``
+    is the compiled radius, to the bit (the kernel sums them in place of calling it)."""
+    q = np.asarray(plan.prepare(t, plan.params), dtype=float)
+    summed = np.full(len(z), q[0])
+    for k in range(len(weights)):
+        summed = summed + weights[k] * q[1 + k]
+    radius = np.broadcast_to(plan.radius(t, z, q), z.shape)
+    if weights.shape[1:] != z.shape or not np.array_equal(summed, radius):
+        raise BarkError(f"the growth law's compiled_weights ({getattr(plan.weights, '__qualname__', plan.weights)}) "
+                        f"do not reproduce its compiled radius ({getattr(plan.radius, '__qualname__', plan.radius)}) "
+                        "at its anchors' heights: they must give q[0] + w[0]·q[1] + w[1]·q[2] + ... exactly")
+
+
+def _store_of(state) -> tuple:
+    return tuple(state._store.values())
 
 
 def _same(a: tuple, b: tuple) -> bool:
@@ -572,31 +642,86 @@ class NumbaBackend(Backend):
         self._frame: _Frame | None = None
         self._order = SpringOrder()
         self._buffers: dict[str, np.ndarray] = {}
+        self._inv_fmax, self._inv_for = np.empty(0), None
+        self._weights: _Weights | None = None
 
     def frame(self, state) -> _Frame:
-        """The call frame for ``state``: reused while the state keeps its arrays and sizes."""
-        of = _frame_of(state)
-        if self._frame is not None and _same(self._frame.of, of):
-            return self._frame
+        """The call frame for ``state``: reused while the state keeps its arrays and sizes, extended
+        when it has grown (bases and springs appended), else made again."""
+        fr = self._frame
+        sizes = (state.n_bases, state.n_springs, *_store_of(state))
+        if fr is not None and fr.state is state and _same(fr.sizes, sizes):
+            return fr
+        if fr is None or fr.state is not state or not (fr.sizes[0] <= state.n_bases and fr.sizes[1] <= state.n_springs) \
+                or not self._extend(fr, state):
+            fr = self._frame = self._make(state)
+        fr.sizes = sizes
+        self._views(fr, state)
+        return fr
+
+    def _make(self, state) -> _Frame:
+        """A frame made from scratch: the springs in summation order, laid out run by run with room."""
+        ids = self._order.of(state.pairs, state)
+        ids = np.arange(state.n_springs) if ids is None else ids
+        starts, lengths, first_i, offsets = self._order.runs()
+        room = lengths + np.where(lengths >= SLACK_RUN, lengths, 0)
+        position = np.cumsum(room) - room
+        where = np.arange(len(ids)) + np.repeat(position - starts, lengths)  # sorted place -> position
+        size = int(room.sum())
+        by_position = np.full(size, -1, np.int64)
+        by_position[where] = ids
+        springs = tuple(np.zeros(size) for _ in range(3))
+        for out, values in zip(springs, (state.rest, state.fmax, None)):
+            out[where] = values[ids] if values is not None else 1.0 / state.fmax[ids]
+        live = np.zeros(size, bool)
+        live[where] = state.intact[ids]
+        return _Frame(state=state, sizes=(), bases=(), runs=(position, lengths.copy(), first_i, offsets), room=room,
+                      first_keys=self._order.keys[starts] if len(starts) else np.empty(0, np.uint64),
+                      springs=springs, ids=by_position, live=live, n_live=int(np.count_nonzero(live)),
+                      pending=np.empty(0, np.int64), work=(),
+                      start=(), log=())
+
+    def _extend(self, fr: _Frame, state) -> bool:
+        """Place the springs appended since ``fr`` was made at the ends of the runs they continue;
+        ``False`` (nothing changed) when one continues no run with room."""
+        seen = fr.sizes[1]
+        if seen == state.n_springs:
+            return True
+        new = np.arange(seen, state.n_springs)
+        keys = order_keys(state.pairs[seen:])
+        by_key = np.argsort(keys, kind="stable")
+        keys, new = keys[by_key], new[by_key]
+        run = np.searchsorted(fr.first_keys, keys, side="right") - 1
+        if run.size and run.min() < 0:
+            return False
+        position, lengths, _, offsets = fr.runs
+        start = np.searchsorted(run, run, side="left")  # each new spring's rank among those of its run
+        rank = np.arange(len(run)) - start
+        fits = (keys == fr.first_keys[run] + (lengths[run] + rank).astype(np.uint64)) & (offsets[run] > 0) \
+            & (lengths[run] + rank < fr.room[run])
+        if not fits.all():
+            return False
+        at = position[run] + lengths[run] + rank
+        fr.ids[at] = new
+        rest, fmax, inv_fmax = fr.springs
+        rest[at], fmax[at] = state.rest[new], state.fmax[new]
+        inv_fmax[at] = 1.0 / state.fmax[new]
+        fr.live[at] = state.intact[new]
+        fr.n_live += int(np.count_nonzero(state.intact[new]))
+        np.add.at(lengths, run, 1)
+        return True
+
+    def _views(self, fr: _Frame, state) -> None:
+        """The frame's base vectors and work space for the state's present sizes."""
         x, v, a, d = state.x, state.v, state.anchor, state.anchor_dir
         n, m = state.n_bases, state.n_springs
-        order = self._order.of(state.pairs, state)
-        runs = self._order.runs()
-        inv_fmax = 1.0 / state.fmax
-        springs = (state.rest, state.fmax, inv_fmax) if order is None else (state.rest[order], state.fmax[order],
-                                                                             inv_fmax[order])
-        longest = int(runs[1].max(initial=1))
         f = self._space("f", (n, 3))
-        f[...] = 0.0
-        self._frame = _Frame(
-            of=of, bases=(*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
-                          *(a[:, i] for i in range(3)), d[:, 0], d[:, 1]),
-            order=order, runs=runs, springs=springs, inv_fmax=inv_fmax,
-            work=tuple(self._space(f"work{i}", (longest,)) for i in range(4)),
-            start=tuple(self._space(f"start{i}", (n, 3)) for i in range(3)), live=self._space("live", (m,), bool),
-            log=(self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,))),
-        )
-        return self._frame
+        fr.bases = (*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
+                    *(a[:, i] for i in range(3)), d[:, 0], d[:, 1])
+        longest = int(fr.runs[1].max(initial=1))
+        fr.work = tuple(self._space(f"work{i}", (longest,)) for i in range(4))
+        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(3))
+        fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
 
     def _space(self, name: str, shape: tuple, dtype=float) -> np.ndarray:
         """Work space ``name`` of ``shape`` (columns contiguous): the leading rows of a buffer kept
@@ -608,24 +733,57 @@ class NumbaBackend(Backend):
         return buf[:shape[0]]
 
     def _live(self, state) -> np.ndarray:
-        """The state's intact mask, in the kernel's order, into the frame's working copy."""
+        """The kernel's intact mask, copied from the state again unless the state has broken exactly
+        what the kernel did: the springs of the last call, and no others (a spring never mends, so
+        the count tells)."""
         fr = self.frame(state)
-        if fr.order is None:
-            np.copyto(fr.live, state.intact)
-        else:
-            np.take(state.intact, fr.order, out=fr.live)
+        if fr.n_live != np.count_nonzero(state.intact) or state.intact[fr.pending].any():
+            valid = fr.ids >= 0
+            fr.live[valid] = state.intact[fr.ids[valid]]
+            fr.n_live = int(np.count_nonzero(fr.live))
         return fr.live
+
+    def _inverse_thresholds(self, state) -> np.ndarray:
+        """``1 / fmax`` in id order (for ``measure``), extended as springs are appended."""
+        have = self._inv_fmax if self._inv_for is state else np.empty(0)
+        if len(have) < state.n_springs:
+            have = np.concatenate([have, 1.0 / state.fmax[len(have):]])
+        self._inv_fmax, self._inv_for = have, state
+        return have[:state.n_springs]
+
+    def _heights(self, state, plan: Plan) -> tuple:
+        """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
+        the growth law's ``compiled_weights`` of each anchor's height, taken when its base is first
+        seen (an anchor's height never changes) and checked then against the law's own radius;
+        ``(empty, 0)`` for a law without them."""
+        if plan.weights is None or plan.uniform:
+            return _NO_WEIGHTS
+        key = (plan.weights, plan.params.tobytes())
+        w = self._weights
+        if w is None or w.key != key or w.state is not state:
+            w = self._weights = _Weights(key=key, state=state)
+        n = state.n_bases
+        if w.count < n:
+            z = np.ascontiguousarray(state.anchor[w.count:n, 2])
+            new = np.atleast_2d(np.asarray(plan.weights(z, plan.params), dtype=float))
+            _check_weights(plan, state.t, z, new)
+            if w.table.shape[1] < n or w.table.shape[0] != len(new):
+                table = np.zeros((len(new), grown(w.table.shape[1], n)))
+                table[:len(w.table), :w.count] = w.table[:, :w.count]
+                w.table = table
+            w.table[:, w.count:n] = new
+            w.count = n
+        return w.table.ravel(), w.table.shape[1]
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         fr = self.frame(state)
-        rest = fr.springs[0]
         f = np.empty_like(x, order="F")
-        _spring_forces(x, fr.runs, fr.work, rest, mech.k, self._live(state), f)
+        _spring_forces(x, fr.runs, fr.work, fr.springs[0], mech.k, self._live(state), f)
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> float:
         return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
-                              self.frame(state).inv_fmax, state.intact, out))
+                              self._inverse_thresholds(state), state.intact, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
@@ -641,10 +799,13 @@ class NumbaBackend(Backend):
                      float(plan.accept_load), float(plan.max_batch))
         flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break))
         rest, fmax, inv_fmax = fr.springs
+        live = self._live(state)
+
+        heights = self._heights(state, plan)
 
         def call(times, relax):
-            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, self._live(state), constants, times,
-                          relax, params, flags, fr.log)
+            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
+                          fr.log, heights)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         relax = plan.relax_flags()
@@ -652,15 +813,18 @@ class NumbaBackend(Backend):
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
             for keep, arr in zip(fr.start, now):
                 np.copyto(arr, keep)
+            live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
             n_log = call(times[: done - 1], relax[: done - 1])[2] if done > 1 else 0
             done -= 1
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
             self.measure(state, mech, tension)
-        ids, step, t = (a[:n_log] for a in fr.log)
-        if fr.order is not None and n_log:  # positions in the kernel's order -> spring ids, by step then id
-            ids = fr.order[ids]
+        positions, step, t = (a[:n_log] for a in fr.log)
+        ids = fr.ids[positions]
+        if n_log:  # positions -> spring ids, by step then id
             by = np.lexsort((ids, step))
             ids, step, t = ids[by], step[by], t[by]
+        fr.n_live -= n_log  # the simulation breaks these in the state next (Simulation.break_springs)
+        fr.pending = ids
         return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy())
 
     def patch_labels(self, state) -> np.ndarray:

@@ -1,0 +1,73 @@
+"""The numba backend's frame: the springs in the kernel's order, kept across calls and extended in
+place as bases join, is derived data — a run must not depend on whether it was extended or made
+again, nor on which springs broke outside the kernel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bark import Stop
+from bark.kernels import numba_backend
+from bark.lattice import Lattice
+from bark_plugins.breakers import ProbabilisticBreaker
+from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
+from conftest import build_sim
+
+
+def _run(n_start: int, breakers=None, stepping="adaptive"):
+    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=[Bulge(z=0.1, half_width=0.05, magnitude=0.01, G=0.02)])
+    lattice = Lattice(n_bases=700, n_start=n_start, join_rate=60.0, join_every=0.1, jitter=0.05)
+    sim = build_sim(n_bases=700, G=0.05, dt=0.3 if stepping == "adaptive" else 0.05, seed=5, stepping=stepping,
+                    backend="numba", fmax_spread=0.05, growth=growth, lattice=lattice, breakers=breakers)
+    sim.run(Stop(until_time=6.0))
+    return sim
+
+
+def _same(a, b) -> None:
+    assert a.state.n_bases == b.state.n_bases
+    for name in ("x", "v", "anchor", "intact", "rest", "fmax"):
+        assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name
+    la, lb = a.breaks.arrays(), b.breaks.arrays()
+    for key in la:
+        assert np.array_equal(la[key], lb[key]), key
+
+
+@pytest.mark.parametrize("n_start", [400, 100])  # 100: runs too short for room, or outgrown: made again
+@pytest.mark.parametrize("breakers", [None, "probabilistic"])
+def test_a_frame_extended_at_joins_runs_as_one_made_again_every_call(monkeypatch, n_start, breakers):
+    make = [0]
+    original = numba_backend.NumbaBackend._make
+
+    def counted(self, state):
+        make[0] += 1
+        return original(self, state)
+
+    monkeypatch.setattr(numba_backend.NumbaBackend, "_make", counted)
+    kinds = [ProbabilisticBreaker()] if breakers else None
+    stepping = "fixed" if breakers else "adaptive"
+    extended = _run(n_start, kinds, stepping)
+    made = make[0]
+    assert extended.n_broken > 20 and extended.state.n_bases > n_start
+    monkeypatch.setattr(numba_backend.NumbaBackend, "_extend", lambda self, frame, state: False)
+    again = _run(n_start, kinds, stepping)
+    assert make[0] - made > 40  # every join made the frame again
+    if n_start == 400:
+        assert made <= 2  # the joins extended it in place (the stability check's lattice aside)
+    _same(extended, again)
+
+
+def test_springs_broken_outside_the_kernel_reach_it():
+    """A spring broken by Simulation.break_springs between calls is broken in the kernel's copy too."""
+    sim = build_sim(n_bases=300, G=0.05, dt=0.05, seed=1, backend="numba")
+    sim.run(Stop(until_time=1.0))
+    tension = sim.tension()
+    strongest = np.argsort(np.where(sim.state.intact, -tension, np.inf))[:30]
+    sim.break_springs(strongest)
+    sim.run(Stop(until_time=1.5))
+    other = build_sim(n_bases=300, G=0.05, dt=0.05, seed=1, backend="numpy")
+    other.run(Stop(until_time=1.0))
+    other.break_springs(strongest)
+    other.run(Stop(until_time=1.5))
+    assert np.array_equal(sim.state.x, other.state.x)
+    assert np.array_equal(sim.state.intact, other.state.intact)
