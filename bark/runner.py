@@ -192,6 +192,22 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
                    pictures)
 
 
+def _pictures_begun(pictures: dict | None, sim, scene, recorded: dict, out: Path) -> list:
+    """Start the scene's pictures: ``[(file name, wait)]``.  A picture writer may return a ``wait()``
+    that ends when its file is written (it draws in another process meanwhile), or draw at once and
+    return ``None``; what it raised is kept, to be reported in its turn."""
+    begun = []
+    for effect, (name, draw) in (pictures or {}).items():
+        if not scene.has(effect):
+            continue
+        try:
+            wait = draw(sim, scene, recorded, out / name)
+        except Exception as err:
+            wait = err
+        begun.append((name, wait if wait is not None else (lambda: None)))
+    return begun
+
+
 def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wall: float, resumed: bool, error,
             pictures, save: bool = True) -> Outcome:
     if out is None:
@@ -207,13 +223,17 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
         by_name["series"].write(out / "statistics.csv")
     if "dissipation" in by_name:
         by_name["dissipation"].write(out / "fracture.csv")
+    waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
     summary = write_run(sim, scene, out, reason, wall, _extra(by_name))
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error)
-    for effect, (name, draw) in (pictures or {}).items():
-        if not scene.has(effect):
+    for name, wait in waits:
+        if outcome.drawing_stopped:
+            outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
             continue
         try:
-            draw(sim, scene, by_name, out / name)
+            if isinstance(wait, BaseException):
+                raise wait
+            wait()
         except KeyboardInterrupt:
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
             outcome.drawing_stopped = True

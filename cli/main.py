@@ -123,17 +123,22 @@ class Signals:
     """SIGINT (Ctrl-C), SIGTERM (``kill``, ``timeout``, schedulers) and SIGHUP stop a run between two
     steps: the handler only notes the signal, which the runner reads after each advance, so a step
     and the final writes are never cut.  Before the first step (building a large scene) and while a
-    picture is drawn (the data are already written), a signal stops at once."""
+    picture is drawn (the data are already written), a signal stops at once; pictures are drawn in
+    another process beside the final writes, and one that came meanwhile stops them once those are
+    done (a picture already drawn is kept)."""
 
     REASONS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated"}
 
     def __init__(self) -> None:
         self.received: int | None = None
+        self.count = 0
+        """Signals received so far."""
         self.drawing = False
         self.started = False
         self._previous: dict = {}
 
     def _handle(self, signum, frame) -> None:
+        self.count += 1
         if self.received is None:
             self.received = signum
         if self.drawing or not self.started:  # a picture, or a run not yet begun: nothing to lose
@@ -165,28 +170,30 @@ class Signals:
 
 def _pictures(signals: Signals, painter) -> dict:
     """The runner's picture writers, drawn by ``painter`` (``bark_cli.pictures``: matplotlib is
-    imported only when a scene asks for a picture, and then beside the run, not after it)."""
-    from bark_cli.pictures import PatternData
+    imported only when a scene asks for a picture, and then beside the run, not after it).  Each
+    hands its picture's data to the painter and returns the wait for it (``runner``: the data are
+    written meanwhile); a signal while waiting stops the drawing at once."""
+    from bark_cli.pictures import PatternData, TreeData
+
+    def submitted(kind, data, path, scene):
+        wait, before = painter().submit(kind, data, path, scene.run.min_patch_size), signals.count
+
+        def waited():  # a signal since it was handed over came while it was drawn: stop it now
+            with signals.draw():
+                wait(stop=signals.count > before)
+        return waited
 
     def pattern(sim, scene, recorded, path):
-        data = PatternData.of(sim, scene.run.min_patch_size)
-        with signals.draw():
-            painter().draw("pattern", data, path, scene.run.min_patch_size)
+        return submitted("pattern", PatternData.of(sim, scene.run.min_patch_size), path, scene)
 
     def animation(sim, scene, recorded, path):
-        with signals.draw():
-            painter().draw("animation", recorded["frames"], path, scene.run.min_patch_size)
+        return submitted("animation", recorded["frames"], path, scene)
 
     def tree(sim, scene, recorded, path):
-        from bark_cli.tree_picture import TreeData
-
-        data = TreeData.of(sim, scene.run.min_patch_size, scene.dome)
-        with signals.draw():
-            painter().draw("tree", data, path, scene.run.min_patch_size)
+        return submitted("tree", TreeData.of(sim, scene.run.min_patch_size, scene.dome), path, scene)
 
     def fracture(sim, scene, recorded, path):
-        with signals.draw():
-            painter().draw("fracture", recorded["dissipation"].result, path, scene.run.min_patch_size)
+        return submitted("fracture", recorded["dissipation"].result, path, scene)
 
     return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation),
             "tree-image": ("tree.png", tree), "fracture-history": ("fracture.png", fracture)}

@@ -12,63 +12,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import attrs
-import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
-from bark.units import METRES_PER_LENGTH_UNIT, metres, years
+from bark.units import METRES_PER_LENGTH_UNIT, years
+from bark_cli.pictures import TreeData
 from bark_cli.plot import save_figure
 
 MAX_HEIGHT_IN = 12.0
 WIDTH_IN = 5.0
-
-
-@attrs.frozen
-class TreeData:
-    """What tree.png shows, as plain arrays (sent to the drawing process)."""
-
-    polygons: np.ndarray
-    """Projected rhomboids (x, z) of the bases facing the viewer, far first, ``(n, 4, 2)``, metres."""
-    colours: np.ndarray
-    outline: np.ndarray
-    """(z, r) of the trunk's outline, metres."""
-    dome: np.ndarray
-    """(x, z) of the dome's profile (right half), metres."""
-    organs: np.ndarray
-    """(x, z) of the leaf bases on the dome facing the viewer (Ridley's placement), far first, metres."""
-    t: float
-    n_bases: int
-    n_patches: int
-    n_broken: int
-
-    @classmethod
-    def of(cls, sim, min_size: int, dome) -> "TreeData":
-        from bark.mesh import leaf_quads
-        from bark.pattern import simulation_colours
-        from bark.tree import Apex
-
-        quads = leaf_quads(sim)
-        depth = quads[..., 1].mean(axis=1)  # towards the viewer
-        shown = np.flatnonzero(depth > 0.0)
-        shown = shown[np.argsort(depth[shown])]  # far (small y) first
-        polygons = metres(quads[shown][..., [0, 2]])
-        colours = simulation_colours(sim, min_size)[shown]
-        z = sim.state.anchor[:, 2]
-        zs = np.linspace(float(z.min()), float(z.max()), 400)
-        r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)
-        top_r = float(r[-1])
-        apex = Apex(dome=dome, lattice=sim.lattice)
-        top = float(apex.top(sim.state.t))
-        rho, u = dome.curve(200)
-        profile = np.column_stack([rho * top_r, top + u * top_r])
-        _, organs = apex.organs(sim.state.t, top_r)
-        organs = organs[organs[:, 1] > 0.0]
-        organs = organs[np.argsort(organs[:, 1])][:, [0, 2]]
-        return cls(polygons=polygons, colours=colours, outline=metres(np.column_stack([zs, r])), dome=metres(profile),
-                   organs=metres(organs),
-                   t=sim.state.t, n_bases=sim.state.n_bases, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
 
 
 def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
