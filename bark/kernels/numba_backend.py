@@ -247,6 +247,38 @@ def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, he
 
 
 @inline
+def _refresh(x, runs, rest, k, live, f, work, first):
+    """The spring forces of the bases from ``first`` on, made again (the others' left as they are):
+    for each run, the springs with an end there, computed as the full pass computes them and added
+    in its order — so each of those bases gets the bits of a full pass."""
+    x0, x1, x2 = x
+    w0, w1, w2, wt = work
+    r_start, r_len, r_i, r_o = runs
+    f0, f1, f2 = f
+    for q in range(first, f0.shape[0]):  # written out: a loop over the tuple, inlined here, left them as they were
+        f0[q] = 0.0
+        f1[q] = 0.0
+        f2[q] = 0.0
+    for r in range(r_start.shape[0]):
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        lo = max(0, first - i0 - o)  # the first spring whose second end is a base from `first` on
+        if lo >= n:
+            continue
+        a, m = i0 + lo, n - lo
+        _run_forces(x0[a:a + m], x1[a:a + m], x2[a:a + m], x0[a + o:a + o + m], x1[a + o:a + o + m],
+                    x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n], k,
+                    w0, w1, w2, wt, False, _no_breaking)
+        ours = max(0, first - a)  # of these, the first whose first end is a base from `first` on
+        for u, w in ((f0, w0), (f1, w1), (f2, w2)):
+            second = u[a + o:a + o + m]
+            for q in range(m):
+                second[q] -= w[q]
+            head = u[a + ours:a + m]
+            for q in range(m - ours):
+                head[q] += w[ours + q]
+
+
+@inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
                   update, rule, radius, prepare):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
@@ -254,18 +286,23 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
-    call, so the result does not depend on where calls begin and end."""
+    call, so the result does not depend on where calls begin and end.  That pass makes the forces of
+    the bases from ``fresh`` on (0: all); the others' are taken from ``f`` as the last call left them,
+    which the backend knows to be those of the positions and springs now (``NumbaBackend.steps``)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
     k, c, b, m, h, accept_load, max_batch = constants
-    uniform, breaking, return_on_break = flags
+    uniform, breaking, return_on_break, fresh = flags
     log_id, log_step, log_t = log
     hm = h / m
-    f0[:] = 0.0
-    f1[:] = 0.0
-    f2[:] = 0.0
-    _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule,
-                 log_id, log_step, log_t, 0, 0)
+    if fresh == 0:
+        f0[:] = 0.0
+        f1[:] = 0.0
+        f2[:] = 0.0
+        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule,
+                     log_id, log_step, log_t, 0, 0)
+    elif fresh < x0.shape[0]:
+        _refresh((x0, x1, x2), runs, rest, k, live, f, work, fresh)
     may_relax = False
     for step in range(relax.shape[0]):
         may_relax = may_relax or relax[step]
@@ -596,6 +633,13 @@ class _Frame:
     start: tuple
     """Copies of x, v and anchor at the start of a call: an undone step is replayed from them."""
     log: tuple
+    forces: float | None = None
+    """The stiffness ``k`` of the spring forces the last call left in f, of the positions it ended
+    with (kept in ``start[0]``, ``kept`` bases of them); ``None`` when they are of nothing now."""
+    kept: int = 0
+    refresh_from: int = 0
+    """Bases from this id on have springs (or are bases) that came after those forces: theirs are
+    made again at the next call, the others' kept (``NumbaBackend.steps``)."""
 
 
 @attrs.define(eq=False)
@@ -685,6 +729,7 @@ class NumbaBackend(Backend):
         """Place the springs appended since ``fr`` was made at the ends of the runs they continue;
         ``False`` (nothing changed) when one continues no run with room."""
         seen = fr.sizes[1]
+        fr.refresh_from = min(fr.refresh_from, fr.sizes[0])  # new bases
         if seen == state.n_springs:
             return True
         new = np.arange(seen, state.n_springs)
@@ -709,6 +754,7 @@ class NumbaBackend(Backend):
         fr.live[at] = state.intact[new]
         fr.n_live += int(np.count_nonzero(state.intact[new]))
         np.add.at(lengths, run, 1)
+        fr.refresh_from = min(fr.refresh_from, int(state.pairs[seen:].min()))  # and the bases they join
         return True
 
     def _views(self, fr: _Frame, state) -> None:
@@ -725,11 +771,15 @@ class NumbaBackend(Backend):
 
     def _space(self, name: str, shape: tuple, dtype=float) -> np.ndarray:
         """Work space ``name`` of ``shape`` (columns contiguous): the leading rows of a buffer kept
-        between frames and doubled when outgrown, so a join does not allocate (and fault in) it anew."""
+        between frames and doubled when outgrown (its rows carried over), so a join does not allocate
+        (and fault in) it anew, and what a call left in it stays."""
         buf = self._buffers.get(name)
         if buf is None or buf.shape[0] < shape[0]:
             rows = grown(0 if buf is None else buf.shape[0], shape[0])
-            buf = self._buffers[name] = np.empty((rows, *shape[1:]), dtype=dtype, order="F")
+            bigger = np.empty((rows, *shape[1:]), dtype=dtype, order="F")
+            if buf is not None:
+                bigger[:buf.shape[0]] = buf
+            buf = self._buffers[name] = bigger
         return buf[:shape[0]]
 
     def _live(self, state) -> np.ndarray:
@@ -738,6 +788,7 @@ class NumbaBackend(Backend):
         the count tells)."""
         fr = self.frame(state)
         if fr.n_live != np.count_nonzero(state.intact) or state.intact[fr.pending].any():
+            fr.forces = None  # of other springs
             valid = fr.ids >= 0
             fr.live[valid] = state.intact[fr.ids[valid]]
             fr.n_live = int(np.count_nonzero(fr.live))
@@ -789,33 +840,49 @@ class NumbaBackend(Backend):
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
 
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        """Up to ``len(plan.times)`` steps in one kernel call.  The spring forces the last call left
+        in f are kept where they are of the positions, springs and stiffness now (``k`` the same, no
+        break outside the kernel, and the positions those the call ended with, compared in full):
+        only the bases that joined since, and those their springs reach, get theirs made again (from
+        ``refresh_from``; the same bits as a fresh pass over all)."""
         kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare)
         fr = self.frame(state)
-        now = (state.x, state.v, state.anchor)
-        for keep, arr in zip(fr.start, now):
-            np.copyto(keep, arr)
-        params = np.ascontiguousarray(plan.params, dtype=float)
-        constants = (float(mech.k), float(mech.c), float(mech.b), float(mech.m), float(plan.h),
-                     float(plan.accept_load), float(plan.max_batch))
-        flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break))
-        rest, fmax, inv_fmax = fr.springs
         live = self._live(state)
-
+        k = float(mech.k)
+        now = (state.x, state.v, state.anchor)
+        n, kept = state.n_bases, fr.kept
+        same = fr.forces == k and kept <= n and np.array_equal(fr.start[0][:kept], state.x[:kept])
+        fresh = min(fr.refresh_from, n) if same else 0  # forces made again from this base on
+        for keep, arr in zip(fr.start, now):
+            rows = slice(kept if same and keep is fr.start[0] else 0, n)  # start[0] holds the kept positions
+            np.copyto(keep[rows], arr[rows])
+        fr.forces = None
+        params = np.ascontiguousarray(plan.params, dtype=float)
+        constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
+                     float(plan.accept_load), float(plan.max_batch))
+        rest, fmax, inv_fmax = fr.springs
         heights = self._heights(state, plan)
 
-        def call(times, relax):
+        def call(times, relax, fresh):
+            flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break), int(fresh))
             return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
                           fr.log, heights)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         relax = plan.relax_flags()
-        done, load, n_log = call(times, relax)
+        done, load, n_log = call(times, relax, fresh)
+        kept = True  # the forces in f are of the positions the call ended with
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
             for keep, arr in zip(fr.start, now):
                 np.copyto(arr, keep)
             live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
-            n_log = call(times[: done - 1], relax[: done - 1])[2] if done > 1 else 0
+            n_log, kept = 0, done > 1
+            if done > 1:
+                n_log = call(times[: done - 1], relax[: done - 1], 0)[2]
             done -= 1
+        if kept:  # for the next call
+            np.copyto(fr.start[0], state.x)
+            fr.forces, fr.kept, fr.refresh_from = k, n, n
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
             self.measure(state, mech, tension)
         positions, step, t = (a[:n_log] for a in fr.log)
