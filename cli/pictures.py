@@ -173,12 +173,9 @@ class Painter:
             if job is None:
                 return
 
-    def draw(self, kind: str, data, path: Path, min_size: int) -> None:
-        """Draw ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) into ``path`` and wait."""
-        self.submit(kind, data, path, min_size)()
-
     def submit(self, kind: str, data, path: Path, min_size: int):
-        """Hand ``data`` to the drawing process and return at once with a ``wait()`` that ends when the
+        """Hand ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) to the drawing process and
+        return at once with a ``wait()`` that ends when the
         picture is written (call the waits in the order of submission): the command writes its other
         outputs meanwhile.  ``wait`` raises what drawing raised (a ``RuntimeError`` naming it), or
         ``KeyboardInterrupt`` if a signal stopped it.  Without a drawing process, draws now."""
@@ -191,13 +188,13 @@ class Painter:
     def _wait(self, stop: bool = False) -> None:
         """The next picture's outcome; with ``stop``, unless it is ready, the drawing is stopped now."""
         try:
-            if stop and not (self._conn is not None and self._conn.poll(0)):
+            if stop and not self._conn.poll(0):
                 raise KeyboardInterrupt
             failure = self._conn.recv()
         except KeyboardInterrupt:
             self.close(kill=True)
             raise
-        except (EOFError, OSError, TypeError):  # TypeError: closed already (a signal stopped an earlier one)
+        except (EOFError, OSError):  # OSError: closed already (a signal stopped an earlier one)
             raise RuntimeError("the drawing process ended unexpectedly") from None
         if failure is not None:
             raise RuntimeError(failure)

@@ -640,14 +640,17 @@ class _Frame:
     refresh_from: int = 0
     """Bases from this id on have springs (or are bases) that came after those forces: theirs are
     made again at the next call, the others' kept (``NumbaBackend.steps``)."""
+    inv_fmax: np.ndarray = attrs.field(factory=lambda: np.empty(0))
+    """``1 / fmax`` in id order, for ``measure`` (taken when first asked, extended as springs come)."""
+    weights: "_Weights | None" = None
+    """The anchors' growth-law weights (``NumbaBackend._heights``)."""
 
 
 @attrs.define(eq=False)
 class _Weights:
-    """The anchors' weights (``Growth.compiled_weights``) for one state and growth law."""
+    """The anchors' weights (``Growth.compiled_weights``) for one growth law."""
 
     key: tuple
-    state: object
     table: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 0)))
     """Weight k of base i at ``[k, i]``; capacity for more bases in its columns."""
     count: int = 0
@@ -686,8 +689,6 @@ class NumbaBackend(Backend):
         self._frame: _Frame | None = None
         self._order = SpringOrder()
         self._buffers: dict[str, np.ndarray] = {}
-        self._inv_fmax, self._inv_for = np.empty(0), None
-        self._weights: _Weights | None = None
 
     def frame(self, state) -> _Frame:
         """The call frame for ``state``: reused while the state keeps its arrays and sizes, extended
@@ -796,11 +797,10 @@ class NumbaBackend(Backend):
 
     def _inverse_thresholds(self, state) -> np.ndarray:
         """``1 / fmax`` in id order (for ``measure``), extended as springs are appended."""
-        have = self._inv_fmax if self._inv_for is state else np.empty(0)
-        if len(have) < state.n_springs:
-            have = np.concatenate([have, 1.0 / state.fmax[len(have):]])
-        self._inv_fmax, self._inv_for = have, state
-        return have[:state.n_springs]
+        fr = self.frame(state)
+        if len(fr.inv_fmax) < state.n_springs:
+            fr.inv_fmax = np.concatenate([fr.inv_fmax, 1.0 / state.fmax[len(fr.inv_fmax):]])
+        return fr.inv_fmax[:state.n_springs]
 
     def _heights(self, state, plan: Plan) -> tuple:
         """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
@@ -810,9 +810,10 @@ class NumbaBackend(Backend):
         if plan.weights is None or plan.uniform:
             return _NO_WEIGHTS
         key = (plan.weights, plan.params.tobytes())
-        w = self._weights
-        if w is None or w.key != key or w.state is not state:
-            w = self._weights = _Weights(key=key, state=state)
+        fr = self.frame(state)
+        w = fr.weights
+        if w is None or w.key != key:
+            w = fr.weights = _Weights(key=key)
         n = state.n_bases
         if w.count < n:
             z = np.ascontiguousarray(state.anchor[w.count:n, 2])
@@ -849,13 +850,13 @@ class NumbaBackend(Backend):
         fr = self.frame(state)
         live = self._live(state)
         k = float(mech.k)
-        now = (state.x, state.v, state.anchor)
         n, kept = state.n_bases, fr.kept
         same = fr.forces == k and kept <= n and np.array_equal(fr.start[0][:kept], state.x[:kept])
         fresh = min(fr.refresh_from, n) if same else 0  # forces made again from this base on
-        for keep, arr in zip(fr.start, now):
-            rows = slice(kept if same and keep is fr.start[0] else 0, n)  # start[0] holds the kept positions
-            np.copyto(keep[rows], arr[rows])
+        copied = kept if same else 0  # start[0] holds the positions of the first `kept` bases already
+        np.copyto(fr.start[0][copied:], state.x[copied:])
+        np.copyto(fr.start[1], state.v)
+        np.copyto(fr.start[2], state.anchor)
         fr.forces = None
         params = np.ascontiguousarray(plan.params, dtype=float)
         constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
@@ -871,16 +872,16 @@ class NumbaBackend(Backend):
         times = np.ascontiguousarray(plan.times, dtype=float)
         relax = plan.relax_flags()
         done, load, n_log = call(times, relax, fresh)
-        kept = True  # the forces in f are of the positions the call ended with
+        valid = True  # the forces in f are of the positions the last call ended with
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
-            for keep, arr in zip(fr.start, now):
+            for keep, arr in zip(fr.start, (state.x, state.v, state.anchor)):
                 np.copyto(arr, keep)
             live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
-            n_log, kept = 0, done > 1
+            n_log, valid = 0, done > 1
             if done > 1:
                 n_log = call(times[: done - 1], relax[: done - 1], 0)[2]
             done -= 1
-        if kept:  # for the next call
+        if valid:  # for the next call
             np.copyto(fr.start[0], state.x)
             fr.forces, fr.kept, fr.refresh_from = k, n, n
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
