@@ -58,7 +58,18 @@ import numpy as np
 
 from bark.physics import as_given
 
-__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS"]
+__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "weighted_radius"]
+
+
+def weighted_radius(q: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``q[0] + w[0]·q[1] + w[1]·q[2] + ...`` summed left to right: the radius a growth law's
+    ``compiled_weights`` promise gives, to the bit.  ``weights`` is ``(K, n)``; ``q`` is one per-step
+    vector (``compiled_time(t, params)``) or ``(K + 1, n)``, each base's own."""
+    q = np.asarray(q, dtype=float)
+    r = np.array(np.broadcast_to(q[0], weights.shape[1:]), dtype=float)
+    for k in range(len(weights)):
+        r = r + weights[k] * q[1 + k]
+    return r
 
 
 _FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "compiled_weights": None,

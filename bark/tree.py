@@ -41,6 +41,7 @@ import numpy as np
 from bark._validate import in_range, one_of
 from bark.errors import BarkError, Ref
 from bark.lattice import Lattice
+from bark.strategies import weighted_radius
 
 __all__ = ["Dome", "Apex", "SAMPLES", "leaf_corners", "join_radii", "phyllotaxis"]
 
@@ -236,12 +237,18 @@ def _half_vectors(lattice: Lattice, radius) -> tuple[np.ndarray, np.ndarray]:
 
 def join_radii(sim) -> np.ndarray:
     """The trunk radius at each base's site when it joined (the growth law at its birth time)."""
-    s = sim.state
+    s, growth = sim.state, sim.growth
     z, born = s.anchor[:, 2], s.born
+    times, group = np.unique(born, return_inverse=True)
+    if growth.compiled_weights is not None and growth.compiled_time is not None and not growth.uniform:
+        # radius = q(t)[0] + w(z)[0]·q(t)[1] + ..., to the bit: the weights of all sites at once
+        p = growth.compiled_params()
+        q = np.array([growth.compiled_time(float(t), p) for t in times]).reshape(len(times), -1)
+        return weighted_radius(q[group].T, np.atleast_2d(np.asarray(growth.compiled_weights(z, p), dtype=float)))
     out = np.empty(s.n_bases)
-    for t in np.unique(born):  # bases join in groups: one call of the law per group
-        at = born == t
-        out[at] = np.broadcast_to(sim.growth.radius(float(t), z[at]), z[at].shape)
+    for i, t in enumerate(times):  # bases join in groups: one call of the law per group
+        at = group == i
+        out[at] = np.broadcast_to(growth.radius(float(t), z[at]), z[at].shape)
     return out
 
 

@@ -107,3 +107,22 @@ def test_mesh_corners_lie_on_the_trunk_and_surround_their_base(meshed):
     for a, b in ((0, 2), (1, 3)):
         assert np.linalg.norm(quads[:, a] - quads[:, b], axis=1) == pytest.approx(
             np.linalg.norm(corners[:, a] - corners[:, b], axis=1), rel=2e-3)
+
+
+@pytest.mark.parametrize("growth", [
+    {"name": "bulge", "base": {"name": "sqrt", "G": 0.05}, "bulges": [{"z": 0.25, "half_width": 0.15, "magnitude": 0.03,
+                                                                     "decay": 0.02, "G": 0.01}]},
+    {"name": "sqrt", "G": 0.05}])
+def test_join_radii_are_the_growth_laws_radius_at_each_bases_birth_to_the_bit(meshed, growth):
+    """With the bulge law's weights (all sites at once) and without (a call per join group)."""
+    from types import SimpleNamespace
+
+    from bark import registry
+    from bark.tree import join_radii
+
+    sim = SimpleNamespace(state=meshed[0].sim.state, growth=registry.create("growth", **growth))
+    s = sim.state
+    assert len(np.unique(s.born)) > 2 and (sim.growth.compiled_weights is not None) == (growth["name"] == "bulge")
+    expected = np.concatenate([np.broadcast_to(sim.growth.radius(float(t), s.anchor[i:i + 1, 2]), 1)
+                               for i, t in enumerate(s.born)])
+    assert np.array_equal(join_radii(sim), expected)

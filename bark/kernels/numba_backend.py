@@ -36,6 +36,7 @@ from bark.forces import SpringOrder, order_keys
 from bark.kernels import Backend, Plan, Steps
 from bark.errors import BarkError
 from bark.state import grown
+from bark.strategies import weighted_radius
 
 NAME = "numba"
 
@@ -664,9 +665,7 @@ def _check_weights(plan: Plan, t: float, z: np.ndarray, weights: np.ndarray) -> 
     """The promise of ``compiled_weights``: at heights ``z``, ``q[0] + w_0 q[1] + w_1 q[2] + ...``
     is the compiled radius, to the bit (the kernel sums them in place of calling it)."""
     q = np.asarray(plan.prepare(t, plan.params), dtype=float)
-    summed = np.full(len(z), q[0])
-    for k in range(len(weights)):
-        summed = summed + weights[k] * q[1 + k]
+    summed = weighted_radius(q, weights)
     radius = np.broadcast_to(plan.radius(t, z, q), z.shape)
     if weights.shape[1:] != z.shape or not np.array_equal(summed, radius):
         raise BarkError(f"the growth law's compiled_weights ({getattr(plan.weights, '__qualname__', plan.weights)}) "
