@@ -240,7 +240,7 @@ def join_radii(sim) -> np.ndarray:
     s, growth = sim.state, sim.growth
     z, born = s.anchor[:, 2], s.born
     times, group = np.unique(born, return_inverse=True)
-    if growth.compiled_weights is not None and growth.compiled_time is not None and not growth.uniform:
+    if len(times) and growth.compiled_weights is not None and growth.compiled_time is not None and not growth.uniform:
         # radius = q(t)[0] + w(z)[0]·q(t)[1] + ..., to the bit: the weights of all sites at once
         p = growth.compiled_params()
         q = np.array([growth.compiled_time(float(t), p) for t in times]).reshape(len(times), -1)

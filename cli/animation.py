@@ -58,7 +58,8 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
     for i in range(len(frames.frames)):
         draw(i)
         fig.canvas.draw()
-        images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert("RGB").quantize(colors=128, method=Image.Quantize.FASTOCTREE))
+        rgb = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert("RGB")
+        images.append(rgb.quantize(colors=128, method=Image.Quantize.FASTOCTREE))  # 5x median cut's speed
     buf = io.BytesIO()
     images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
