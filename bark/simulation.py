@@ -257,7 +257,7 @@ class Simulation:
             raise NonFiniteStateError(
                 f"the state became NaN or infinite at t = {self.clock.t + self.clock.step:.6g} (step "
                 f"{self.step_count + 1}); the simulation holds the last finite state, t = {self.state.t:.6g}")
-        if self.clock.levels and result.load > 1.0 + self.numerics.overshoot_tol:  # accepted at the smallest step
+        if stepping.watches_overshoot(self) and result.load > 1.0 + self.numerics.overshoot_tol:  # at the smallest step
             self.events.append({"kind": "overshoot", "t": self.state.t, "step": self.step_count, "load": result.load})
         if not plan.breaking:
             self._break_selected(result.load)

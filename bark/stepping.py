@@ -24,7 +24,8 @@ from bark._validate import int_in, one_of, positive
 from bark.errors import BarkError, Ref
 from bark.kernels import BACKENDS, Plan, Steps
 
-__all__ = ["Numerics", "Clock", "plan", "python_step", "stable_step", "check_countable", "DEFAULT_DT", "DEFAULT_STEPPING",
+__all__ = ["Numerics", "Clock", "plan", "watches_overshoot", "python_step", "stable_step", "check_countable", "DEFAULT_DT",
+           "DEFAULT_STEPPING",
            "DEFAULT_OVERSHOOT_TOL"]
 
 DEFAULT_DT = 0.3
@@ -188,7 +189,6 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     after the first step in which the rule picks a spring, and the breakers select in Python (an
     ``overload_only`` breaker is watched by the threshold rule)."""
     clock = sim.clock
-    adaptive = clock.levels > 0
     rule, breaking = _rule(sim.breakers)
     compiled = sim.integrator.update is not None and sim.growth.compiled is not None
     n = 1
@@ -202,11 +202,18 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         h=clock.step, times=clock.times(n), update=sim.integrator.update, radius=sim.growth.compiled,
         params=sim.growth.compiled_params() if compiled else np.empty(0), uniform=sim.growth.uniform,
         rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
-        accept_load=1.0 + sim.numerics.overshoot_tol if adaptive and clock.can_halve() else math.inf,
+        accept_load=1.0 + sim.numerics.overshoot_tol if watches_overshoot(sim) and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
         weights=sim.growth.compiled_weights if compiled else None,
     )
+
+
+def watches_overshoot(sim) -> bool:
+    """Whether steps are held to the overshoot tolerance: adaptive stepping, and breakers to break
+    springs at their thresholds (with none, a spring's tension over its threshold is no overshoot:
+    nothing breaks there, and halving the step would not change it)."""
+    return sim.clock.levels > 0 and bool(sim.breakers)
 
 
 def _rule(breakers) -> tuple:

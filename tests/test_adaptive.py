@@ -113,3 +113,18 @@ def test_adaptive_implicit_respects_the_tolerance(make_sim):
     sim.run(Stop(until_time=6.0))
     assert _overshoots(sim).size > 10
     assert _overshoots(sim).max() <= 0.01 + 1e-12
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_with_no_breakers_adaptive_steps_are_not_halved_for_tension(make_sim, backend):
+    """A scene without the fracture effect has no breakers: tension over a threshold breaks nothing,
+    so it is no overshoot — the step stays whole (halving it to the floor only slowed the run) and no
+    overshoot event is recorded."""
+    import attrs
+
+    with_breakers = make_sim(n_bases=300, G=0.2, dt=0.3, seed=1, stepping="adaptive", backend=backend)
+    sim = attrs.evolve(with_breakers, breakers=())
+    sim.run(Stop(until_time=6.0))
+    assert float(np.max(sim.forces.tension(sim.state) / sim.state.fmax)) > 1.0 + sim.numerics.overshoot_tol
+    assert sim.step_count == round(6.0 / sim.clock.h) and sim.clock.halvings == 0
+    assert not [e for e in sim.events if e["kind"] == "overshoot"]
