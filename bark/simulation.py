@@ -299,10 +299,7 @@ class Simulation:
         rest lengths are the distances now (a new spring is at rest) and whose thresholds come from the
         material and the growth law's regions.  Graph and arrays change together.  Returns the ids."""
         s, t = self.state, self.state.t
-        theta, z = np.atleast_1d(theta).astype(float), np.atleast_1d(z).astype(float)
-        x = cylinder_points(theta, z, np.broadcast_to(self.growth.radius(t, z), z.shape))
-        ids = s.add_bases(x=x, v=np.zeros_like(x), anchor=x, anchor_dir=np.column_stack([np.cos(theta), np.sin(theta)]),
-                          born=np.full(len(z), t))
+        ids = s.add_bases(**self._new_bases(theta, z, t))
         self.graph.add_bases(len(ids))
         pairs = self.lattice.new_pairs(ids, self.graph)
         if len(pairs):
@@ -317,6 +314,29 @@ class Simulation:
         self._tension = _rows(self._tension, s.n_springs)
         self._labels = None
         return ids
+
+    def _new_bases(self, theta, z, t: float) -> dict[str, np.ndarray]:
+        """The fields of bases joining at time ``t`` at angles ``theta`` and heights ``z``: on the trunk
+        surface there, at rest, each anchored at its site."""
+        theta, z = np.atleast_1d(theta).astype(float), np.atleast_1d(z).astype(float)
+        x = cylinder_points(theta, z, np.broadcast_to(self.growth.radius(t, z), z.shape))
+        return {"x": x, "v": np.zeros_like(x), "anchor": x, "anchor_dir": np.column_stack([np.cos(theta), np.sin(theta)]),
+                "born": np.full(len(z), t)}
+
+    def whole_lattice(self) -> State:
+        """The state of the whole lattice, every base laid out at t = 0 as :meth:`build` lays out the
+        first ones (its own generator from the seed: the simulation's is not drawn), with its springs
+        at rest: what a bound on a lattice that is still to grow is taken on.  Arrays only — no graph,
+        and every threshold ``f_max`` (a bound needs neither)."""
+        lattice = attrs.evolve(self.lattice, n_start=None, join_rate=0.0)
+        radius = float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1)))
+        state = State.empty(lattice.n_bases, lattice.n_springs)
+        state.add_bases(**self._new_bases(*lattice.sites(radius, np.random.default_rng(self.seed)), 0.0))
+        pairs = lattice.pairs()
+        _, rest = spring_geometry(state.x, pairs)
+        state.add_springs(pairs=pairs, rest=rest, fmax=np.full(len(pairs), self.mechanics.f_max),
+                          intact=np.ones(len(pairs), bool))
+        return state
 
     def break_springs(self, ids, tension: np.ndarray | None = None, *, step=None, t=None,
                       tension_of_ids: bool = False) -> np.ndarray:

@@ -22,6 +22,7 @@ import numpy as np
 from bark import physics
 from bark._validate import int_in, one_of, positive
 from bark.errors import BarkError, Ref
+from bark.forces import ForceField
 from bark.kernels import BACKENDS, Plan, Steps
 
 __all__ = ["Numerics", "Clock", "plan", "watches_overshoot", "python_step", "stable_step", "check_countable", "DEFAULT_DT",
@@ -121,9 +122,8 @@ def stable_step(sim) -> tuple[float, float]:
     bases are still to join — and the step, ``dt`` or ``dt`` split into equal sub-steps below the
     limit (``auto``, ``adaptive``).  A ``dt`` above the limit with ``fixed`` stepping is refused."""
     limit = float(sim.integrator.stability_limit(sim.state, sim.forces))
-    if sim.lattice.initial < sim.lattice.n_bases:
-        whole = attrs.evolve(sim, lattice=attrs.evolve(sim.lattice, n_start=None, join_rate=0.0)).build()
-        limit = min(limit, whole.stability_limit)
+    if sim.lattice.initial < sim.lattice.n_bases:  # its own forces: their caches are of the simulation's state
+        limit = min(limit, float(sim.integrator.stability_limit(sim.whole_lattice(), ForceField(sim.mechanics, sim.backend))))
     h = sim.numerics.dt
     if h <= limit:
         return limit, h

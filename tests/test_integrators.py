@@ -678,3 +678,26 @@ def test_the_benchmarks_plain_numpy_step_is_the_same_model(backend):
     assert sim.n_broken > 20
     np.testing.assert_allclose(plain.x, sim.state.x, rtol=0, atol=1e-10)
     np.testing.assert_array_equal(plain.intact, sim.state.intact)
+
+
+@pytest.mark.parametrize("bound", ["gershgorin", "lanczos"])
+def test_a_lattice_still_to_grow_is_bounded_as_the_whole_lattice_laid_out(bound):
+    """The stability limit of a lattice whose bases join during the run is taken on the whole lattice
+    (the most springs a base will have), laid out as a simulation with every base lays it out: the
+    same positions, springs and rest lengths, without building that simulation (its graph)."""
+    mechanics = Mechanics(k=1.0, c=0.03, b=2.0)
+    lattice = Lattice(n_bases=1500, n_start=60, join_rate=50.0, join_every=0.1, offsets=(21, 34), jitter=0.05)
+    growing = Simulation(lattice=lattice, mechanics=mechanics, growth=SqrtGrowth(r0=0.2), integrator=EulerCromer(bound=bound),
+                         breakers=[ThresholdBreaker()], seed=7).build()
+    full = Simulation(lattice=attrs.evolve(lattice, n_start=None, join_rate=0.0), mechanics=mechanics,
+                      growth=SqrtGrowth(r0=0.2), integrator=EulerCromer(bound=bound), breakers=[ThresholdBreaker()],
+                      seed=7).build()
+    whole = growing.whole_lattice()
+    for name in ("x", "v", "anchor", "anchor_dir", "pairs", "rest", "intact"):
+        np.testing.assert_array_equal(getattr(whole, name), getattr(full.state, name), err_msg=name)
+    alone = Simulation(lattice=attrs.evolve(lattice, n_bases=60, n_start=None, join_rate=0.0), mechanics=mechanics,
+                       growth=SqrtGrowth(r0=0.2), integrator=EulerCromer(bound=bound), breakers=[ThresholdBreaker()],
+                       seed=7).build()
+    assert growing.stability_limit == min(alone.stability_limit, full.stability_limit)
+    assert full.stability_limit < alone.stability_limit  # the first 60 bases have fewer springs a base
+    assert growing.rng.bit_generator.state == alone.rng.bit_generator.state  # the simulation's generator: not drawn
