@@ -149,6 +149,36 @@ def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
     assert int(rows[-1]["n_broken"]) > 0 and rows[-1]["n_patches"] != ""
 
 
+@pytest.mark.parametrize("n", [500, 40_000])  # drawn as dots, and as a raster
+def test_each_animation_frame_shows_its_own_pattern_only(tmp_path, n):
+    """Each frame is drawn over the axes drawn once: nothing of the frame before shows through (a frame
+    is the same image whether another came before it or not)."""
+    from PIL import Image
+
+    from bark.output import Frames
+    from bark_cli.animation import write_gif
+
+    rng = np.random.default_rng(3)
+
+    def frame(t, patches):
+        uv = np.column_stack([rng.uniform(0, 2 * np.pi * 0.3, n), rng.uniform(0, 1, n)])
+        uv[:2] = [[0.0, 0.0], [2 * np.pi * 0.3, 1.0]]  # the same extent in every frame: the same axes
+        return (t, 0.3, uv.astype(np.float32), rng.integers(0, patches, n).astype(np.int32))
+
+    first, second = frame(1.0, 3), frame(2.0, 40)
+    both, alone = Frames(), Frames()
+    both.frames, alone.frames = [first, second], [second]
+    write_gif(both, tmp_path / "both.gif")
+    write_gif(alone, tmp_path / "alone.gif")
+    with Image.open(tmp_path / "both.gif") as a, Image.open(tmp_path / "alone.gif") as b:
+        a.seek(1)
+        later, own = np.asarray(a.convert("RGB")), np.asarray(b.convert("RGB"))
+        a.seek(0)
+        earlier = np.asarray(a.convert("RGB"))
+    np.testing.assert_array_equal(later, own)
+    assert np.count_nonzero((earlier != later).any(axis=-1)) > 1000  # and the two frames do differ
+
+
 def test_graphml_is_the_graph_of_record(tmp_path):
     import networkx as nx
 
