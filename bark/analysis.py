@@ -31,6 +31,7 @@ __all__ = [
     "axial_difference",
     "patch_statistics",
     "components",
+    "count_patches",
     "window_labels",
     "pattern_summary",
     "hellinger",
@@ -107,6 +108,11 @@ def components(n: int, pairs: np.ndarray, kept: np.ndarray) -> np.ndarray:
     p = np.asarray(pairs, dtype=np.int64)[np.asarray(kept, bool)]
     adjacency = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n))
     return connected_components(adjacency, directed=False)[1].astype(np.int32)
+
+
+def count_patches(labels: np.ndarray, min_size: int) -> int:
+    """How many patches (labels, as ``components`` gives them) have at least ``min_size`` bases."""
+    return int(np.count_nonzero(np.bincount(labels) >= min_size))
 
 
 def window_labels(points: np.ndarray, pairs: np.ndarray, intact: np.ndarray, size: float) -> np.ndarray:

@@ -79,9 +79,9 @@ def crack_counts(broken: np.ndarray, pairs: np.ndarray, offsets: tuple[int, ...]
 
 def patch_count(n_bases: int, pairs: np.ndarray, intact: np.ndarray, min_size: int) -> int:
     """Patches of at least ``min_size`` of bases ``0 .. n_bases − 1`` over the ``intact`` springs."""
-    from bark.analysis import components
+    from bark.analysis import components, count_patches
 
-    return int(np.count_nonzero(np.bincount(components(n_bases, pairs, intact)) >= min_size))
+    return count_patches(components(n_bases, pairs, intact), min_size)
 
 
 @attrs.frozen

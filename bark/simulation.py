@@ -17,6 +17,7 @@ import numpy as np
 
 from bark import kernels, stepping
 from bark._validate import MISSING, in_range, int_in, one_of, optional, positive, positive_int
+from bark.analysis import count_patches
 from bark.errors import BarkError, NonFiniteStateError, Ref
 from bark.forces import ForceField, Mechanics, spring_geometry
 from bark.lattice import Lattice
@@ -390,7 +391,7 @@ class Simulation:
 
     def patch_count(self, min_size: int = 7) -> int:
         """Number of patches of at least ``min_size`` bases."""
-        return int(np.count_nonzero(np.bincount(self.patch_labels()) >= min_size))
+        return count_patches(self.patch_labels(), min_size)
 
     def analyze(self) -> dict[str, Analysis]:
         """Run every analyzer on the current pattern; results by analyzer class name."""

@@ -15,6 +15,7 @@ from PIL import Image
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from bark.analysis import count_patches
 from bark.output import Frames, atomic_write
 from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, patch_colours, raster
 
@@ -56,7 +57,7 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
             lo, hi = float(uv[:, 1].min()), float(uv[:, 1].max())
             cells.set_data(raster(uv, colours, 2 * np.pi * r, lo, hi))
             cells.set_extent((0.0, 2 * np.pi * r, lo, hi))
-        count = int(np.count_nonzero(np.bincount(labels) >= min_size))
+        count = count_patches(labels, min_size)
         title.set_text(f"t = {t:.1f}   r = {r:.3f}   {count} patches")
 
     images = []
