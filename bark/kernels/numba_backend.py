@@ -152,6 +152,24 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
 
 
 @inline
+def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update):
+    """Base ``q`` moved by its total force (eq. 4: its springs' forces in f, used up and zeroed, its
+    anchor at ``(anchor_x, anchor_y)`` and its own height, damping) through the integrator's update:
+    its new position and velocity, not yet on the surface."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    g0 = _base_force(f0[q], x0[q], anchor_x, v0[q], c, b)
+    g1 = _base_force(f1[q], x1[q], anchor_y, v1[q], c, b)
+    g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
+    f0[q] = 0.0
+    f1[q] = 0.0
+    f2[q] = 0.0
+    px, u0 = update(x0[q], v0[q], g0, hm, h)
+    py, u1 = update(x1[q], v1[q], g1, hm, h)
+    pz, u2 = update(x2[q], v2[q], g2, hm, h)
+    return px, py, pz, u0, u1, u2
+
+
+@inline
 def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before, from_radius, heights):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
@@ -168,15 +186,7 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
     for q in range(x0.shape[0]):
         anchor_x = r_before * dx[q] if from_radius else ax[q]
         anchor_y = r_before * dy[q] if from_radius else ay[q]
-        g0 = _base_force(f0[q], x0[q], anchor_x, v0[q], c, b)
-        g1 = _base_force(f1[q], x1[q], anchor_y, v1[q], c, b)
-        g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
-        f0[q] = 0.0
-        f1[q] = 0.0
-        f2[q] = 0.0
-        px, u0 = update(x0[q], v0[q], g0, hm, h)
-        py, u1 = update(x1[q], v1[q], g1, hm, h)
-        pz, u2 = update(x2[q], v2[q], g2, hm, h)
+        px, py, pz, u0, u1, u2 = _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update)
         r = r_now
         scale = _surface_scale(px, py, r)
         px *= scale
@@ -205,15 +215,7 @@ def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, he
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
-        g0 = _base_force(f0[q], x0[q], ax[q], v0[q], c, b)
-        g1 = _base_force(f1[q], x1[q], ay[q], v1[q], c, b)
-        g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
-        f0[q] = 0.0
-        f1[q] = 0.0
-        f2[q] = 0.0
-        x0[q], v0[q] = update(x0[q], v0[q], g0, hm, h)
-        x1[q], v1[q] = update(x1[q], v1[q], g1, hm, h)
-        x2[q], v2[q] = update(x2[q], v2[q], g2, hm, h)
+        x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update)
     weights, stride = heights
     by_weights = stride > 0
     bad = 0
