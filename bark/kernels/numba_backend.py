@@ -675,6 +675,15 @@ def _check_weights(plan: Plan, t: float, z: np.ndarray, weights: np.ndarray) -> 
                         "at its anchors' heights: they must give q[0] + w[0]·q[1] + w[1]·q[2] + ... exactly")
 
 
+def _place(springs: tuple, live: np.ndarray, at: np.ndarray, ids: np.ndarray, state) -> None:
+    """The state's springs ``ids`` at positions ``at`` of a frame: rest lengths, thresholds, their
+    inverses and intact flags."""
+    rest, fmax, inv_fmax = springs
+    rest[at], fmax[at] = state.rest[ids], state.fmax[ids]
+    inv_fmax[at] = 1.0 / state.fmax[ids]
+    live[at] = state.intact[ids]
+
+
 def _store_of(state) -> tuple:
     return tuple(state._store.values())
 
@@ -716,11 +725,8 @@ class NumbaBackend(Backend):
         size = int(room.sum())
         by_position = np.full(size, -1, np.int64)
         by_position[where] = ids
-        springs = tuple(np.zeros(size) for _ in range(3))
-        for out, values in zip(springs, (state.rest, state.fmax, None)):
-            out[where] = values[ids] if values is not None else 1.0 / state.fmax[ids]
-        live = np.zeros(size, bool)
-        live[where] = state.intact[ids]
+        springs, live = tuple(np.zeros(size) for _ in range(3)), np.zeros(size, bool)
+        _place(springs, live, where, ids, state)
         return _Frame(state=state, sizes=(), bases=(), runs=(position, lengths.copy(), first_i, offsets), room=room,
                       first_keys=self._order.keys[starts] if len(starts) else np.empty(0, np.uint64),
                       springs=springs, ids=by_position, live=live, n_live=int(np.count_nonzero(live)),
@@ -750,10 +756,7 @@ class NumbaBackend(Backend):
             return False
         at = position[run] + lengths[run] + rank
         fr.ids[at] = new
-        rest, fmax, inv_fmax = fr.springs
-        rest[at], fmax[at] = state.rest[new], state.fmax[new]
-        inv_fmax[at] = 1.0 / state.fmax[new]
-        fr.live[at] = state.intact[new]
+        _place(fr.springs, fr.live, at, new, state)
         fr.n_live += int(np.count_nonzero(state.intact[new]))
         np.add.at(lengths, run, 1)
         fr.refresh_from = min(fr.refresh_from, int(state.pairs[seen:].min()))  # and the bases they join
@@ -808,7 +811,7 @@ class NumbaBackend(Backend):
         the growth law's ``compiled_weights`` of each anchor's height, taken when its base is first
         seen (an anchor's height never changes) and checked then against the law's own radius;
         ``(empty, 0)`` for a law without them."""
-        if plan.weights is None or plan.uniform:
+        if plan.weights is None:  # the plan gives them only for a radius that depends on height
             return _NO_WEIGHTS
         key = (plan.weights, plan.params.tobytes())
         fr = self.frame(state)
