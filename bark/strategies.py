@@ -151,6 +151,12 @@ class Growth(Strategy):
         """The ``params`` array of the compiled form."""
         return np.empty(0)
 
+    def weights_form(self) -> Callable | None:
+        """``compiled_weights`` where radii are summed from it — a compiled radius that depends on
+        height — else ``None``.  (With ``compiled_time``, ``q = compiled_time(t, params)``; without,
+        ``q = params``.)"""
+        return self.compiled_weights if self.compiled is not None and not self.uniform else None
+
     def mean_radius(self, t: float, z: np.ndarray) -> float:
         """The mean of ``radius(t, z)`` over the heights ``z`` (derived from ``radius``: a law that
         gives one radius for all heights counts it once for each)."""

@@ -41,6 +41,7 @@ import numpy as np
 from bark._validate import in_range, one_of
 from bark.errors import BarkError, Ref
 from bark.lattice import Lattice
+from bark.physics import as_given
 from bark.strategies import weighted_radius
 
 __all__ = ["Dome", "Apex", "SAMPLES", "leaf_corners", "join_radii", "phyllotaxis"]
@@ -240,11 +241,12 @@ def join_radii(sim) -> np.ndarray:
     s, growth = sim.state, sim.growth
     z, born = s.anchor[:, 2], s.born
     times, group = np.unique(born, return_inverse=True)
-    if len(times) and growth.compiled_weights is not None and growth.compiled_time is not None and not growth.uniform:
+    weights = growth.weights_form()
+    if len(times) and weights is not None:
         # radius = q(t)[0] + w(z)[0]·q(t)[1] + ..., to the bit: the weights of all sites at once
-        p = growth.compiled_params()
-        q = np.array([growth.compiled_time(float(t), p) for t in times]).reshape(len(times), -1)
-        return weighted_radius(q[group].T, np.atleast_2d(np.asarray(growth.compiled_weights(z, p), dtype=float)))
+        p, prepare = growth.compiled_params(), growth.compiled_time or as_given
+        q = np.array([prepare(float(t), p) for t in times]).reshape(len(times), -1)
+        return weighted_radius(q[group].T, np.atleast_2d(np.asarray(weights(z, p), dtype=float)))
     out = np.empty(s.n_bases)
     for i, t in enumerate(times):  # bases join in groups: one call of the law per group
         at = group == i
