@@ -39,6 +39,7 @@ import attrs
 import numpy as np
 
 from bark.errors import BarkError, Ref
+from bark.output import PATTERN_KEYS
 
 __all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "FIG9_AXES", "RESULT_COLUMNS"]
 
@@ -47,9 +48,7 @@ FIG9_AXES = (("growth.G", (0.007, 0.011, 0.014)), ("mechanics.f_max", (0.0028, 0
 
 RESULT_COLUMNS = {
     "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
-    "n_patches": "INTEGER", "mean_orientation_deg": "REAL", "circular_sd_deg": "REAL", "orientation_se_deg": "REAL",
-    "mean_anisotropy": "REAL", "anisotropy_sd": "REAL", "anisotropy_se": "REAL", "fraction_within_45_deg": "REAL",
-    "stop_reason": "TEXT", "first_break_t": "REAL", "initial_fractures": "INTEGER", "dissipation_rate": "REAL",
+    "n_patches": "INTEGER", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL", "initial_fractures": "INTEGER", "dissipation_rate": "REAL",
     "growth_dissipation": "REAL",
 }
 """What the table holds of each run besides its identity, by SQLite type: the keys of the run's
@@ -184,10 +183,7 @@ class SweepTable:
                     + ", wall_s REAL, finished TEXT, bark_version TEXT, scene TEXT NOT NULL)")
                 self.con.execute("CREATE TABLE IF NOT EXISTS patterns (key TEXT PRIMARY KEY REFERENCES runs(key), "
                                  "n INTEGER NOT NULL, uv BLOB NOT NULL, labels BLOB NOT NULL, colours BLOB NOT NULL)")
-                have = set(self.columns())
-                for c, t in RESULT_COLUMNS.items():  # a table of an earlier bark: the columns added since
-                    if c not in have:
-                        self.con.execute(f"ALTER TABLE runs ADD COLUMN {c} {t}")
+                self._add_columns(RESULT_COLUMNS)  # a table of an earlier bark: the columns added since
         except sqlite3.DatabaseError as err:
             raise BarkError(f"{self.path}: not a sweep database ({err})") from None
 
@@ -205,11 +201,15 @@ class SweepTable:
 
     def add_axes(self, axes: Iterable[Axis]) -> None:
         """A column per swept setting (``"growth.G"``), added to an older table as needed."""
-        have = set(self.columns())
         with self.con:
-            for a in axes:
-                if a.key not in have:
-                    self.con.execute(f'ALTER TABLE runs ADD COLUMN "{a.key}"')
+            self._add_columns({a.key: "" for a in axes})
+
+    def _add_columns(self, columns: dict[str, str]) -> None:
+        """The columns (name: SQLite type, or none) the table lacks, added."""
+        have = set(self.columns())
+        for name, kind in columns.items():
+            if name not in have:
+                self.con.execute(f'ALTER TABLE runs ADD COLUMN "{name}" {kind}')
 
     def done(self) -> set[str]:
         return {k for (k,) in self.con.execute("SELECT key FROM runs")}
