@@ -21,6 +21,8 @@ photographs (points and patch ids, no simulation) alike.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -28,6 +30,7 @@ __all__ = [
     "principal_axes",
     "axial_mean",
     "axial_sd",
+    "axial_se",
     "axial_difference",
     "patch_statistics",
     "components",
@@ -79,6 +82,23 @@ def axial_sd(deg: np.ndarray) -> float:
     sin, cos = _doubled(deg)
     r = min(float(np.hypot(sin, cos)), 1.0)  # rounding can put it a hair above 1
     return float(np.sqrt(-2.0 * np.log(r)) + 0.0) * 90.0 / np.pi
+
+
+def axial_se(deg: np.ndarray) -> float:
+    """Standard error of the axial mean in degrees (Fisher 1993, eq. 4.21 on the doubled angles):
+    ``δ = (1 − ρ₂) / (2 R̄²)``, ``SE = √(δ / n)`` on the doubled circle, halved back to axes; ``ρ₂``
+    is the mean of ``cos 2(φ − μ)`` over the doubled angles ``φ``.  NaN for fewer than two."""
+    deg = np.asarray(deg, dtype=float)
+    if deg.size < 2:
+        return float("nan")
+    s, c = _doubled(deg)
+    r2 = s * s + c * c
+    if r2 < (64 * np.finfo(float).eps) ** 2:  # R̄ zero but for the rounding of the sines
+        return float("inf")  # no mean axis: its error is unbounded
+    mu = math.atan2(s, c)
+    rho2 = float(np.mean(np.cos(2.0 * (np.radians(2.0 * deg) - mu))))  # 2(φ − μ), φ the doubled angles
+    delta = max(0.0, 1.0 - rho2) / (2.0 * r2)
+    return math.degrees(math.sqrt(delta / deg.size)) / 2.0
 
 
 def axial_difference(a, b) -> np.ndarray:

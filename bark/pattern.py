@@ -35,7 +35,7 @@ from pathlib import Path
 import attrs
 import numpy as np
 
-from bark.analysis import axial_mean, axial_sd, axial_difference, principal_axes, tangent_plane
+from bark.analysis import axial_difference, axial_mean, axial_sd, axial_se, principal_axes, tangent_plane
 from bark.errors import BarkError
 
 __all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
@@ -77,10 +77,6 @@ class Pattern:
             raise BarkError(f"{self.name or 'pattern'}: {n} points but {self.patches.shape[0]} patch ids")
         if not np.isfinite(self.points).all():
             raise BarkError(f"{self.name or 'pattern'}: a point is NaN or infinite")
-
-    @property
-    def n_points(self) -> int:
-        return int(self.points.shape[0])
 
     @property
     def on_trunk(self) -> bool:
@@ -178,9 +174,7 @@ class Pattern:
         """The pattern seen in a mirror held along the trunk: left and right swapped (θ → −θ on the
         trunk, x → −x in a plane), so every orientation ``o`` becomes ``180° − o``.  A phyllotactic
         spiral turns either way on real trees; this compares patterns of opposite handedness."""
-        flip = np.ones(self.points.shape[1])
-        flip[1 if self.on_trunk else 0] = -1.0
-        return attrs.evolve(self, points=self.points * flip, name=f"{self.name} (mirrored)")
+        return attrs.evolve(self, points=_mirrored_points(self.points), name=f"{self.name} (mirrored)")
 
     # -- measured -------------------------------------------------------------------------------
     def patch_table(self, min_size: int = MIN_PATCH_SIZE) -> "PatchTable":
@@ -204,6 +198,14 @@ class Pattern:
     def statistics(self, min_size: int = MIN_PATCH_SIZE) -> "PatternStatistics":
         """The pattern's statistics over its patches of at least ``min_size`` points."""
         return PatternStatistics.of_table(self.patch_table(min_size), name=self.name)
+
+
+def _mirrored_points(points: np.ndarray) -> np.ndarray:
+    """Points seen in a mirror held along the trunk: y → −y for 3-D points on the trunk (θ → −θ), x → −x
+    for 2-D points in a plane."""
+    flip = np.ones(points.shape[1])
+    flip[1 if points.shape[1] == 3 else 0] = -1.0
+    return points * flip
 
 
 def _mirror(deg):
@@ -241,9 +243,7 @@ class PatchTable:
 
     def mirrored(self) -> "PatchTable":
         """The table of the mirrored pattern (``Pattern.mirrored``)."""
-        flip = np.ones(self.centroid.shape[1])
-        flip[1 if self.centroid.shape[1] == 3 else 0] = -1.0
-        return attrs.evolve(self, centroid=self.centroid * flip, orientation_deg=_mirror(self.orientation_deg))
+        return attrs.evolve(self, centroid=_mirrored_points(self.centroid), orientation_deg=_mirror(self.orientation_deg))
 
     @property
     def columns(self) -> list[str]:
@@ -283,24 +283,6 @@ class Linear:
     mean: float
     sd: float
     se: float
-
-
-def axial_se(deg: np.ndarray) -> float:
-    """Standard error of the axial mean in degrees (Fisher 1993, eq. 4.21 on the doubled angles):
-    ``δ = (1 − ρ₂) / (2 R̄²)``, ``SE = √(δ / n)`` on the doubled circle, halved back to axes; ``ρ₂``
-    is the mean of ``cos 2(φ − μ)`` over the doubled angles ``φ``.  NaN for fewer than two."""
-    deg = np.asarray(deg, dtype=float)
-    if deg.size < 2:
-        return float("nan")
-    phi = np.radians(2.0 * deg)
-    s, c = float(np.mean(np.sin(phi))), float(np.mean(np.cos(phi)))
-    r2 = s * s + c * c
-    if r2 < (64 * np.finfo(float).eps) ** 2:  # R̄ zero but for the rounding of the sines
-        return float("inf")  # no mean axis: its error is unbounded
-    mu = math.atan2(s, c)
-    rho2 = float(np.mean(np.cos(2.0 * (phi - mu))))
-    delta = max(0.0, 1.0 - rho2) / (2.0 * r2)
-    return math.degrees(math.sqrt(delta / deg.size)) / 2.0
 
 
 def wrapped_normal_se(sd_deg: float, n: int) -> float:
