@@ -222,6 +222,6 @@ def power_law(x, y, level: float = 0.95) -> PowerLaw:
         raise ValueError(f"a power law needs at least three points with both values positive, not {np.count_nonzero(ok)}")
     fit = stats.linregress(np.log(x[ok]), np.log(y[ok]))
     n = int(np.count_nonzero(ok))
-    half = float(stats.t.ppf(0.5 + level / 2, n - 2) * fit.stderr) if n > 2 else math.inf
+    half = float(stats.t.ppf(0.5 + level / 2, n - 2) * fit.stderr)  # n ≥ 3: checked above
     return PowerLaw(exponent=float(fit.slope), ci=(float(fit.slope - half), float(fit.slope + half)), level=level,
                     prefactor=float(math.exp(fit.intercept)), r2=float(fit.rvalue**2), n=n)

@@ -62,7 +62,7 @@ def analyze(pattern, min_size, out):
     from rich.console import Console
 
     from bark.folder import writable_folder
-    from bark.output import patch_columns, write_csv, write_json
+    from bark.output import write_csv, write_json
 
     _namer()
     (stats,) = _read_all([pattern], min_size)
@@ -71,8 +71,7 @@ def analyze(pattern, min_size, out):
     write_json(folder / "statistics.json", stats.as_dict())
     written = ["statistics.json"]
     if stats.patches is not None:
-        rows = stats.patches.rows()
-        write_csv(folder / "patches.csv", rows, patch_columns(rows))
+        write_csv(folder / "patches.csv", stats.patches.rows(), stats.patches.columns)
         written.append("patches.csv")
         if stats.n_patches:
             from bark_cli.figures import plot_histogram, plot_radial
