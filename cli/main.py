@@ -23,7 +23,8 @@ import click
 from bark.errors import BarkError
 from bark.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.strategies import KINDS
-from bark_cli.options import NAMER, LazyHelpOption, Provenance, name_ref, overrides_from, parameter_options
+from bark_cli.options import (NAMER, LazyHelpOption, Provenance, name_ref, overrides_from, parameter_options,
+                              setting_value, split_setting)
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 
@@ -71,21 +72,15 @@ def _strategy_option(kind: str):
 def _parse_set(items: tuple[str, ...]) -> tuple[dict, dict]:
     """``--set growth.G=0.01`` → ``{"growth": {"G": 0.01}}`` (values parsed as TOML), and the text
     of each item by (section, key), for messages."""
-    import tomllib
-
     out: dict = {}
     raw: dict = {}
     for item in items:
-        key, sep, text = item.partition("=")
-        section, dot, name = key.strip().partition(".")
-        if not sep or not dot or not section or not name:
+        parts = split_setting(item)
+        if parts is None:
             raise BarkError(f"--set {shlex.quote(item)}: expected SECTION.KEY=VALUE, e.g. --set growth.G=0.011")
-        try:
-            value = tomllib.loads(f"v = {text.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = text.strip()  # a bare word, e.g. a strategy name
-        out.setdefault(section.strip(), {})[name.strip()] = value
-        raw[(section.strip(), name.strip())] = shlex.quote(item)
+        section, name, text = parts
+        out.setdefault(section, {})[name] = setting_value(text)
+        raw[(section, name)] = shlex.quote(item)
     return out, raw
 
 

@@ -227,3 +227,24 @@ def name_ref(ref: Ref) -> str:
     """``ref`` named for the command being run (its options; see :class:`Provenance`)."""
     namer = NAMER.get()
     return namer(ref) if namer is not None else Provenance().name(ref)
+
+
+def split_setting(item: str) -> tuple[str, str, str] | None:
+    """``SECTION.KEY=TEXT`` (``--set``, ``--grid``) → ``(section, key, text)``, the names stripped, or
+    ``None`` when the item is not of that form."""
+    key, sep, text = item.partition("=")
+    section, dot, name = key.strip().partition(".")
+    if not sep or not dot or not section or not name:
+        return None
+    return section.strip(), name.strip(), text
+
+
+def setting_value(text: str):
+    """A ``--set`` or ``--grid`` value: read as TOML (``0.01``, ``true``, ``[55, 89]``), else the bare
+    word as it is (a strategy name)."""
+    import tomllib
+
+    try:
+        return tomllib.loads(f"v = {text.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text.strip()

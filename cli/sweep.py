@@ -17,19 +17,18 @@ CONTEXT = {"help_option_names": ["-h", "--help"]}
 def parse_grid(items: tuple[str, ...]):
     """``--grid growth.G=0.007,0.011,0.014`` or ``--grid growth.G=0.005:0.015:5`` (5 values from
     0.005 to 0.015) → :class:`bark.sweep.Axis` es, and the tables they touch (for messages)."""
-    import tomllib
-
     import numpy as np
 
     from bark.sweep import Axis
+    from bark_cli.options import setting_value, split_setting
 
     axes, layer = [], {}
     for item in items:
-        key, sep, text = item.partition("=")
-        section, dot, name = key.strip().partition(".")
-        if not sep or not dot or not section or not name or not text.strip():
+        setting = split_setting(item)
+        if setting is None or not setting[2].strip():
             raise BarkError(f"--grid {shlex.quote(item)}: expected SECTION.KEY=V1,V2,... or SECTION.KEY=START:STOP:N, "
                             "e.g. --grid growth.G=0.007,0.011,0.014")
+        section, name, text = setting
         parts = text.split(":")
         if len(parts) == 3:
             try:
@@ -41,13 +40,8 @@ def parse_grid(items: tuple[str, ...]):
             # to 12 digits: 0.01:0.03:3 is 0.01, 0.02, 0.03 as typed, not linspace's 0.019999999999999997
             values = [float(f"{v:.12g}") for v in np.linspace(start, stop, n)] if n > 1 else [start]
         else:
-            values = []
-            for word in text.split(","):
-                try:
-                    values.append(tomllib.loads(f"v = {word.strip()}")["v"])
-                except tomllib.TOMLDecodeError:
-                    values.append(word.strip())  # a bare word, e.g. a strategy name
-        axis = Axis(f"{section.strip()}.{name.strip()}", tuple(values))
+            values = [setting_value(word) for word in text.split(",")]
+        axis = Axis(f"{section}.{name}", tuple(values))
         axes.append(axis)
         layer.setdefault(axis.section, {})[axis.name] = list(values)
     return axes, layer
@@ -97,43 +91,30 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     client = _dask_client(dask_address) if dask_address is not None else None
     folder = writable_folder(out)
     bar = None if quiet or not sys.stdout.isatty() else _bar()
-    stopped = _stop_on_signals()
-    try:
-        counts = run_sweep(plan, folder / "sweep.sqlite", workers=workers or 1, client=client,
-                           progress=bar.update if bar is not None else None)
-    except WorkerDied as err:
-        click.echo(f"bark: {err}", err=True)
-        sys.exit(1)
-    except KeyboardInterrupt:
-        from bark.sweep import SweepTable
+    from bark_cli.main import Signals
 
-        with SweepTable(folder / "sweep.sqlite") as table:
-            n = len(table.done() & {p.key for p in plan.points()})
-        signum = stopped.get("signum", signal.SIGINT)
-        click.echo(f"bark: sweep stopped by {signal.Signals(signum).name}: {n} of {len(plan.points())} runs are in "
-                   f"{folder / 'sweep.sqlite'}; the same command goes on", err=True)
-        sys.exit(128 + int(signum))
-    finally:
-        for sig, handler in stopped["previous"].items():
-            signal.signal(sig, handler)
-        if bar is not None:
-            bar.close()
-        if client is not None:
-            client.close()
+    with Signals() as signals:  # SIGTERM and SIGHUP stop a sweep as Ctrl-C does: a run is in the table whole or not at all
+        try:
+            counts = run_sweep(plan, folder / "sweep.sqlite", workers=workers or 1, client=client,
+                               progress=bar.update if bar is not None else None)
+        except WorkerDied as err:
+            click.echo(f"bark: {err}", err=True)
+            sys.exit(1)
+        except KeyboardInterrupt:
+            from bark.sweep import SweepTable
+
+            with SweepTable(folder / "sweep.sqlite") as table:
+                n = len(table.done() & {p.key for p in plan.points()})
+            signum = signals.received or signal.SIGINT
+            click.echo(f"bark: sweep stopped by {signal.Signals(signum).name}: {n} of {len(plan.points())} runs are in "
+                       f"{folder / 'sweep.sqlite'}; the same command goes on", err=True)
+            sys.exit(128 + int(signum))
+        finally:
+            if bar is not None:
+                bar.close()
+            if client is not None:
+                client.close()
     _finish(plan, folder, counts, quiet)
-
-
-def _stop_on_signals() -> dict:
-    """SIGTERM and SIGHUP stop the sweep as Ctrl-C does (between commits: a run is in the table whole
-    or not at all); returns where the signal's number will be noted."""
-    seen: dict = {}
-
-    def handle(signum, frame):
-        seen.setdefault("signum", signum)
-        raise KeyboardInterrupt
-
-    seen["previous"] = {sig: signal.signal(sig, handle) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-    return seen
 
 
 def _dask_client(address: str):
@@ -184,7 +165,8 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
 
         t = Table(*[a.key for a in plan.axes], "seed", "patches", "orientation (°)", "SD (°)", "anisotropy", "t", "wall (s)",
                   title=f"bark sweep: {counts['ran']} runs now, {counts['skipped']} already in the table")
-        for p, r in zip(points, rows):
+        for p in points:
+            r = by_key[p.key]
             t.add_row(*[f"{v:g}" if isinstance(v, float) else str(v) for v in p.settings.values()], str(p.seed),
                       str(r["n_patches"]), _g(r["mean_orientation_deg"]), _g(r["circular_sd_deg"]), _g(r["mean_anisotropy"]),
                       _g(r["t"]), _g(r["wall_s"]))
