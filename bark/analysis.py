@@ -163,10 +163,7 @@ def pattern_summary(rows: list[dict]) -> dict:
     from bark.pattern import PatternStatistics
 
     stats = PatternStatistics.of_values([r["orientation_deg"] for r in rows], [r["anisotropy"] for r in rows])
-    summary = {k: v for k, v in stats.as_dict().items() if k not in ("name", "source")}
-    if summary["fraction_within_45_deg"] is None:
-        summary["fraction_within_45_deg"] = float("nan")
-    return summary
+    return {k: v for k, v in stats.as_dict().items() if k not in ("name", "source")}
 
 
 def hellinger(mean_p: float, sd_p: float, mean_q: float, sd_q: float, axial: bool = False) -> float:

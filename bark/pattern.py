@@ -317,7 +317,8 @@ class PatternStatistics:
     """``None`` where a published summary does not give it."""
     patches: PatchTable | None = None
     fraction_within_45: float | None = None
-    """Share of patches whose orientation is within 45° of the mean axis."""
+    """Share of patches whose orientation is within 45° of the mean axis (NaN with no patches; ``None``
+    where a published summary does not give it)."""
     source: str = ""
     """Where the figures come from, in words (a file, or the publication of a summary)."""
 
@@ -331,13 +332,14 @@ class PatternStatistics:
         """The statistics of patches with these orientations and anisotropies (one each)."""
         deg = np.asarray(orientation_deg, dtype=float)
         n = int(deg.size)
-        if n == 0:
+        aniso = _linear(np.asarray(anisotropy, dtype=float))
+        if n == 0:  # no patches: every statistic undefined (NaN), as summary.json writes it (null)
             nan = math.nan
-            return cls(name=name, n_patches=0, orientation=Axial(0, nan, nan, nan), anisotropy=_linear(deg),
-                       patches=patches, fraction_within_45=None, source=source)
+            return cls(name=name, n_patches=0, orientation=Axial(0, nan, nan, nan), anisotropy=aniso,
+                       patches=patches, fraction_within_45=nan, source=source)
         mean = axial_mean(deg)
         return cls(name=name, n_patches=n, orientation=Axial(n, mean, axial_sd(deg), axial_se(deg)),
-                   anisotropy=_linear(np.asarray(anisotropy, dtype=float)), patches=patches,
+                   anisotropy=aniso, patches=patches,
                    fraction_within_45=float(np.mean(np.abs(axial_difference(deg, mean)) <= 45.0)), source=source)
 
     @classmethod
