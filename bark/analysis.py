@@ -188,6 +188,9 @@ def orientation_hellinger(deg_p: np.ndarray, deg_q: np.ndarray) -> float:
 
 
 def standard_error_difference(mean_p: float, se_p: float, mean_q: float, axial: bool = False) -> float:
-    """``d_P(P, Q) = |μ_Q − μ_P| / SE_P`` (paper, eq. 15): asymmetric, in standard errors of P."""
+    """``d_P(P, Q) = |μ_Q − μ_P| / SE_P`` (paper, eq. 15): asymmetric, in standard errors of P; with
+    ``SE_P = 0``, 0 for the same mean and ``inf`` for another."""
     diff = float(axial_difference(mean_q, mean_p)) if axial else mean_q - mean_p
+    if se_p == 0.0:
+        return 0.0 if diff == 0.0 else math.inf
     return abs(diff) / se_p

@@ -64,12 +64,8 @@ def d_p(stats: Sequence[PatternStatistics], quantity: str = "orientation") -> np
     d = np.zeros((n, n))
     for p, q in itertools.permutations(range(n), 2):
         (mp, _, se), (mq, _, _) = m[p], m[q]
-        if not all(math.isfinite(v) for v in (mp, se, mq)):
-            d[p, q] = math.nan
-        elif se == 0.0:
-            d[p, q] = 0.0 if mp == mq else math.inf
-        else:
-            d[p, q] = standard_error_difference(mp, se, mq, axial=quantity == "orientation")
+        finite = all(math.isfinite(v) for v in (mp, se, mq))
+        d[p, q] = standard_error_difference(mp, se, mq, axial=quantity == "orientation") if finite else math.nan
     return d
 
 

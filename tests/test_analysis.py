@@ -306,6 +306,9 @@ def test_standard_error_difference_is_eq_15_and_asymmetric():
     assert standard_error_difference(10.0, 2.0, 16.0) == pytest.approx(3.0)
     assert standard_error_difference(16.0, 0.5, 10.0) == pytest.approx(12.0)
     assert standard_error_difference(178.0, 2.0, 4.0, axial=True) == pytest.approx(3.0)  # 6° apart as axes
+    # a pattern known without error: the same mean is no distance, another is infinitely far
+    assert standard_error_difference(10.0, 0.0, 10.0) == 0.0
+    assert standard_error_difference(10.0, 0.0, 10.5) == math.inf
 
 
 @given(
