@@ -240,6 +240,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
             if stop_reason == "non-finite" else "the state at the stop"
         ),
         "backend": sim.backend.name,
+        "threads": getattr(sim.backend, "threads", 1),
         "dt": sim.numerics.dt,
         "h": sim.clock.h,
         "stability_limit": sim.stability_limit,

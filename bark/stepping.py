@@ -61,6 +61,10 @@ class Numerics:
     """Adaptive stepping: the smallest step is the full step / 2**max_halvings (at most 40)."""
     backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
     """Compute backend: numpy, numba, or auto (numba if installed, else numpy)."""
+    threads: int = attrs.field(default=0, validator=int_in(0, 65536))
+    """Threads the numba backend's kernel shares each step among: 0 = automatic (as many as the cores
+    this process may use, for a lattice of at least 16,000 bases; else 1), at most that many.  Results
+    are the same to the bit whatever the count; the numpy backend runs on one."""
 
 
 @attrs.define
@@ -205,7 +209,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         accept_load=1.0 + sim.numerics.overshoot_tol if watches_overshoot(sim) and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
-        weights=sim.growth.weights_form() if compiled else None,
+        weights=sim.growth.weights_form() if compiled else None, threads=sim.numerics.threads,
     )
 
 

@@ -30,6 +30,7 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import sqlite3
 import time
 from pathlib import Path
@@ -282,8 +283,9 @@ def _local(todo: list[Point], workers: int):
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_start)
+    workers = min(workers, len(todo))
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_start, initargs=(max(1, _cores() // workers),))
     try:
         pending = {pool.submit(run_point, p.scene, p.key) for p in todo}
         while pending:
@@ -303,13 +305,21 @@ def _local(todo: list[Point], workers: int):
         pool.shutdown(wait=False, cancel_futures=True)
 
 
-def _worker_start() -> None:
+def _worker_start(threads: int) -> None:
     """A local worker leaves signals to the sweep: Ctrl-C stops the sweep (which stops handing out
-    runs), not the runs in flight mid-step with a traceback each."""
+    runs), not the runs in flight mid-step with a traceback each.  Its kernels' threads are its share
+    of the cores (``NUMBA_NUM_THREADS``, read when numba is imported, unless the user has set it), so
+    that workers do not contend for them."""
     import signal
 
     for sig in (signal.SIGINT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))
+
+
+def _cores() -> int:
+    """The cores this process may use (its CPU affinity, where the system tells it)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def _on_dask(client, todo: list[Point]):

@@ -35,12 +35,12 @@ def _case(n: int, case: str) -> dict:
     return {"lattice": {"n_bases": n}}
 
 
-def _phase_sim(n: int, backend: str, start_t: float, case: str = "default"):
-    """``case`` at ``n`` bases on ``backend``, stepped as the paper did (fixed dt = 0.01, so that a
-    step is the same work whatever the backend), compiled and run up to ``start_t``."""
+def _phase_sim(n: int, backend: str, start_t: float, case: str = "default", threads: int = 0):
+    """``case`` at ``n`` bases on ``backend`` (with ``threads``), stepped as the paper did (fixed
+    dt = 0.01, so that a step is the same work whatever the backend), compiled and run up to ``start_t``."""
     from bark.scene import Scene, merge
 
-    run = {"backend": backend, "dt": 0.01, "stepping": "fixed", "until_time": 1e6}  # the bench stops it itself
+    run = {"backend": backend, "threads": threads, "dt": 0.01, "stepping": "fixed", "until_time": 1e6}  # the bench stops it
     sim = Scene.from_dict(merge(_case(n, case), {"run": run})).simulation()
     sim.run(Stop(until_time=max(start_t, 2 * sim.clock.h)))  # also compiles the kernels, outside the timing
     return sim
@@ -85,21 +85,21 @@ class PlainNumpy:
 
 
 def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int, case: str = "default"
-                      ) -> dict[str, float]:
+                      ) -> dict[tuple, float]:
     """Median steps/s of the plain numpy baseline (the default case only: it knows no bulges and no
-    joining) and each backend over ``repeats`` stretches of ``steps`` steps from ``start_t``.
+    joining) and each ``(backend, threads)`` over ``repeats`` stretches of ``steps`` steps from ``start_t``.
 
     The stretches are interleaved (plain, numpy, numba, plain, numpy, numba, ...), so that a change in
     the machine's load falls on all of them alike and the ratios stay honest."""
-    sims = {b: _phase_sim(n, b, start_t, case) for b in backends}
+    sims = {b: _phase_sim(n, b[0], start_t, case, b[1]) for b in backends}
     plain = PlainNumpy(sims[backends[0]]) if case == "default" else None
-    rates = {b: [] for b in (("plain numpy",) if plain else ()) + tuple(backends)}
+    rates = {b: [] for b in ((PLAIN,) if plain else ()) + tuple(backends)}
     for _ in range(repeats):
         if plain is not None:
             t0 = time.perf_counter()
             for _ in range(steps):
                 plain.step()
-            rates["plain numpy"].append(steps / (time.perf_counter() - t0))
+            rates[PLAIN].append(steps / (time.perf_counter() - t0))
         for b, sim in sims.items():
             s0, t0 = sim.step_count, time.perf_counter()
             sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
@@ -107,11 +107,15 @@ def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int
     return {b: float(np.median(r)) for b, r in rates.items()}
 
 
-def _peak_memory(n: int, backend: str, start_t: float, steps: int, case: str = "default") -> float:
+PLAIN = ("plain numpy", 1)
+
+
+def _peak_memory(n: int, backend: tuple, start_t: float, steps: int, case: str = "default") -> float:
     """Peak memory (MiB, numpy and Python allocations as traced by tracemalloc) of building the
-    simulation and running it through the phase; measured apart from the timing, which tracing slows."""
+    simulation with ``(backend, threads)`` and running it through the phase; measured apart from the
+    timing, which tracing slows."""
     tracemalloc.start()
-    sim = _phase_sim(n, backend, start_t, case)
+    sim = _phase_sim(n, backend[0], start_t, case, backend[1])
     sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
@@ -139,15 +143,17 @@ PHASES = {
 @click.option("--case", "cases", type=click.Choice(list(CASES)), multiple=True, default=("default",), show_default=True,
               help="default: the vertical regime; bulge: with two bulges (per-base radii); joining: bases joining "
                    "at the top during the run.  The plain numpy baseline is measured for the default case.")
+@click.option("--threads", "thread_counts", type=click.IntRange(0, 65536), multiple=True, default=(0,), show_default=True,
+              help="The numba backend's threads (repeatable: each count is measured; 0: automatic).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None, help="Also write the table as CSV.")
-def speed(sizes, backends, phases, steps, repeats, cases, csv_path):
+def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_path):
     """Steps per second of the full step (integrate, constrain, tensions, breaking, stop checks) on
-    the default scene, per backend and phase, with ratios against a plain vectorised numpy step of
-    the same model measured in this run, interleaved."""
+    the default scene, per backend (and the numba backend's threads) and phase, with ratios against a
+    plain vectorised numpy step of the same model measured in this run, interleaved."""
     from rich.console import Console
     from rich.table import Table
 
-    backends = ("numpy", *[b for b in backends if b != "numpy"])
+    backends = (("numpy", 1), *[(b, t) for b in dict.fromkeys(backends) if b != "numpy" for t in dict.fromkeys(thread_counts)])
     from bark.scene import Scene
 
     for n in sizes:  # every size is a valid scene that fits in memory, before any work
@@ -165,11 +171,12 @@ def speed(sizes, backends, phases, steps, repeats, cases, csv_path):
                 peaks = {b: _peak_memory(n, b, start_t, k, case) for b in backends}
                 for backend, rate in rates.items():
                     rows.append({
-                        "case": case, "n_bases": n, "phase": phase, "backend": backend, "steps": k * repeats,
-                        "steps_per_s": rate, "speed_vs_plain_numpy": rate / rates.get("plain numpy", float("nan")),
-                        "speed_vs_numpy_backend": rate / rates["numpy"],
+                        "case": case, "n_bases": n, "phase": phase, "backend": backend[0], "threads": backend[1] or "auto",
+                        "steps": k * repeats, "steps_per_s": rate,
+                        "speed_vs_plain_numpy": rate / rates.get(PLAIN, float("nan")),
+                        "speed_vs_numpy_backend": rate / rates[("numpy", 1)],
                         "peak_MiB": peaks.get(backend, float("nan")),
-                        "memory_vs_numpy_backend": peaks.get(backend, float("nan")) / peaks["numpy"],
+                        "memory_vs_numpy_backend": peaks.get(backend, float("nan")) / peaks[("numpy", 1)],
                     })
     table = Table(*rows[0].keys(), title="bark bench speed — steps per second, interleaved")
     for r in rows:

@@ -32,7 +32,7 @@ settings.load_profile("ci" if os.environ.get("CI") else os.environ.get("HYPOTHES
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
-NUMERICS = ("dt", "stepping", "overshoot_tol", "max_halvings", "backend")
+NUMERICS = ("dt", "stepping", "overshoot_tol", "max_halvings", "backend", "threads")
 
 
 def build_sim(

@@ -106,7 +106,7 @@ TOML_VALUES = st.sampled_from(["nan", "-nan", "inf", "-inf", "1e308", "-1e308", 
 SCENE_KEYS = [("lattice", k) for k in ("n_bases", "divergence_deg", "rise", "offsets", "jitter")] + \
     [("mechanics", k) for k in ("k", "c", "b", "m", "f_max", "fmax_spread", "fmax_weibull_shape")] + \
     [("run", k) for k in ("dt", "seed", "until_time", "until_radius", "until_patches", "min_patch_size",
-                          "degenerate_fraction", "on_degenerate", "stepping", "overshoot_tol", "max_halvings", "backend")] + \
+                          "degenerate_fraction", "on_degenerate", "stepping", "overshoot_tol", "max_halvings", "backend", "threads")] + \
     [("effects", k) for k in ("want", "frame_every", "series_every", "history_every", "window")] + [("scene", "name"), ("growth", "G")]
 BULGE_KEYS = ("z", "half_width", "magnitude", "decay", "G", "f_max")
 
@@ -155,6 +155,7 @@ REFUSED = {
     ("--until-time", "1e308"): "--until-time 1e+308",
     ("--until-time", "1e-300"): "--until-time 1e-300",
     ("--max-halvings", "2000"): "--max-halvings 2000",
+    ("--threads", "-1"): "--threads -1",
     ("--fmax-weibull-shape", "1e-300"): "--fmax-weibull-shape 1e-300",
     ("--n-bases", "1000000000000"): "--n-bases 1000000000000",
     ("--n-bases", "400000000"): "--n-bases 400000000",  # fits 32 bits, not this machine's memory

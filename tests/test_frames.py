@@ -85,3 +85,28 @@ def test_positions_changed_between_calls_are_seen():
         runs.append(sim)
     assert np.array_equal(runs[0].state.x, runs[1].state.x)
     assert np.array_equal(runs[0].state.intact, runs[1].state.intact)
+
+
+def _threaded(threads: int, growth: str):
+    """A lattice of three blocks and more (``BLOCK`` bases each), bases joining, springs breaking: in
+    the kernel (threshold, adaptive steps, per-base radii) or in Python (probabilistic, fixed steps)."""
+    if growth == "bulge":
+        law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=2.0, half_width=1.0, magnitude=0.02, G=0.03)])
+        breakers, stepping, dt = None, "adaptive", 0.3
+    else:
+        law, breakers, stepping, dt = SqrtGrowth(G=0.08), [ProbabilisticBreaker()], "fixed", 0.05
+    n = 3 * numba_backend.BLOCK + 300
+    lattice = Lattice(n_bases=n, n_start=n - 600, join_rate=150.0, join_every=0.1, jitter=0.05)
+    sim = build_sim(G=0.08, dt=dt, seed=2, stepping=stepping, backend="numba", fmax_spread=0.05, growth=law,
+                    lattice=lattice, breakers=breakers, threads=threads)
+    sim.run(Stop(until_time=4.0))
+    return sim
+
+
+@pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
+@pytest.mark.parametrize("growth", ["bulge", "sqrt"])
+def test_threads_share_the_blocks_and_the_bits_stay_the_same(growth):
+    serial, shared = _threaded(1, growth), _threaded(2, growth)
+    assert (serial.backend.threads, shared.backend.threads) == (1, 2)
+    assert shared.n_broken > 100 and shared.state.n_bases > serial.lattice.n_start  # breaks, and joins, happened
+    _same(serial, shared)

@@ -11,8 +11,15 @@ Each piece of physics is :mod:`bark.physics`'s function, inlined (``inline="alwa
 fastmath: every expression is evaluated as written, so a run does not depend on where its compiled
 calls begin and end (what makes a resumed run end bit-identical).  The one exception is a maximum
 (``_largest_load``), exact in any order: it may use SIMD lanes, and it is taken every step only when
-adaptive stepping needs it, else once at the end of a call.  Loops run serially: on the
-2-core machines bark targets, the spring scatter is memory-bound and threads buy little.
+adaptive stepping needs it, else once at the end of a call.
+
+**Blocks, and threads.**  The loops over bases and over a run's springs go a block of ``BLOCK`` at a
+time, and a spring's force reaches its bases by a *gather* over blocks of bases (each base takes its
+springs' forces in the order of the serial sum), so no two blocks write the same entry.  Every
+kernel is compiled twice from the same source: serial, and with the blocks shared among threads
+(``prange``, ``Numerics.threads``); per base and per spring the arithmetic, and its order, are the
+same, so the two give the same bits (tested).  Threads pay on large lattices only (a parallel loop
+costs a few microseconds to start: ``PARALLEL_BASES``).
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ import attrs
 import numba
 import numba.extending
 import numpy as np
+from numba import prange
 
 from bark import physics
 from bark.forces import SpringOrder, order_keys
@@ -49,6 +57,11 @@ _base_force = inline(physics.base_force)
 _surface_scale = inline(physics.surface_scale)
 _radial_speed = inline(physics.radial_speed)
 _no_breaking = inline(physics.no_breaking)
+
+BLOCK = 2048
+"""Bases or springs a block: the loops over them go a block at a time (each block's loops in SIMD
+lanes); in a parallel kernel the blocks are shared among threads.  Every base's arithmetic is the
+same whatever the blocks and threads, so the bits are too."""
 
 
 @inline
@@ -77,12 +90,28 @@ def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, k, w0, w1, w2, wt, loa
 
 
 @inline
-def _add_forces(first, second, w):
-    """A run's forces along one axis: subtracted at the second ends, then added at the first."""
-    for q in range(first.shape[0]):
-        second[q] -= w[q]
-    for q in range(first.shape[0]):
-        first[q] += w[q]
+def _blocks(n):
+    """How many blocks of ``BLOCK`` items ``n`` items make (a parallel loop's iterations)."""
+    return (n + BLOCK - 1) // BLOCK
+
+
+@inline
+def _gather_forces(u, w, i0, o, n, lo, hi):
+    """A run's forces along one axis added into the bases ``lo .. hi`` (a block of the bases the run
+    reaches: its first ends ``i0 .. i0 + n`` and second ends ``i0 + o .. i0 + o + n``): subtracted at
+    those that are its springs' second ends, then added at those that are their first ends — per
+    base, the order in which a pass over the run's springs adds them (all second ends, then all first
+    ends), so the same bits whatever the blocks."""
+    s_lo, s_hi = max(lo, i0 + o), min(hi, i0 + o + n)
+    if s_hi > s_lo:
+        second, ws = u[s_lo:s_hi], w[s_lo - i0 - o:s_hi - i0 - o]
+        for q in range(second.shape[0]):
+            second[q] -= ws[q]
+    f_lo, f_hi = max(lo, i0), min(hi, i0 + n)
+    if f_hi > f_lo:
+        first, wf = u[f_lo:f_hi], w[f_lo - i0:f_hi - i0]
+        for q in range(first.shape[0]):
+            first[q] += wf[q]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"nnan", "nsz"})
@@ -123,15 +152,24 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
     picked = False
     for r in range(r_start.shape[0]):
         s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
-        a0, a1, a2 = x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n]
-        b0, b1, b2 = x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n], x2[i0 + o:i0 + o + n]
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
-        fm = fmax[s0:s0 + n]
-        run_finite, hit = _run_forces(a0, a1, a2, b0, b1, b2, rr, lv, fm, k, w0, w1, w2, wt, loads, rule)
+        fm, inv = fmax[s0:s0 + n], inv_fmax[s0:s0 + n]
+        nb = _blocks(n)
+        block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
+        for blk in prange(nb):  # the springs' forces, a block at a time
+            lo, hi = blk * BLOCK, min(n, (blk + 1) * BLOCK)
+            a, e = i0 + lo, i0 + hi
+            block_finite[blk], block_hit[blk] = _run_forces(
+                x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
+                fm[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], loads, rule)
+            if loads and tops:
+                block_top[blk] = _largest_load(wt[lo:hi], lv[lo:hi], inv[lo:hi])
+        hit = False
+        for blk in range(nb):
+            finite = finite & block_finite[blk]
+            hit = hit | block_hit[blk]
+            top = max(top, block_top[blk])
         if loads:
-            finite = finite & run_finite
-            if tops:
-                top = max(top, _largest_load(wt, lv, inv_fmax[s0:s0 + n]))
             if hit:
                 for q in range(n):
                     if lv[q] and rule(wt[q], fm[q]):
@@ -146,8 +184,13 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
                             w2[q] = 0.0
                         else:
                             picked = True
-        for u, w in ((f0, w0), (f1, w1), (f2, w2)):
-            _add_forces(u[i0:i0 + n], u[i0 + o:i0 + o + n], w)
+        low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
+        span = n + abs(o)
+        for blk in prange(_blocks(span)):  # then added to the bases they reach, a block of bases at a time
+            lo, hi = low + blk * BLOCK, low + min(span, (blk + 1) * BLOCK)
+            _gather_forces(f0, w0, i0, o, n, lo, hi)
+            _gather_forces(f1, w1, i0, o, n, lo, hi)
+            _gather_forces(f2, w2, i0, o, n, lo, hi)
     return top, finite, n_log, picked
 
 
@@ -176,12 +219,37 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
     step the anchors are ``r_before · direction`` (the last step's radius; written back once, at the end
     of the call — the very products, so the bits do not depend on where calls end); else each is placed
-    at its own radius, every step (``_base_pass_per_base_radius``, with the anchors' ``heights``).  Returns whether every coordinate
-    stayed finite.
-    One coordinate per vector: this loop runs in SIMD lanes."""
+    at its own radius, every step (``_per_base_radius``, with the anchors' ``heights``).  Returns
+    whether every coordinate stayed finite.
+
+    A block of bases at a time (shared among threads in a parallel kernel), each block on slices of
+    the vectors, one coordinate per vector, so its loops run in SIMD lanes."""
+    n = bases[0].shape[0]
+    weights, stride = heights
+    block_bad = np.zeros(_blocks(n), np.int64)
+    for blk in prange(_blocks(n)):
+        lo, hi = blk * BLOCK, min(n, (blk + 1) * BLOCK)
+        part = _slices(bases, lo, hi)
+        if uniform:
+            block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, r_now, r_before, from_radius)
+        else:
+            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, radius, params, weights, stride, lo)
+    return block_bad.sum() == 0
+
+
+@inline
+def _slices(bases, lo, hi):
+    """The bases ``lo .. hi`` of the 14 base vectors."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
-    if not uniform:
-        return _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, heights)
+    return (x0[lo:hi], x1[lo:hi], x2[lo:hi], v0[lo:hi], v1[lo:hi], v2[lo:hi], f0[lo:hi], f1[lo:hi], f2[lo:hi],
+            ax[lo:hi], ay[lo:hi], az[lo:hi], dx[lo:hi], dy[lo:hi])
+
+
+@inline
+def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
+    """``_base_pass`` on a block, for a radius that does not depend on height; returns how many bases
+    went non-finite."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     bad = 0
     for q in range(x0.shape[0]):
         anchor_x = r_before * dx[q] if from_radius else ax[q]
@@ -199,24 +267,23 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
         v0[q] = u0 - vr * px
         v1[q] = u1 - vr * py
         v2[q] = u2
-    return bad == 0
+    return bad
 
 
 @inline
-def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, heights):
-    """``_base_pass`` for a radius that depends on height, in loops: the forces and the update (no
-    calls: SIMD lanes), then the surface at each base's own radius (a call of the growth law each,
-    which keeps that loop scalar), then the anchors at their sites' radii.  The anchors' heights never
-    change, so a law that gives ``compiled_weights`` has each anchor's radius as ``q[0] + w_0 q[1] +
-    w_1 q[2] + ...`` with its weights ``w`` taken once (``heights = (weights, stride)``: weight k of
-    base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
-    (stride 0), a call per anchor.  Per base the same operations in the same order as one loop: the
-    same bits."""
+def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, stride, first):
+    """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
+    the forces and the update (no calls: SIMD lanes), then the surface at each base's own radius (a
+    call of the growth law each, which keeps that loop scalar), then the anchors at their sites'
+    radii.  The anchors' heights never change, so a law that gives ``compiled_weights`` has each
+    anchor's radius as ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once
+    (``weights``: weight k of base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the
+    call; with no weights (stride 0), a call per anchor.  Per base the same operations in the same
+    order as one loop: the same bits.  Returns how many bases went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
         x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update)
-    weights, stride = heights
     by_weights = stride > 0
     bad = 0
     for q in range(n):
@@ -238,15 +305,15 @@ def _base_pass_per_base_radius(bases, c, b, hm, h, t, update, radius, params, he
     if by_weights:  # ax holds each anchor's radius while it is summed
         for q in range(n):
             ax[q] = params[0]
-        for k in range(weights.shape[0] // stride):
-            w, coefficient = weights[k * stride:k * stride + n], params[1 + k]
+        for term in range(weights.shape[0] // stride):
+            w, coefficient = weights[term * stride + first:term * stride + first + n], params[1 + term]
             for q in range(n):
                 ax[q] = ax[q] + w[q] * coefficient
         for q in range(n):
             ra = ax[q]
             ax[q] = ra * dx[q]
             ay[q] = ra * dy[q]
-    return bad == 0
+    return bad
 
 
 @inline
@@ -378,7 +445,7 @@ _radius = inline({radius})
 _prepare = inline({prepare})
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
 def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights):
     return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log,
                          heights, _update, _rule, _radius, _prepare)
@@ -438,20 +505,22 @@ def _make_jitable(functions) -> None:
             _JITABLE.add(fn)
 
 
-def specialized(update, rule, radius, prepare=physics.as_given):
+def specialized(update, rule, radius, prepare=physics.as_given, parallel=False):
     """The stepping kernel with ``update``, ``rule``, ``radius`` and ``prepare`` inlined (compiled once
-    per combination and kept on disk; see the module's docstring).  Functions that cannot be imported
-    by name (lambdas, local functions) get a wrapper compiled in this process only."""
-    key = (update, rule, radius, prepare)
+    per combination and kept on disk; see the module's docstring), its block loops shared among
+    threads if ``parallel``.  Functions that cannot be imported by name (lambdas, local functions) get
+    a wrapper compiled in this process only."""
+    parts = (update, rule, radius, prepare)
+    key = (*parts, bool(parallel))
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
-    helpers = [h for fn in key for h in _helpers(fn)[1:]]
+    helpers = [h for fn in parts for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
-    names = [_importable(fn) for fn in key]
+    names = [_importable(fn) for fn in parts]
     if None in names:
-        u, r, g, p = (inline(fn) for fn in key)
+        u, r, g, p = (inline(fn) for fn in parts)
 
-        @numba.njit(nogil=True, error_model="numpy")
+        @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
         def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
                                  log, heights, u, r, g, p)
@@ -459,8 +528,8 @@ def specialized(update, rule, radius, prepare=physics.as_given):
         _SPECIALIZED[key] = steps
         return steps
     digest = hashlib.sha256()
-    for part in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in key),
-                 *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names)):
+    for part in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in parts),
+                 *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names), f"parallel={bool(parallel)}"):
         digest.update(part.encode())
     imports, refs = [], []
     for i, (module, qualname) in enumerate(names):
@@ -468,7 +537,8 @@ def specialized(update, rule, radius, prepare=physics.as_given):
         imports.append(f"from {module} import {head} as _f{i}")
         refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
     text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
-                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3])
+                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3],
+                           parallel=bool(parallel))
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -591,6 +661,11 @@ def _radii(r) -> np.ndarray:
     return np.ascontiguousarray(r)
 
 
+PARALLEL_BASES = 16_000
+"""Automatic threads (``Numerics.threads = 0``) share a kernel call's blocks among all the cores for
+a lattice of at least this many bases (``bark bench threads`` measures where that begins to pay);
+below, one thread, and the serial kernel."""
+
 SLACK_RUN = 64
 """A run of at least this many springs gets as many free positions again after it, where springs
 that extend it later (the next base of the same offset, as bases join) go without moving any other."""
@@ -699,6 +774,18 @@ class NumbaBackend(Backend):
         self._frame: _Frame | None = None
         self._order = SpringOrder()
         self._buffers: dict[str, np.ndarray] = {}
+        self.threads = 1
+        """Threads the last kernel call shared its blocks among."""
+
+    @staticmethod
+    def _threads(requested: int, n_bases: int) -> int:
+        """Threads for a call: ``requested`` (``Numerics.threads``), at most numba's pool
+        (``NUMBA_NUM_THREADS``: the cores this process may use, unless set); automatic (0) takes them
+        all for a lattice of ``PARALLEL_BASES`` or more, else one."""
+        most = numba.config.NUMBA_NUM_THREADS
+        if requested == 0:
+            return most if n_bases >= PARALLEL_BASES else 1
+        return min(requested, most)
 
     def frame(self, state) -> _Frame:
         """The call frame for ``state``: reused while the state keeps its arrays and sizes, extended
@@ -850,7 +937,10 @@ class NumbaBackend(Backend):
         break outside the kernel, and the positions those the call ended with, compared in full):
         only the bases that joined since, and those their springs reach, get theirs made again (from
         ``refresh_from``; the same bits as a fresh pass over all)."""
-        kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare)
+        self.threads = self._threads(plan.threads, state.n_bases)
+        kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare, parallel=self.threads > 1)
+        if self.threads > 1:
+            numba.set_num_threads(self.threads)
         fr = self.frame(state)
         live = self._live(state)
         k = float(mech.k)
