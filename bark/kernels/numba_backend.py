@@ -137,12 +137,14 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
     whether the rule picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
-    ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes: the springs'
-    tensions, force vectors, finiteness and the rule in one loop; their largest load in a second; a
-    spring by itself only where the rule picks one; then the forces, added to the second ends first
-    and the first ends second, so that every base receives its springs' forces in the order of the
-    runs (:class:`bark.forces.SpringOrder`, in which the springs come here) — the order, and the
-    bits, of a pass one spring at a time, and of the numpy backend's sum."""
+    ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes, a block of
+    springs at a time: the springs' tensions, force vectors, finiteness and the rule in one loop;
+    their largest load in a second; a spring by itself only where the rule picks one (after all
+    blocks); then the forces, gathered a block of bases at a time, each base taking its force as a
+    second end before its force as a first end (``_gather_forces``), so that every base receives its
+    springs' forces in the order of the runs (:class:`bark.forces.SpringOrder`, in which the springs
+    come here) — the order, and the bits, of a pass one spring at a time, and of the numpy
+    backend's sum."""
     x0, x1, x2 = x
     f0, f1, f2 = f
     w0, w1, w2, wt = work
