@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from bark import Stop
 from bark.kernels import numba_backend
@@ -87,18 +89,18 @@ def test_positions_changed_between_calls_are_seen():
     assert np.array_equal(runs[0].state.intact, runs[1].state.intact)
 
 
-def _threaded(threads: int, growth: str):
-    """A lattice of three blocks and more (``BLOCK`` bases each), bases joining, springs breaking: in
-    the kernel (threshold, adaptive steps, per-base radii) or in Python (probabilistic, fixed steps)."""
+def _threaded(threads: int, block: int, growth: str):
+    """Bases joining and springs breaking — in the kernel (threshold, adaptive steps, per-base radii)
+    or in Python (probabilistic, fixed steps) — with the kernel's loops in blocks of ``block``."""
     if growth == "bulge":
-        law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=2.0, half_width=1.0, magnitude=0.02, G=0.03)])
+        law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
         breakers, stepping, dt = None, "adaptive", 0.3
     else:
         law, breakers, stepping, dt = SqrtGrowth(G=0.08), [ProbabilisticBreaker()], "fixed", 0.05
-    n = 3 * numba_backend.BLOCK + 300
-    lattice = Lattice(n_bases=n, n_start=n - 600, join_rate=150.0, join_every=0.1, jitter=0.05)
+    lattice = Lattice(n_bases=2000, n_start=1500, join_rate=150.0, join_every=0.1, jitter=0.05)
     sim = build_sim(G=0.08, dt=dt, seed=2, stepping=stepping, backend="numba", fmax_spread=0.05, growth=law,
                     lattice=lattice, breakers=breakers, threads=threads)
+    sim.build().backend.block = block
     sim.run(Stop(until_time=4.0))
     return sim
 
@@ -106,7 +108,31 @@ def _threaded(threads: int, growth: str):
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
 @pytest.mark.parametrize("growth", ["bulge", "sqrt"])
 def test_threads_share_the_blocks_and_the_bits_stay_the_same(growth):
-    serial, shared = _threaded(1, growth), _threaded(2, growth)
+    """Blocks of 16 bases or springs, about a hundred a loop, shared between two threads — where a
+    block that wrote another's bases, or a reduction taken out of order, would show — against the
+    serial kernel with its usual blocks."""
+    serial, shared = _threaded(1, numba_backend.BLOCK, growth), _threaded(2, 16, growth)
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
     assert shared.n_broken > 100 and shared.state.n_bases > serial.lattice.n_start  # breaks, and joins, happened
     _same(serial, shared)
+
+
+@settings(max_examples=200, deadline=None)
+@given(i0=st.integers(0, 50), o=st.integers(-40, 40).filter(bool), n=st.integers(1, 200), block=st.integers(1, 64),
+       seed=st.integers(0, 2**32 - 1))
+def test_the_gather_blocks_write_apart_so_any_order_of_blocks_gives_the_serial_bits(i0, o, n, block, seed):
+    """A run's forces reach its bases by blocks of bases (``_gather_forces``): each block writes only
+    its own bases, each base its second-end force before its first-end one — so the blocks done in
+    any order (as threads may do them) give the bits of the serial sum."""
+    assume(i0 + o >= 0)  # a run's second ends are bases too
+    rng = np.random.default_rng(seed)
+    low, span = i0 + min(o, 0), n + abs(o)
+    size = i0 + n + abs(o) + 5
+    start, w = rng.normal(size=size), rng.normal(size=n)
+    serial = start.copy()
+    serial[i0 + o:i0 + o + n] -= w
+    serial[i0:i0 + n] += w
+    gathered = start.copy()
+    for blk in rng.permutation((span + block - 1) // block):
+        numba_backend._gather_forces(gathered, w, i0, o, n, low + blk * block, low + min(span, (blk + 1) * block))
+    assert np.array_equal(gathered, serial)
