@@ -353,21 +353,29 @@ def _refresh(x, runs, rest, k, live, f, work, first):
 
 @inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
-                  update, rule, radius, prepare):
+                  start, update, rule, radius, prepare):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
     call, so the result does not depend on where calls begin and end.  That pass makes the forces of
-    the bases from ``fresh`` on (0: all); the others' are taken from ``f`` as the last call left them,
-    which the backend knows to be those of the positions and springs now (``NumbaBackend.steps``)."""
+    the bases from ``fresh`` on (0: all); the others' are taken from ``f`` as the last call left them
+    — when ``kept >= 0`` and the positions of the first ``kept`` bases are still those the last call
+    ended with (kept in ``start``: compared here, to the bit), which the backend knows to be all that
+    can have changed (``NumbaBackend.steps``); else all are made again.
+
+    ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
+    step is replayed from them), and, when the last step is accepted, receives the positions it ends
+    with (for the next call's comparison)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
     k, c, b, m, h, accept_load, max_batch = constants
-    uniform, breaking, return_on_break, fresh, block = flags
+    uniform, breaking, return_on_break, fresh, block, kept = flags
     log_id, log_step, log_t = log
     hm = h / m
+    if not _kept_and_started(bases, start, kept, block):
+        fresh = 0
     if fresh == 0:
         f0[:] = 0.0
         f1[:] = 0.0
@@ -411,7 +419,45 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
             ay[q] = r_before * dy[q]
     if finite and not tops and done > 0:
         top = _last_load((x0, x1, x2), runs, rest, k, live, inv_fmax, work, log_id[before:n_log])
+    if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
+        _copy_blocks((x0, x1, x2), start[:3], 0, block)
     return done, (top if finite else np.nan), n_log
+
+
+@inline
+def _kept_and_started(bases, start, kept, block):
+    """Whether the first ``kept`` bases' positions are those in ``start`` (``kept < 0``: not known),
+    to the bit; and ``start`` made the state this call begins from — positions (those not already
+    there), velocities and anchors — in one pass over blocks of bases."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    n = x0.shape[0]
+    block_same = np.ones(_blocks(n, block), np.bool_)
+    for blk in prange(_blocks(n, block)):
+        lo, hi = blk * block, min(n, (blk + 1) * block)
+        same = True
+        top = min(hi, max(kept, lo))
+        s0, s1, s2 = start[0][lo:top], start[1][lo:top], start[2][lo:top]
+        p0, p1, p2 = x0[lo:top], x1[lo:top], x2[lo:top]
+        for q in range(top - lo):
+            same = same & (s0[q] == p0[q]) & (s1[q] == p1[q]) & (s2[q] == p2[q])
+        block_same[blk] = same
+    same = kept >= 0
+    for blk in range(block_same.shape[0]):
+        same = same & block_same[blk]
+    _copy_blocks((x0, x1, x2), start[:3], kept if same else 0, block)
+    _copy_blocks((v0, v1, v2, ax, ay, az), start[3:], 0, block)
+    return same
+
+
+@inline
+def _copy_blocks(source, target, first, block):
+    """The vectors ``source`` into ``target`` from entry ``first`` on, a block at a time."""
+    n = source[0].shape[0]
+    for blk in prange(_blocks(n, block)):
+        lo, hi = max(first, blk * block), min(n, (blk + 1) * block)
+        for v in range(len(source)):
+            if hi > lo:
+                target[v][lo:hi] = source[v][lo:hi]
 
 
 @inline
@@ -449,9 +495,9 @@ _prepare = inline({prepare})
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights):
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights, start):
     return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log,
-                         heights, _update, _rule, _radius, _prepare)
+                         heights, start, _update, _rule, _radius, _prepare)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
 
@@ -524,9 +570,10 @@ def specialized(update, rule, radius, prepare=physics.as_given, parallel=False):
         u, r, g, p = (inline(fn) for fn in parts)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
-        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights):
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
+                  start):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
-                                 log, heights, u, r, g, p)
+                                 log, heights, start, u, r, g, p)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -712,7 +759,8 @@ class _Frame:
     """Springs the last call broke (ids): the state has them broken once the simulation has taken them."""
     work: tuple
     start: tuple
-    """Copies of x, v and anchor at the start of a call: an undone step is replayed from them."""
+    """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
+    from them; after an accepted call, x is the positions it ended with."""
     log: tuple
     forces: float | None = None
     """The stiffness ``k`` of the spring forces the last call left in f, of the positions it ended
@@ -939,9 +987,10 @@ class NumbaBackend(Backend):
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
         """Up to ``len(plan.times)`` steps in one kernel call.  The spring forces the last call left
         in f are kept where they are of the positions, springs and stiffness now (``k`` the same, no
-        break outside the kernel, and the positions those the call ended with, compared in full):
-        only the bases that joined since, and those their springs reach, get theirs made again (from
-        ``refresh_from``; the same bits as a fresh pass over all)."""
+        break outside the kernel, and the positions those the call ended with, compared in full by
+        the kernel as it copies the state it starts from): only the bases that joined since, and
+        those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
+        fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
         kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare, parallel=self.threads > 1)
         if self.threads > 1:
@@ -949,13 +998,10 @@ class NumbaBackend(Backend):
         fr = self.frame(state)
         live = self._live(state)
         k = float(mech.k)
-        n, kept = state.n_bases, fr.kept
-        same = fr.forces == k and kept <= n and np.array_equal(fr.start[0][:kept], state.x[:kept])
-        fresh = min(fr.refresh_from, n) if same else 0  # forces made again from this base on
-        copied = kept if same else 0  # start[0] holds the positions of the first `kept` bases already
-        np.copyto(fr.start[0][copied:], state.x[copied:])
-        np.copyto(fr.start[1], state.v)
-        np.copyto(fr.start[2], state.anchor)
+        n = state.n_bases
+        kept = fr.kept if fr.forces == k and fr.kept <= n else -1  # the kernel compares their positions
+        fresh = min(fr.refresh_from, n)  # forces made again from this base on (all, if those moved)
+        start = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.forces = None
         params = np.ascontiguousarray(plan.params, dtype=float)
         constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
@@ -963,14 +1009,15 @@ class NumbaBackend(Backend):
         rest, fmax, inv_fmax = fr.springs
         heights = self._heights(state, plan)
 
-        def call(times, relax, fresh):
-            flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break), int(fresh), self.block)
+        def call(times, relax, fresh, kept):
+            flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break), int(fresh), self.block,
+                     int(kept))
             return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
-                          fr.log, heights)
+                          fr.log, heights, start)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         relax = plan.relax_flags()
-        done, load, n_log = call(times, relax, fresh)
+        done, load, n_log = call(times, relax, fresh, kept)
         valid = True  # the forces in f are of the positions the last call ended with
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
             for keep, arr in zip(fr.start, (state.x, state.v, state.anchor)):
@@ -978,10 +1025,9 @@ class NumbaBackend(Backend):
             live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
             n_log, valid = 0, done > 1
             if done > 1:
-                n_log = call(times[: done - 1], relax[: done - 1], 0)[2]
+                n_log = call(times[: done - 1], relax[: done - 1], 0, -1)[2]
             done -= 1
-        if valid:  # for the next call
-            np.copyto(fr.start[0], state.x)
+        if valid:  # for the next call (the kernel has put the positions it ended with in start)
             fr.forces, fr.kept, fr.refresh_from = k, n, n
         if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
             self.measure(state, mech, tension)
