@@ -12,12 +12,10 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from bark.analysis import count_patches
 from bark.output import Frames, atomic_write
-from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, patch_colours, raster
+from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, patch_colours, raster
 
 
 def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
@@ -28,8 +26,7 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
     height = float(np.ptp(z)) or width
     aspect = height / width
     shown = min(max(aspect, MIN_ASPECT), MAX_ASPECT)
-    fig = Figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=90)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=90)
     ax = fig.add_subplot()
     ax.set_xlim(0, width)
     ax.set_ylim(z.min() - 0.01 * height, z.max() + 0.01 * height)

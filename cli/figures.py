@@ -17,14 +17,13 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm, Normalize
-from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from bark.compare import QUANTITIES, Comparison
 from bark.pattern import PatternStatistics
-from bark_cli.plot import save_figure
+from bark_cli.options import value_text
+from bark_cli.plot import new_figure, save_figure
 
 BINS = 10
 """Histogram bins over [0°, 180°): 18° each, as in the paper."""
@@ -41,8 +40,7 @@ def _caption(s: PatternStatistics) -> str:
 def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:
     """Fig. 6B / 7B for ``stats`` (which must have its patches) into ``path``."""
     table = stats.patches
-    fig = Figure(figsize=(5.6, 5.0), dpi=130)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(5.6, 5.0), dpi=130)
     ax = fig.add_subplot(projection="polar")
     theta = np.radians(table.orientation_deg)
     size = table.size.astype(float)
@@ -69,8 +67,7 @@ def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
     """Fig. 6C / 7C for ``stats`` into ``path``: patches per 18° bin of orientation."""
     deg = stats.patches.orientation_deg
     counts, edges = np.histogram(deg, bins=BINS, range=(0.0, 180.0))
-    fig = Figure(figsize=(5.6, 3.4), dpi=130)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(5.6, 3.4), dpi=130)
     ax = fig.add_subplot(projection="polar")
     ax.bar(np.radians(edges[:-1]), counts, width=np.radians(180.0 / BINS), align="edge", color="tab:blue",
            edgecolor="k", linewidth=0.5)
@@ -137,8 +134,7 @@ def _pairing_panel(ax, comparison: Comparison, quantity: str) -> None:
 
 def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
     """Fig. 8D–G for four patterns into ``path``: a row per quantity, Hellinger quartet then d_P."""
-    fig = Figure(figsize=(10.0, 9.0), dpi=120)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(10.0, 9.0), dpi=120)
     axes = fig.subplots(len(QUANTITIES), 2)
     for row, quantity in zip(axes, QUANTITIES):
         _quartet_panel(row[0], comparison, quantity)
@@ -160,8 +156,7 @@ def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | No
     shape = plan.shape + (1,) * (2 - len(plan.shape))
     ncols, nrows = shape[0], shape[1]
     cell = min(2.4, 16.0 / max(ncols, nrows))
-    fig = Figure(figsize=(cell * ncols + 0.8, cell * 1.25 * nrows + 0.8), dpi=110, layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(cell * ncols + 0.8, cell * 1.25 * nrows + 0.8), dpi=110, layout="constrained")
     axes = np.atleast_2d(fig.subplots(nrows, ncols, squeeze=False))
     drawn = 0
     for index, p in first.items():
@@ -184,11 +179,10 @@ def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | No
         ax.set_title(f"{count} patch{'' if count == 1 else 'es'}" + ("" if mean is None else f", {mean:.0f}°"), fontsize=6)
         drawn += 1
     for i, v in enumerate(plan.axes[0].values):
-        axes[-1, i].set_xlabel(f"{plan.axes[0].key} = {v:g}" if isinstance(v, float) else f"{plan.axes[0].key} = {v}", fontsize=7)
+        axes[-1, i].set_xlabel(f"{plan.axes[0].key} = {value_text(v)}", fontsize=7)
     if len(plan.axes) == 2:
         for j, v in enumerate(plan.axes[1].values):
-            axes[nrows - 1 - j, 0].set_ylabel(f"{plan.axes[1].key} = {v:g}" if isinstance(v, float) else f"{plan.axes[1].key} = {v}",
-                                              fontsize=7)
+            axes[nrows - 1 - j, 0].set_ylabel(f"{plan.axes[1].key} = {value_text(v)}", fontsize=7)
     fig.suptitle("bark sweep: the unwrapped trunk of each run (arc length across, height up; patches coloured, "
                  "fragments grey)", fontsize=8)
     return save_figure(fig, path) if drawn else None
@@ -202,8 +196,7 @@ def plot_fracture_history(history, path: str | Path) -> Path:
 
     s = history.samples
     t = years(s["t"])
-    fig = Figure(figsize=(7.0, 5.6), dpi=130)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(7.0, 5.6), dpi=130)
     top, bottom = fig.subplots(2, 1, sharex=True)
     top.plot(t, s["n_broken"], color="0.3", lw=1.2, label="broken springs")
     top.plot(t, s["n_cracks"], color="crimson", lw=1.2, label="cracks")
@@ -231,8 +224,7 @@ def plot_power_law(x: np.ndarray, y: np.ndarray, groups: np.ndarray, fit, path: 
                    xlabel: str) -> Path:
     """Initial fractures against the dissipation rate on log–log axes, one colour per value of
     ``groups`` (a swept setting), with the fitted power law ``fit`` (``bark.fracture.PowerLaw``)."""
-    fig = Figure(figsize=(6.0, 4.6), dpi=130)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(6.0, 4.6), dpi=130)
     ax = fig.add_subplot()
     values = sorted(set(groups.tolist()))
     cmap = colormaps["viridis"]

@@ -248,3 +248,9 @@ def setting_value(text: str):
         return tomllib.loads(f"v = {text.strip()}")["v"]
     except tomllib.TOMLDecodeError:
         return text.strip()
+
+
+def value_text(value) -> str:
+    """A setting's value as shown to the user (tables, progress, figure labels): a float in its
+    shortest form (``%g``), anything else as it is."""
+    return f"{value:g}" if isinstance(value, float) else str(value)

@@ -18,6 +18,14 @@ from matplotlib.figure import Figure
 from bark.output import atomic_write
 
 
+def new_figure(**kwargs) -> Figure:
+    """A matplotlib figure (``Figure(**kwargs)``) on the Agg canvas: the object API, no pyplot and
+    no global state."""
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
 MAX_ASPECT = 2.0
 """Tallest figure, as height / width: a longer trunk is drawn with its height axis compressed (said
 in the title), so the image stays bounded (at most 1050 × 2100 pixels) whatever the scene."""
@@ -43,8 +51,7 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     height = (z_hi - z_lo) or width
     aspect = height / width
     shown = min(max(aspect, MIN_ASPECT), MAX_ASPECT)
-    fig = Figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=150)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=150)
     ax = fig.add_subplot()
     pad = 0.01 * height
     if data.n_bases <= SPRINGS_UP_TO:
@@ -130,8 +137,7 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
     dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""
     from bark.accuracy import METRICS
 
-    fig = Figure(figsize=(13, 9), dpi=120)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(13, 9), dpi=120)
     axes = fig.subplots(2, 2).ravel()
     names = {
         "error": "(a) max position error, no breaking",

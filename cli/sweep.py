@@ -10,6 +10,7 @@ import sys
 import click
 
 from bark.errors import BarkError
+from bark_cli.options import value_text
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 
@@ -142,8 +143,8 @@ class _bar:
         if self.task is None:
             self.progress.start()
             self.task = self.progress.add_task("runs", total=total, completed=done, last="")
-        last = "" if point is None else ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-                                                  for k, v in point.settings.items()) + f", seed {point.seed}"
+        last = "" if point is None else ", ".join(f"{k}={value_text(v)}" for k, v in point.settings.items()) \
+            + f", seed {point.seed}"
         self.progress.update(self.task, completed=done, last=last)
 
     def close(self) -> None:
@@ -167,7 +168,7 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
                   title=f"bark sweep: {counts['ran']} runs now, {counts['skipped']} already in the table")
         for p in points:
             r = by_key[p.key]
-            t.add_row(*[f"{v:g}" if isinstance(v, float) else str(v) for v in p.settings.values()], str(p.seed),
+            t.add_row(*[value_text(v) for v in p.settings.values()], str(p.seed),
                       str(r["n_patches"]), _g(r["mean_orientation_deg"]), _g(r["circular_sd_deg"]), _g(r["mean_anisotropy"]),
                       _g(r["t"]), _g(r["wall_s"]))
         Console(width=150).print(t)

@@ -12,13 +12,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
-from matplotlib.figure import Figure
 
 from bark.units import METRES_PER_LENGTH_UNIT, years
 from bark_cli.pictures import TreeData
-from bark_cli.plot import save_figure
+from bark_cli.plot import new_figure, save_figure
 
 MAX_HEIGHT_IN = 12.0
 WIDTH_IN = 5.0
@@ -30,8 +28,7 @@ def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
     z_hi = float(data.dome[:, 1].max())
     half = float(max(data.outline[:, 1].max(), 1e-9)) * 1.15
     height_in = min(MAX_HEIGHT_IN, max(3.0, WIDTH_IN * (z_hi - z_lo) / (2 * half)))
-    fig = Figure(figsize=(WIDTH_IN, height_in + 0.5), dpi=150)
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize=(WIDTH_IN, height_in + 0.5), dpi=150)
     ax = fig.add_subplot()
     ax.add_collection(PolyCollection(data.polygons, facecolors=data.colours / 255.0, edgecolors="none"))
     zo, ro = data.outline[:, 0], data.outline[:, 1]
