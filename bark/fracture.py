@@ -33,6 +33,8 @@ from typing import Callable
 import attrs
 import numpy as np
 
+from bark.output import Recorder, write_csv
+
 __all__ = ["Dissipation", "FractureHistory", "crack_counts", "history", "power_law"]
 
 COLUMNS = ["t", "n_broken", "n_cracks", "n_patches", "dissipation"]
@@ -145,12 +147,12 @@ def history(log: dict[str, np.ndarray], pairs: np.ndarray, offsets: tuple[int, .
     return FractureHistory(samples, t0, int(cracks[k]), t_peak, rate)
 
 
-class Dissipation:
-    """The dissipation along a run: an action for ``Simulation.add_action`` (on ``Every(history_every)``)
-    that keeps the time and the damping's power per base, ``b·Σ|v|² / n``.  ``arrays``/``load`` carry
-    it through a checkpoint."""
+class Dissipation(Recorder):
+    """The dissipation along a run (on ``Every(history_every)``): the time and the damping's power per
+    base, ``b·Σ|v|² / n``; at the end, the run's fracture history made from them (``finish``)."""
 
     name = "dissipation"
+    file = "fracture.csv"
 
     def __init__(self) -> None:
         self.t: list[float] = []
@@ -172,6 +174,12 @@ class Dissipation:
     def load(self, arrays: dict[str, np.ndarray]) -> None:
         self.t, self.power = arrays["t"].tolist(), arrays["power"].tolist()
 
+    def finish(self, sim, min_size: int) -> None:
+        self.analyse(sim, min_size)
+
+    def summary(self) -> dict:
+        return {"fracture": self.result.summary()} if self.result is not None else {}
+
     def analyse(self, sim, min_size: int) -> FractureHistory:
         """The run's fracture history at the samples recorded (kept as ``result``)."""
         found = history(sim.breaks.arrays(), sim.state.pairs, sim.lattice.offsets, sim.lattice.bases_at,
@@ -183,8 +191,6 @@ class Dissipation:
 
     def write(self, path):
         """The history ``analyse`` made, as ``fracture.csv`` at ``path``."""
-        from bark.output import write_csv
-
         return write_csv(path, self.result.rows(), COLUMNS)
 
 

@@ -326,12 +326,28 @@ SERIES_COLUMNS = ["t", "radius", "step", "n_broken", "n_patches", "mean_orientat
                   "mean_anisotropy", "fraction_within_45_deg"]
 
 
-class StatisticsSeries:
-    """The patch statistics along a run: an action for ``Simulation.add_action`` (on a trigger, e.g.
-    ``Every(series_every)``) that runs the simulation's analyzers and keeps one row per call.
-    ``arrays``/``load`` carry the rows through a checkpoint, so a resumed run's series is whole."""
+class Recorder:
+    """What a run records along the way: an action for ``Simulation.add_action`` (on a trigger, e.g.
+    ``Every(series_every)``) whose ``record(sim)`` keeps a sample; ``arrays``/``load`` carry the samples
+    through a checkpoint (under ``name``), so a resumed run's record is whole.  At the run's end
+    ``finish`` makes what is made of them, ``write`` puts them in the run's file ``file`` (if any),
+    and ``summary`` is what they add to summary.json."""
+
+    name = ""
+    file: str | None = None
+
+    def finish(self, sim, min_size: int) -> None:
+        """At the end of the run, after its last sample (``min_size``: the smallest patch that counts)."""
+
+    def summary(self) -> dict:
+        return {}
+
+
+class StatisticsSeries(Recorder):
+    """The patch statistics along a run: the simulation's analyzers run, one row a call."""
 
     name = "series"
+    file = "statistics.csv"
 
     def __init__(self) -> None:
         self.rows: list[dict[str, Any]] = []
@@ -356,11 +372,10 @@ class StatisticsSeries:
         return write_csv(path, self.rows, SERIES_COLUMNS)
 
 
-class Frames:
-    """Frames of the unwrapped pattern along a run, for the development animation: an action for
-    ``Simulation.add_action`` that keeps, per call, the time, the mean radius, each base's unwrapped
-    position (float32) and patch label (int32).  Drawing them is the CLI's (``bark_cli.animation``);
-    ``arrays``/``load`` carry them through a checkpoint."""
+class Frames(Recorder):
+    """Frames of the unwrapped pattern along a run, for the development animation: per call, the time,
+    the mean radius, each base's unwrapped position (float32) and patch label (int32).  Drawing them
+    is the CLI's (``bark_cli.animation``)."""
 
     name = "frames"
 

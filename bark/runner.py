@@ -128,20 +128,17 @@ def _outputs_complete(folder: Path, meta: dict) -> bool:
 
 
 def _record_end(sim, scene, recorders: list) -> dict:
-    """The state at the stop recorded, once, by every recorder, and the fracture history made from
-    what was recorded; the recorders by name."""
+    """The state at the stop recorded, once, by every recorder, each finished (what it makes of its
+    record: the fracture history); the recorders by name."""
     for rec in recorders:
         rec.record(sim)
-    by_name = {rec.name: rec for rec in recorders}
-    if "dissipation" in by_name:
-        by_name["dissipation"].analyse(sim, scene.run.min_patch_size)
-    return by_name
+        rec.finish(sim, scene.run.min_patch_size)
+    return {rec.name: rec for rec in recorders}
 
 
 def _extra(by_name: dict) -> dict:
-    """What the recorders add to summary.json: the fracture history's summary."""
-    rec = by_name.get("dissipation")
-    return {"fracture": rec.result.summary()} if rec is not None and rec.result is not None else {}
+    """What the recorders add to summary.json."""
+    return {k: v for rec in by_name.values() for k, v in rec.summary().items()}
 
 
 def _recorders(scene, sim, recorded: dict) -> list:
@@ -219,10 +216,9 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
         why = "interrupted" if reason in STOPPED_BY_SIGNAL else "end"
         checkpoint.save(out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall}, recorders)
     by_name = _record_end(sim, scene, recorders)  # after the checkpoint: a resumed run records only what
-    if "series" in by_name:                        # the uninterrupted run would
-        by_name["series"].write(out / "statistics.csv")
-    if "dissipation" in by_name:
-        by_name["dissipation"].write(out / "fracture.csv")
+    for rec in recorders:                          # the uninterrupted run would
+        if rec.file is not None:
+            rec.write(out / rec.file)
     waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
     summary = write_run(sim, scene, out, reason, wall, _extra(by_name))
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error)

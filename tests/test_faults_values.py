@@ -24,6 +24,13 @@ from bark_cli.main import cli, simulate
 
 from conftest import assert_clean_outcome, signal_after
 
+pytestmark = pytest.mark.filterwarnings(
+    "ignore:Exception ignored in. <function gc_cumulative_time.<locals>.gc_callback:pytest.PytestUnraisableExceptionWarning")
+"""A run stopped by ``signal_after`` before its first step (building, or compiling a kernel) is
+stopped by a KeyboardInterrupt raised wherever Python is; when that is inside hypothesis's own
+garbage-collection timer, Python ignores it there and says so — the run still stops, at its first
+step (the signal is recorded: ``Signals.reason``).  That report, and only that one, is not a failure."""
+
 BASE = ["simulate", "--n-bases", "200", "--until-time", "0.6", "--quiet", "--checkpoint-every", "0"]
 LIMIT_S = 3.0
 
