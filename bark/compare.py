@@ -105,18 +105,22 @@ class Pairing:
     """The d_P analysis (the paper, Fig. 8F, G): each pattern's nearest by its own standard error."""
 
     nearest: tuple[int, ...]
+    """Each pattern's nearest (``-1``: none — its standard error is zero and every other mean elsewhere)."""
     valid: bool
     """Whether every pattern's nearest has it as its own nearest (disjoint mutual pairs)."""
 
 
 def pairing(d: np.ndarray) -> Pairing:
-    """Each row's smallest off-diagonal entry of a ``d_P`` matrix, and whether they pair up."""
+    """Each row's smallest off-diagonal entry of a ``d_P`` matrix, and whether they pair up (a row
+    whose entries are all infinite — a pattern with a standard error of zero, every other mean
+    elsewhere — has no nearest: no valid pairing)."""
     d = np.asarray(d, dtype=float)
     n = d.shape[0]
-    off = np.where(np.eye(n, dtype=bool), np.inf, np.where(np.isnan(d), np.inf, d))
-    nearest = tuple(int(i) for i in np.argmin(off, axis=1))
-    known = bool(np.isfinite(off).any(axis=1).all())
-    valid = known and all(nearest[nearest[p]] == p for p in range(n))
+    if np.isnan(d).any():
+        raise BarkError("a pairing needs every d_P; a pattern lacks this quantity")
+    off = np.where(np.eye(n, dtype=bool), np.inf, d)
+    nearest = tuple(int(j) if np.isfinite(row[j]) else -1 for row, j in zip(off, np.argmin(off, axis=1)))
+    valid = all(j >= 0 and nearest[j] == p for p, j in enumerate(nearest))
     return Pairing(nearest=nearest, valid=valid)
 
 
@@ -145,5 +149,5 @@ def compare(stats: Sequence[PatternStatistics]) -> Comparison:
     dp = {q: d_p(stats, q) for q in QUANTITIES}
     four = len(stats) == 4
     quartets = {q: quartet(h[q]) if four and np.isfinite(h[q]).all() else None for q in QUANTITIES}
-    pairings = {q: pairing(dp[q]) if four and np.isfinite(dp[q]).all() else None for q in QUANTITIES}
+    pairings = {q: pairing(dp[q]) if four and not np.isnan(dp[q]).any() else None for q in QUANTITIES}  # inf: far
     return Comparison(stats=stats, hellinger=h, d_p=dp, quartets=quartets, pairings=pairings)

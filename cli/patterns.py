@@ -139,8 +139,8 @@ def compare(patterns, min_size, mirror, out):
             entry["quartet"] = {"edges": [[names[i], names[j], d] for i, j, d in q.edges], "valid": q.valid, "tied": q.tied}
         if p is not None:
             console.print(f"  d_P pairing ({quantity}): {'valid' if p.valid else 'not valid'} — nearest: "
-                          + ", ".join(f"{names[i]}→{names[j]}" for i, j in enumerate(p.nearest)))
-            entry["d_p_pairing"] = {"nearest": [names[j] for j in p.nearest], "valid": p.valid}
+                          + ", ".join(f"{names[i]}→{names[j] if j >= 0 else 'none'}" for i, j in enumerate(p.nearest)))
+            entry["d_p_pairing"] = {"nearest": [names[j] if j >= 0 else None for j in p.nearest], "valid": p.valid}
         report[quantity] = entry
     write_json(folder / "comparison.json", report)
     written = ["comparison.json"]

@@ -145,6 +145,19 @@ def test_d_p_pairing_is_valid_when_nearest_pointers_are_mutual():
     assert not pairing(d).valid
 
 
+def test_a_pattern_with_no_spread_still_gets_a_pairing():
+    """A standard error of zero makes a d_P infinite (every other mean infinitely far), not missing:
+    the four patterns are still paired — that one has no nearest, so no pairing is valid."""
+    s = [PatternStatistics.of_summary(str(i), 10, 10.0 * i, 0.0 if i == 3 else 5.0) for i in range(4)]
+    c = compare(s)
+    assert np.isinf(c.d_p["orientation"][3, :3]).all()
+    assert c.pairings["orientation"] is not None and not c.pairings["orientation"].valid
+    assert c.pairings["orientation"].nearest[3] == -1  # none: every other mean is infinitely far
+    assert c.pairings["anisotropy"] is None  # no pattern gives it
+    with pytest.raises(BarkError, match="lacks"):
+        pairing(c.d_p["anisotropy"])
+
+
 def test_d_p_is_in_standard_errors_of_the_first_pattern():
     a = PatternStatistics.of_summary("a", 16, 47.0, 34.4)
     b = PatternStatistics.of_summary("b", 9, 90.0, 9.3)
