@@ -25,9 +25,8 @@ from bark.errors import BarkError, Ref
 from bark.forces import ForceField
 from bark.kernels import BACKENDS, Plan, Steps
 
-__all__ = ["Numerics", "Clock", "plan", "watches_overshoot", "python_step", "stable_step", "check_countable", "DEFAULT_DT",
-           "DEFAULT_STEPPING",
-           "DEFAULT_OVERSHOOT_TOL"]
+__all__ = ["Numerics", "Clock", "plan", "watches_overshoot", "python_step", "stable_step", "check_countable",
+           "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
 
 DEFAULT_DT = 0.3
 """Default (largest) time step.  With adaptive stepping and ``DEFAULT_OVERSHOOT_TOL`` this setting

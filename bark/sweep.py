@@ -49,8 +49,8 @@ FIG9_AXES = (("growth.G", (0.007, 0.011, 0.014)), ("mechanics.f_max", (0.0028, 0
 
 RESULT_COLUMNS = {
     "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
-    "n_patches": "INTEGER", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL", "initial_fractures": "INTEGER", "dissipation_rate": "REAL",
-    "growth_dissipation": "REAL",
+    "n_patches": "INTEGER", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL",
+    "initial_fractures": "INTEGER", "dissipation_rate": "REAL", "growth_dissipation": "REAL",
 }
 """What the table holds of each run besides its identity, by SQLite type: the keys of the run's
 summary (summary.json) of these names, and of its ``fracture`` part (the ``fracture-history`` effect;

@@ -10,7 +10,7 @@ import sys
 import click
 
 from bark.errors import BarkError
-from bark_cli.options import value_text
+from bark_cli.options import setting_value, split_setting, value_text
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 
@@ -21,7 +21,6 @@ def parse_grid(items: tuple[str, ...]):
     import numpy as np
 
     from bark.sweep import Axis
-    from bark_cli.options import setting_value, split_setting
 
     axes, layer = [], {}
     for item in items:

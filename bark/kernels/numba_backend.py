@@ -427,8 +427,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
 @inline
 def _kept_and_started(bases, start, kept, block):
     """Whether the first ``kept`` bases' positions are those in ``start`` (``kept < 0``: not known),
-    to the bit; and ``start`` made the state this call begins from — positions (those not already
-    there), velocities and anchors — in one pass over blocks of bases."""
+    to the bit; and ``start`` made the state this call begins from: its velocities and anchors copied
+    in the same pass over blocks of bases as the comparison, then the positions not already there."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     block_same = np.ones(_blocks(n, block), np.bool_)
@@ -441,12 +441,20 @@ def _kept_and_started(bases, start, kept, block):
         for q in range(top - lo):
             same = same & (s0[q] == p0[q]) & (s1[q] == p1[q]) & (s2[q] == p2[q])
         block_same[blk] = same
+        _copy_block((v0, v1, v2, ax, ay, az), start[3:], lo, hi)
     same = kept >= 0
     for blk in range(block_same.shape[0]):
         same = same & block_same[blk]
     _copy_blocks((x0, x1, x2), start[:3], kept if same else 0, block)
-    _copy_blocks((v0, v1, v2, ax, ay, az), start[3:], 0, block)
     return same
+
+
+@inline
+def _copy_block(source, target, lo, hi):
+    """Entries ``lo .. hi`` of the vectors ``source`` into ``target``."""
+    if hi > lo:
+        for v in range(len(source)):
+            target[v][lo:hi] = source[v][lo:hi]
 
 
 @inline
@@ -454,10 +462,7 @@ def _copy_blocks(source, target, first, block):
     """The vectors ``source`` into ``target`` from entry ``first`` on, a block at a time."""
     n = source[0].shape[0]
     for blk in prange(_blocks(n, block)):
-        lo, hi = max(first, blk * block), min(n, (blk + 1) * block)
-        for v in range(len(source)):
-            if hi > lo:
-                target[v][lo:hi] = source[v][lo:hi]
+        _copy_block(source, target, max(first, blk * block), min(n, (blk + 1) * block))
 
 
 @inline
@@ -713,7 +718,8 @@ def _radii(r) -> np.ndarray:
 
 PARALLEL_BASES = 16_000
 """Automatic threads (``Numerics.threads = 0``) share a kernel call's blocks among all the cores for
-a lattice of at least this many bases (``bark bench threads`` measures where that begins to pay);
+a lattice of at least this many bases (``bark bench speed --threads 1 --threads 2`` measures where
+that begins to pay);
 below, one thread, and the serial kernel."""
 
 SLACK_RUN = 64
