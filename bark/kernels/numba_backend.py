@@ -172,9 +172,11 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
             finite = finite & block_finite[blk]
             hit = hit | block_hit[blk]
             top = max(top, block_top[blk])
-        if loads:
-            if hit:
-                for q in range(n):
+        if loads and hit:
+            for blk in range(nb):  # only the blocks the rule picked springs in, in order
+                if not block_hit[blk]:
+                    continue
+                for q in range(blk * block, min(n, (blk + 1) * block)):
                     if lv[q] and rule(wt[q], fm[q]):
                         if breaking:
                             lv[q] = False
@@ -276,9 +278,9 @@ def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
 @inline
 def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, stride, first):
     """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
-    the forces and the update (no calls: SIMD lanes), then the surface at each base's own radius (a
-    call of the growth law each, which keeps that loop scalar), then the anchors at their sites'
-    radii.  The anchors' heights never change, so a law that gives ``compiled_weights`` has each
+    the forces and the update (no calls: SIMD lanes), each base's own radius (a call of the growth law
+    each, which keeps that loop scalar), the surface at those radii (SIMD lanes again), then the
+    anchors at their sites' radii.  The anchors' heights never change, so a law that gives ``compiled_weights`` has each
     anchor's radius as ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once
     (``weights``: weight k of base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the
     call; with no weights (stride 0), a call per anchor.  Per base the same operations in the same
@@ -288,10 +290,13 @@ def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, str
     for q in range(n):
         x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update)
     by_weights = stride > 0
+    r_at = np.empty(n)  # each base's radius at its height: calls, so a loop of its own (the rest in SIMD lanes)
+    for q in range(n):
+        r_at[q] = radius(t, x2[q], params)
     bad = 0
     for q in range(n):
         px, py, pz = x0[q], x1[q], x2[q]
-        r = radius(t, pz, params)
+        r = r_at[q]
         scale = _surface_scale(px, py, r)
         px *= scale
         py *= scale
@@ -301,10 +306,6 @@ def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, str
         vr = _radial_speed(v0[q], v1[q], px, py, 1.0 / (r * r))
         v0[q] = v0[q] - vr * px
         v1[q] = v1[q] - vr * py
-        if not by_weights:
-            ra = radius(t, az[q], params)
-            ax[q] = ra * dx[q]
-            ay[q] = ra * dy[q]
     if by_weights:  # ax holds each anchor's radius while it is summed
         for q in range(n):
             ax[q] = params[0]
@@ -312,10 +313,13 @@ def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, str
             w, coefficient = weights[term * stride + first:term * stride + first + n], params[1 + term]
             for q in range(n):
                 ax[q] = ax[q] + w[q] * coefficient
+    else:
         for q in range(n):
-            ra = ax[q]
-            ax[q] = ra * dx[q]
-            ay[q] = ra * dy[q]
+            ax[q] = radius(t, az[q], params)
+    for q in range(n):
+        ra = ax[q]
+        ax[q] = ra * dx[q]
+        ay[q] = ra * dy[q]
     return bad
 
 
