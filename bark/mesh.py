@@ -59,5 +59,6 @@ def write_mesh(sim, out: str | Path, min_size: int = 7) -> list[Path]:
     out = Path(out)
     vtu = meshio.Mesh(points, cells, point_data=colour_data, cell_data=cell_data)
     ply = meshio.Mesh(points, cells, point_data=colour_data)  # PLY keeps no cell data
-    return [atomic_write(out / "tree.vtu", lambda tmp: meshio.write(tmp, vtu, file_format="vtu", compression=None), by_name=True),
+    return [atomic_write(out / "tree.vtu", lambda tmp: meshio.write(tmp, vtu, file_format="vtu", compression=None),
+                         by_name=True),
             atomic_write(out / "tree.ply", lambda fh: meshio.write(fh, ply, file_format="ply", binary=True))]
