@@ -10,26 +10,21 @@ from __future__ import annotations
 import signal
 import sys
 
-_REASONS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated"}
+from bark_cli import REASONS, Interrupted
 
 
 def main() -> None:
-    received: list[int] = []
-
     def stop(signum, frame):
-        received.append(signum)
-        raise KeyboardInterrupt
+        raise Interrupted(signum)
 
-    previous = {sig: signal.signal(sig, stop) for sig in _REASONS}
+    for sig in REASONS:  # kept until the command's own handlers take over (``bark_cli.main.Signals``)
+        signal.signal(sig, stop)
     try:
         from bark_cli.main import main as command
-    except KeyboardInterrupt:
-        signum = received[0] if received else signal.SIGINT
-        sys.stderr.write(f"bark: {_REASONS[signum]} before the run began: nothing was run\n")
+    except KeyboardInterrupt as err:
+        signum = getattr(err, "signum", signal.SIGINT)
+        sys.stderr.write(f"bark: {REASONS[signum]} before the run began: nothing was run\n")
         sys.exit(128 + int(signum))
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
     command()
 
 

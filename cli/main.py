@@ -23,6 +23,7 @@ import click
 from bark.errors import BarkError
 from bark.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.strategies import KINDS
+from bark_cli import REASONS, Interrupted
 from bark_cli.options import (NAMER, LazyHelpOption, Provenance, name_ref, overrides_from, parameter_options,
                               setting_value, split_setting)
 
@@ -43,11 +44,12 @@ class BarkGroup(click.Group):
             click.echo(f"bark: error: {err.render(name_ref)}", err=True)
             sys.exit(2)
         except StoppedBeforeStart as stop:
-            click.echo(f"bark: {Signals.REASONS[stop.signum]} before the run began: nothing was run", err=True)
+            click.echo(f"bark: {REASONS[stop.signum]} before the run began: nothing was run", err=True)
             sys.exit(128 + int(stop.signum))
-        except (click.Abort, KeyboardInterrupt):
-            click.echo("bark: interrupted", err=True)
-            sys.exit(130)
+        except (click.Abort, KeyboardInterrupt) as err:  # click makes a KeyboardInterrupt an Abort (its cause)
+            signum = getattr(err.__cause__ if isinstance(err, click.Abort) else err, "signum", signal.SIGINT)
+            click.echo(f"bark: {REASONS[signum]}", err=True)
+            sys.exit(128 + int(signum))
         finally:
             NAMER.reset(token)
         sys.exit(rv if isinstance(rv, int) else 0)
@@ -122,7 +124,7 @@ class Signals:
     another process beside the final writes, and one that came meanwhile stops them once those are
     done (a picture already drawn is kept)."""
 
-    REASONS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated"}
+    REASONS = REASONS  # the words of the one line (bark_cli.REASONS)
 
     def __init__(self) -> None:
         self.received: int | None = None
@@ -137,7 +139,7 @@ class Signals:
         if self.received is None:
             self.received = signum
         if self.drawing or not self.started:  # a picture, or a run not yet begun: nothing to lose
-            raise KeyboardInterrupt
+            raise Interrupted(signum)
 
     def reason(self) -> str | None:
         """The runner asks after every advance: from the first, a signal waits for the step to end."""

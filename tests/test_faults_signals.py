@@ -196,6 +196,41 @@ def test_a_signal_while_the_program_loads_is_one_line(tmp_path, sig):
     assert not out.exists()
 
 
+# a signal raised inside code that a string `exec` runs (importing scipy and numba runs such code),
+# under `python -m`: a finder, installed by a sitecustomize, raises it when a module is looked up —
+# while the program loads (bark_cli.main), between loading and the run's own handlers (bark.runner),
+# and while the scene is built (the numba backend)
+_SIGNAL_IN_EXEC = """
+import os, signal, sys
+class _Finder:
+    def find_spec(self, name, path=None, target=None):
+        if name == {module!r}:
+            exec("os.kill(os.getpid(), signal.{sig})\\nfor _ in range(100000): pass")
+        return None
+sys.meta_path.insert(0, _Finder())
+"""
+BEFORE_THE_RUN = " before the run began: nothing was run"
+
+
+@pytest.mark.parametrize("module, said", [("bark_cli.main", BEFORE_THE_RUN), ("bark.runner", ""),
+                                          ("bark.kernels.numba_backend", BEFORE_THE_RUN)],
+                         ids=["loading", "between", "building"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: signal.Signals(s).name)
+def test_a_signal_stopping_code_run_by_exec_exits_with_its_status(tmp_path, module, said, sig):
+    """CPython ends a `python -m` program by SIGINT at exit (status −2, whatever it asked for) when an
+    exact KeyboardInterrupt has left such code; bark's handlers raise their own subclass."""
+    hook, out = tmp_path / "hook", tmp_path / "out"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(_SIGNAL_IN_EXEC.format(module=module, sig=signal.Signals(sig).name))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(hook), os.environ.get("PYTHONPATH")])))
+    proc = subprocess.run([sys.executable, "-m", "bark_cli", "simulate", "--quiet", "--out", str(out)], cwd=REPO_ROOT,
+                          env=env, capture_output=True, text=True)
+    reason = "interrupted" if sig == signal.SIGINT else "terminated"
+    # (click writes an empty line first when a KeyboardInterrupt reaches it, in the command itself)
+    assert (proc.returncode, proc.stderr.lstrip("\n")) == (128 + sig, f"bark: {reason}{said}\n")
+    assert not out.exists()
+
+
 def test_the_drawing_process_does_not_outlive_a_killed_command(tmp_path):
     """The painter (a process that readies matplotlib beside the run) ends when the command is gone,
     even by SIGKILL: it holds no copy of the command's end of their pipe, so it sees it close."""
