@@ -12,6 +12,7 @@ import numpy as np
 __all__ = ["LeafBaseGraph"]
 
 _NO_ATTRIBUTES: dict = {}
+_clear_cache = getattr(nx, "_clear_cache", lambda graph: None)  # what networkx's own edits call (its backends' caches)
 
 
 class LeafBaseGraph(nx.Graph):
@@ -38,11 +39,31 @@ class LeafBaseGraph(nx.Graph):
         return (ids >= 0) & (ids < len(self._node))
 
     def add_springs(self, pairs: np.ndarray) -> None:
-        """Edges for the springs ``pairs`` (rows of base ids), keyed by the node objects themselves: one
-        int object per base rather than one per spring end, 7.5 MiB less at 70 000 bases."""
-        keys = self._keys()
+        """Edges for the springs ``pairs`` (rows of base ids, both ends bases already), keyed by the node
+        objects themselves: one int object per base rather than one per spring end, 7.5 MiB less at
+        70 000 bases.  Written into the adjacency directly, as ``add_edges_from`` does for an edge
+        without attributes, less its per-edge checks (the ends are checked at once): 2,400 joins
+        add 50,000 springs."""
+        pairs = np.asarray(pairs)
+        if pairs.size and not self.has_bases(pairs).all():
+            raise ValueError("a spring's ends must be bases of the graph (add_bases first)")
+        keys, adj = self._keys(), self._adj
         for start in range(0, len(pairs), 4096):  # in chunks: a list of 140 000 pairs is 19 MiB
-            self.add_edges_from((keys[i], keys[j]) for i, j in pairs[start:start + 4096].tolist())
+            for i, j in pairs[start:start + 4096].tolist():
+                u, v = keys[i], keys[j]
+                adj[u][v] = _NO_ATTRIBUTES
+                adj[v][u] = _NO_ATTRIBUTES
+        _clear_cache(self)
+
+    def remove_springs(self, pairs: np.ndarray) -> None:
+        """Remove the edges of the springs ``pairs`` (each an edge of the graph), as
+        ``remove_edges_from`` does, less its per-edge checks."""
+        adj = self._adj
+        for i, j in np.asarray(pairs).tolist():
+            del adj[i][j]
+            if i != j:
+                del adj[j][i]
+        _clear_cache(self)
 
     def _keys(self) -> list:
         """The node objects by base id (nodes are the ids 0 … n-1, added in order by ``add_bases``)."""

@@ -153,6 +153,12 @@ class Lattice:
         ``o`` where one end is new and both are present.  Ordered by offset, then by base — for a
         whole lattice, ``(i, i + o)`` for i = 0, 1, ... in each offset's block."""
         new = np.asarray(new, dtype=np.int64)
+        if isinstance(present, range) or hasattr(present, "has_bases"):
+            count = len(present) if isinstance(present, range) and present.start == 0 and present.step == 1 else \
+                getattr(present, "number_of_nodes", lambda: -1)()
+            if new.size and count >= 0 and new[-1] - new[0] + 1 == new.size and new[-1] < count \
+                    and (new.size == 1 or new[1] > new[0]):
+                return self._pairs_of_range(int(new[0]), int(new[-1]) + 1, count)
         blocks = []
         for o in self.offsets:
             below = new - o  # springs down to a base that is present (new or not)
@@ -163,6 +169,16 @@ class Lattice:
             above = above[_present(present, above)]
             ends = np.concatenate([below, above - o])
             blocks.append(np.column_stack([np.sort(ends), np.sort(ends) + o]))
+        return np.concatenate(blocks).astype(np.uint32) if blocks else np.empty((0, 2), np.uint32)
+
+    def _pairs_of_range(self, a: int, b: int, count: int) -> np.ndarray:
+        """``new_pairs`` for the new bases ``a .. b − 1`` among the bases ``0 .. count − 1``: for each
+        offset the springs down from a new base (first ends ``a − o .. b − o − 1``, those from 0 on)
+        then those up from one to a base after ``b`` — ranges, no set arithmetic (what each join asks)."""
+        blocks = []
+        for o in self.offsets:
+            ends = np.concatenate([np.arange(max(a - o, 0), max(b - o, 0)), np.arange(max(a, b - o), min(b, count - o))])
+            blocks.append(np.column_stack([ends, ends + o]))
         return np.concatenate(blocks).astype(np.uint32) if blocks else np.empty((0, 2), np.uint32)
 
 

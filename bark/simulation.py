@@ -362,7 +362,7 @@ class Simulation:
         ids = ids[order]
         if ids.size:
             s.intact[ids] = False
-            self.graph.remove_edges_from(s.pairs[ids].tolist())
+            self.graph.remove_springs(s.pairs[ids])
             if self.record_breaks:
                 self.breaks.record(ids, s.pairs, steps[order], times[order], values)
             self._labels = None

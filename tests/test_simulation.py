@@ -131,6 +131,49 @@ def test_graph_of_record_agrees_with_arrays_after_breaks(broken_sim):
     assert not any(data for _, data in g.nodes(data=True)) and not any(d for *_, d in g.edges(data=True))
 
 
+def test_graph_of_record_agrees_with_arrays_as_bases_join_and_springs_break():
+    """Bases joining during the run (primary growth) and springs breaking: the graph's nodes are the
+    bases and its edges the intact springs after every advance, with no attribute mapping of its own."""
+    sim = build_sim(n_bases=500, seed=3, lattice=Lattice(n_bases=500, n_start=300, join_rate=40.0, join_every=0.3,
+                                                         jitter=0.05), fmax_spread=0.05, G=0.08)
+    joined = broke = False
+    for _ in sim.irun(Stop(until_time=6.0)):
+        s, g = sim.state, sim.graph
+        assert g.number_of_nodes() == s.n_bases and sorted(g.nodes) == list(range(s.n_bases))
+        assert {frozenset(e) for e in g.edges()} == {frozenset(map(int, p)) for p in s.pairs[s.intact]}
+        joined, broke = joined or s.n_bases > 300, broke or sim.n_broken > 0
+    assert joined and broke and sim.state.n_bases == 500
+    assert not any(d for *_, d in sim.graph.edges(data=True))
+
+
+def test_the_graph_refuses_a_spring_to_a_base_it_does_not_have():
+    from bark.graph import LeafBaseGraph
+
+    g = LeafBaseGraph()
+    g.add_bases(3)
+    with pytest.raises(ValueError, match="add_bases first"):
+        g.add_springs(np.array([[0, 3]]))
+    assert g.number_of_edges() == 0
+
+
+@given(offsets=st.lists(st.integers(1, 40), min_size=1, max_size=3, unique=True), count=st.integers(1, 150),
+       data=st.data())
+def test_new_pairs_of_a_run_of_new_bases_are_those_of_any_container(offsets, count, data):
+    """The springs a run of joining bases makes (found from ranges) are those the general path finds
+    asking a plain container which bases are present."""
+    from bark.graph import LeafBaseGraph
+
+    a = data.draw(st.integers(0, count - 1))
+    b = data.draw(st.integers(a + 1, count))
+    lattice = Lattice(n_bases=200, offsets=tuple(offsets))
+    graph = LeafBaseGraph()
+    graph.add_bases(count)
+    general = lattice.new_pairs(np.arange(a, b), set(range(count)))
+    for present in (graph, range(count)):
+        got = lattice.new_pairs(np.arange(a, b), present)
+        assert got.dtype == general.dtype and np.array_equal(got, general)
+
+
 def test_break_springs_ignores_already_broken_ids_and_logs_once(small_sim):
     sim = small_sim
     m = sim.state.n_springs
