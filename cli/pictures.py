@@ -2,10 +2,11 @@
 
 Importing matplotlib takes about 0.4 s, more than a short run itself.  When a scene asks for a
 picture, ``Painter`` forks a drawing process at the start of the command: it imports matplotlib on
-the machine's other core while the simulation runs, then waits.  At the end the runner hands it the
-pattern as plain arrays (``PatternData``), it draws and writes the file (atomically), and says how it
-went.  Signals belong to the command, not to the painter (it ignores them); a signal while it draws
-stops it at once (the data are already written).  Where ``fork`` is not available the pictures are
+the machine's other core while the simulation runs, then forks a second (where the command may use
+two cores) and both wait.  At the end the runner hands them the pictures as plain arrays
+(``PatternData``, ...), each taken by whichever is free; they draw and write the files (atomically)
+and say how it went.  Signals belong to the command, not to the painters (they ignore them); a
+signal while they draw stops them at once (the data are already written).  Where ``fork`` is not available the pictures are
 drawn in the command's own process.
 """
 
@@ -118,16 +119,50 @@ def _draw(kind: str, data, path: str, min_size: int) -> None:
         write_gif(data, path, min_size)
 
 
-def _serve(jobs, replies, command_ends) -> None:
+def _serve(jobs, replies, command_ends, siblings=()) -> None:
     """The painter: ready matplotlib, then draw what it is sent until told to stop — or until the
-    command is gone (its end of the pipe closes: the painter holds no copy of it, so it sees that)."""
+    command is gone (its end of the pipe closes: the painter holds no copy of it, so it sees that).
+    Once ready it forks a sibling for each pipe pair in ``siblings`` (they share the imports: the
+    pictures of one run are then drawn side by side), and waits for them when it ends."""
     for end in command_ends:
         end.close()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)  # the command decides; it kills the painter if it must
     for module in ("bark_cli.plot", "bark_cli.animation", "bark_cli.tree_picture", "bark_cli.figures"):  # matplotlib, now: this is the point
         importlib.import_module(module)
+    children = []
+    for mine in siblings:
+        pid = os.fork()
+        if pid == 0:  # the sibling: dies with the painter (a command that kills the painter kills both)
+            parent = os.getppid()
+            _die_with_parent()
+            if os.getppid() != parent:
+                os._exit(0)
+            for other in (jobs, replies, *(end for pair in siblings if pair is not mine for end in pair)):
+                other.close()
+            _draw_jobs(*mine)
+            os._exit(0)
+        children.append(pid)
+        for end in mine:
+            end.close()
+    _draw_jobs(jobs, replies)
+    for pid in children:
+        os.waitpid(pid, 0)
 
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent ends (``prctl(PR_SET_PDEATHSIG, SIGKILL)``)."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux's C library: the sibling still ends when the command's pipe closes
+        pass
+
+
+def _draw_jobs(jobs, replies) -> None:
+    """Draw each job received, answering ``None`` or the failure in one line, until ``None`` or the
+    command's end of the pipe is gone."""
     while True:
         try:
             job = jobs.recv()
@@ -137,78 +172,130 @@ def _serve(jobs, replies, command_ends) -> None:
             return
         try:
             _draw(*job)
-            replies.send(None)
+            reply = None
         except Exception as err:  # reported by the command, one line
-            replies.send(f"{type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''}")
+            reply = f"{type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''}"
+        try:
+            replies.send(reply)
+        except OSError:  # the command is gone
+            return
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+@attrs.define(eq=False)
+class _Job:
+    """One picture handed over: its outcome (``None``, a failure's line, or ``_LOST``) once ``done``."""
+
+    args: tuple
+    done: threading.Event = attrs.field(factory=threading.Event)
+    outcome: object = None
+
+
+_LOST = object()
 
 
 class Painter:
-    """A drawing process started now (see the module's docstring), or drawing in this process.
-    Pictures are handed over by a thread of the command (a picture's data are megabytes, more than a
-    pipe holds, and the painter reads them only when it has drawn the one before), so the command
-    goes on with its own outputs meanwhile."""
+    """Drawing processes started now (see the module's docstring), or drawing in this process.
 
-    def __init__(self) -> None:
-        self._proc = self._conn = None
+    ``workers`` processes draw (default: two where this process may use two cores or more, else one):
+    the first imports matplotlib and forks the others, and the pictures a run hands over are shared
+    among them as each becomes free (the whole tree's three pictures took 1.1 s one after another).
+    Each has a thread of the command that hands it pictures and takes its answers (a picture's data
+    are megabytes, more than a pipe holds, and a drawing process reads them only when it has drawn
+    the one before), so the command goes on with its own outputs meanwhile."""
+
+    def __init__(self, workers: int | None = None) -> None:
+        self._proc = None
+        self._jobs: queue.SimpleQueue = queue.SimpleQueue()
+        self._threads: list[threading.Thread] = []
+        self._ends: list = []
         if "fork" in multiprocessing.get_all_start_methods() and sys.platform.startswith("linux"):
+            count = max(1, workers if workers is not None else min(2, _cores()))
             ctx = multiprocessing.get_context("fork")
-            jobs, self._jobs = ctx.Pipe(duplex=False)
-            self._conn, replies = ctx.Pipe(duplex=False)
-            self._proc = ctx.Process(target=_serve, args=(jobs, replies, (self._jobs, self._conn)), daemon=True)
+            pipes = []
+            for _ in range(count):
+                theirs_in, ours_out = ctx.Pipe(duplex=False)  # jobs: we send, they receive
+                ours_in, theirs_out = ctx.Pipe(duplex=False)  # replies: they send, we receive
+                pipes.append(((theirs_in, theirs_out), (ours_out, ours_in)))
+            command_ends = tuple(end for _, ours in pipes for end in ours)
+            self._proc = ctx.Process(target=_serve, args=(*pipes[0][0], command_ends, tuple(p[0] for p in pipes[1:])),
+                                     daemon=True)
             self._proc.start()
-            jobs.close()
-            replies.close()
-            self._outbox: queue.SimpleQueue = queue.SimpleQueue()
-            self._sender = threading.Thread(target=self._send, name="bark-painter-sender", daemon=True)
-            self._sender.start()
+            for theirs, ours in pipes:
+                for end in theirs:
+                    end.close()
+                self._ends.extend(ours)
+                thread = threading.Thread(target=self._hand_over, args=ours, name="bark-painter", daemon=True)
+                thread.start()
+                self._threads.append(thread)
 
-    def _send(self) -> None:
-        """The sending thread: the jobs in order, then ``None`` (stop), to the painter."""
+    def _hand_over(self, send, receive) -> None:
+        """One drawing process's thread: the next picture to it, its answer back to the job, until
+        ``None``.  If the process is gone, the jobs this thread takes say so at once."""
+        gone = False
         while True:
-            job = self._outbox.get()
-            try:
-                self._jobs.send(job)
-            except (OSError, ValueError):  # the painter is gone (killed): its waits say so
-                return
+            job = self._jobs.get()
             if job is None:
+                if not gone:
+                    try:
+                        send.send(None)
+                    except (OSError, ValueError):
+                        pass
                 return
+            if not gone:
+                try:
+                    send.send(job.args)
+                    job.outcome = receive.recv()
+                except (EOFError, OSError, ValueError):  # killed (a signal stopped the drawing), or died
+                    gone, job.outcome = True, _LOST
+            else:
+                job.outcome = _LOST
+            job.done.set()
 
     def submit(self, kind: str, data, path: Path, min_size: int):
-        """Hand ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) to the drawing process and
-        return at once with a ``wait()`` that ends when the
-        picture is written (call the waits in the order of submission): the command writes its other
-        outputs meanwhile.  ``wait`` raises what drawing raised (a ``RuntimeError`` naming it), or
-        ``KeyboardInterrupt`` if a signal stopped it.  Without a drawing process, draws now."""
+        """Hand ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) to a drawing process and
+        return at once with a ``wait()`` that ends when the picture is written: the command writes
+        its other outputs meanwhile.  ``wait`` raises what drawing raised (a ``RuntimeError`` naming
+        it), or ``KeyboardInterrupt`` if a signal stopped it.  Without a drawing process, draws now."""
         if self._proc is None:
             _draw(kind, data, str(path), min_size)
             return lambda stop=False: None
-        self._outbox.put((kind, data, str(path), min_size))
-        return self._wait
+        job = _Job(args=(kind, data, str(path), min_size))
+        self._jobs.put(job)
 
-    def _wait(self, stop: bool = False) -> None:
-        """The next picture's outcome; with ``stop``, unless it is ready, the drawing is stopped now."""
-        try:
-            if stop and not self._conn.poll(0):
-                raise KeyboardInterrupt
-            failure = self._conn.recv()
-        except KeyboardInterrupt:
-            self.close(kill=True)
-            raise
-        except (EOFError, OSError):  # OSError: closed already (a signal stopped an earlier one)
-            raise RuntimeError("the drawing process ended unexpectedly") from None
-        if failure is not None:
-            raise RuntimeError(failure)
+        def wait(stop: bool = False) -> None:
+            """The picture's outcome; with ``stop``, unless it is ready, the drawing is stopped now."""
+            try:
+                if stop and not job.done.is_set():
+                    raise KeyboardInterrupt
+                job.done.wait()
+            except KeyboardInterrupt:
+                self.close(kill=True)
+                raise
+            if job.outcome is _LOST:
+                raise RuntimeError("the drawing process ended unexpectedly")
+            if job.outcome is not None:
+                raise RuntimeError(job.outcome)
+        return wait
 
     def close(self, kill: bool = False) -> None:
         if self._proc is None:
             return
-        if kill:
+        if kill:  # its siblings die with it
             os.kill(self._proc.pid, signal.SIGKILL)
-        self._outbox.put(None)
-        self._sender.join(timeout=5)
+        for _ in self._threads:
+            self._jobs.put(None)
+        for thread in self._threads:
+            thread.join(timeout=5)
         self._proc.join(timeout=5)
         if self._proc.is_alive():
             self._proc.kill()
-        self._jobs.close()
-        self._conn.close()
+        for end in self._ends:
+            end.close()
         self._proc = None

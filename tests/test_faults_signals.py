@@ -256,3 +256,47 @@ def test_the_drawing_process_does_not_outlive_a_killed_command(tmp_path):
         time.sleep(0.1)
     assert left() == []
     proc.communicate()  # and nothing holds the command's stderr open (this reads it to its end)
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] not in "ZX"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the drawing processes are forked on Linux only")
+@pytest.mark.parametrize("kill", [False, True])
+def test_two_drawing_processes_share_the_pictures_and_end_together(tmp_path, make_sim, kill):
+    """Two drawing processes (the second forked by the first once matplotlib is ready) draw a run's
+    pictures as each becomes free: every picture is written, by both; closed, or killed as a signal
+    kills them, neither outlives the painter."""
+    from bark_cli.pictures import PatternData, Painter
+
+    sim = make_sim(n_bases=300, seed=1)
+    sim.run(__import__("bark").Stop(until_time=3.0))
+    data = PatternData.of(sim, 7)
+    painter = Painter(workers=2)
+    waits = [painter.submit("pattern", data, tmp_path / f"p{i}.png", 7) for i in range(4)]
+    waits[0]()
+    first = painter._proc.pid
+    siblings = _children(first)
+    assert len(siblings) == 1 and _alive(siblings[0])
+    if kill:
+        painter.close(kill=True)  # what a wait stopped by a signal does
+    else:
+        for wait in waits:
+            wait()
+        assert all((tmp_path / f"p{i}.png").read_bytes()[:4] == b"\x89PNG" for i in range(4))
+        painter.close()
+    deadline = time.monotonic() + 10
+    while (_alive(first) or _alive(siblings[0])) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(first) and not _alive(siblings[0])
