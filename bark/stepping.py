@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import attrs
 import numpy as np
@@ -64,6 +65,12 @@ class Numerics:
     """Threads the numba backend's kernel shares each step among: 0 = automatic (as many as the cores
     this process may use, for a lattice of at least 16,000 bases; else 1), at most that many.  Results
     are the same to the bit whatever the count; the numpy backend runs on one."""
+
+
+def cores() -> int:
+    """The cores this process may use (its CPU affinity, where the system tells it): what automatic
+    threads, a sweep's local workers and the picture processes share."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 @attrs.define

@@ -41,6 +41,7 @@ import numpy as np
 
 from bark.errors import BarkError, Ref
 from bark.output import PATTERN_KEYS
+from bark.stepping import cores
 
 __all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "FIG9_AXES", "RESULT_COLUMNS"]
 
@@ -285,7 +286,7 @@ def _local(todo: list[Point], workers: int):
 
     workers = min(workers, len(todo))
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_start, initargs=(max(1, _cores() // workers),))
+                               initializer=_worker_start, initargs=(max(1, cores() // workers),))
     try:
         pending = {pool.submit(run_point, p.scene, p.key) for p in todo}
         while pending:
@@ -315,11 +316,6 @@ def _worker_start(threads: int) -> None:
     for sig in (signal.SIGINT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))
-
-
-def _cores() -> int:
-    """The cores this process may use (its CPU affinity, where the system tells it)."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def _on_dask(client, todo: list[Point]):

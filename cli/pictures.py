@@ -25,6 +25,7 @@ import attrs
 import numpy as np
 
 from bark.output import unwrap
+from bark.stepping import cores
 from bark.units import metres
 
 
@@ -181,13 +182,6 @@ def _draw_jobs(jobs, replies) -> None:
             return
 
 
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 @attrs.define(eq=False)
 class _Job:
     """One picture handed over: its outcome (``None``, a failure's line, or ``_LOST``) once ``done``."""
@@ -216,7 +210,7 @@ class Painter:
         self._threads: list[threading.Thread] = []
         self._ends: list = []
         if "fork" in multiprocessing.get_all_start_methods() and sys.platform.startswith("linux"):
-            count = max(1, workers if workers is not None else min(2, _cores()))
+            count = max(1, workers if workers is not None else min(2, cores()))
             ctx = multiprocessing.get_context("fork")
             pipes = []
             for _ in range(count):
