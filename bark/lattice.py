@@ -156,8 +156,7 @@ class Lattice:
         if isinstance(present, range) or hasattr(present, "has_bases"):
             count = len(present) if isinstance(present, range) and present.start == 0 and present.step == 1 else \
                 getattr(present, "number_of_nodes", lambda: -1)()
-            if new.size and count >= 0 and new[-1] - new[0] + 1 == new.size and new[-1] < count \
-                    and (new.size == 1 or new[1] > new[0]):
+            if new.size and count >= 0 and new[-1] < count and (np.diff(new) == 1).all():  # ids a, a + 1, ...
                 return self._pairs_of_range(int(new[0]), int(new[-1]) + 1, count)
         blocks = []
         for o in self.offsets:

@@ -172,6 +172,8 @@ def test_new_pairs_of_a_run_of_new_bases_are_those_of_any_container(offsets, cou
     for present in (graph, range(count)):
         got = lattice.new_pairs(np.arange(a, b), present)
         assert got.dtype == general.dtype and np.array_equal(got, general)
+    ids = data.draw(st.lists(st.integers(0, count - 1), min_size=1, max_size=8))  # any ids, repeated or not
+    assert np.array_equal(lattice.new_pairs(np.array(ids), graph), lattice.new_pairs(np.array(ids), set(range(count))))
 
 
 def test_break_springs_ignores_already_broken_ids_and_logs_once(small_sim):
