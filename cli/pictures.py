@@ -131,18 +131,18 @@ def _serve(jobs, replies, command_ends, siblings=()) -> None:
         signal.signal(sig, signal.SIG_IGN)  # the command decides; it kills the painter if it must
     for module in ("bark_cli.plot", "bark_cli.animation", "bark_cli.tree_picture", "bark_cli.figures"):  # matplotlib, now: this is the point
         importlib.import_module(module)
-    children = []
+    children, painter = [], os.getpid()
     for mine in siblings:
         pid = os.fork()
         if pid == 0:  # the sibling: dies with the painter (a command that kills the painter kills both)
-            parent = os.getppid()
-            _die_with_parent()
-            if os.getppid() != parent:
-                os._exit(0)
-            for other in (jobs, replies, *(end for pair in siblings if pair is not mine for end in pair)):
-                other.close()
-            _draw_jobs(*mine)
-            os._exit(0)
+            try:
+                _die_with_parent()
+                if os.getppid() == painter:  # else it is gone already
+                    for other in (jobs, replies, *(end for pair in siblings if pair is not mine for end in pair)):
+                        other.close()
+                    _draw_jobs(*mine)
+            finally:
+                os._exit(0)  # never back into the painter's code
         children.append(pid)
         for end in mine:
             end.close()
@@ -242,15 +242,17 @@ class Painter:
                     except (OSError, ValueError):
                         pass
                 return
-            if not gone:
-                try:
+            job.outcome = _LOST
+            try:
+                if not gone:
                     send.send(job.args)
                     job.outcome = receive.recv()
-                except (EOFError, OSError, ValueError):  # killed (a signal stopped the drawing), or died
-                    gone, job.outcome = True, _LOST
-            else:
-                job.outcome = _LOST
-            job.done.set()
+            except (EOFError, OSError):  # killed (a signal stopped the drawing), or died
+                gone = True
+            except Exception as err:  # its data could not be sent (pickled): that picture fails, no other
+                job.outcome = f"{type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''}"
+            finally:
+                job.done.set()
 
     def submit(self, kind: str, data, path: Path, min_size: int):
         """Hand ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) to a drawing process and

@@ -300,3 +300,24 @@ def test_two_drawing_processes_share_the_pictures_and_end_together(tmp_path, mak
     while (_alive(first) or _alive(siblings[0])) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not _alive(first) and not _alive(siblings[0])
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the drawing processes are forked on Linux only")
+def test_a_picture_whose_data_cannot_be_sent_fails_alone(tmp_path, make_sim):
+    """A picture's data that cannot be handed to a drawing process (not picklable) fails that picture
+    in one line; the pictures after it are drawn, by the same processes."""
+    from bark_cli.pictures import PatternData, Painter
+
+    sim = make_sim(n_bases=300, seed=1)
+    data = PatternData.of(sim, 7)
+    painter = Painter(workers=2)
+    try:
+        bad = painter.submit("pattern", lambda: None, tmp_path / "bad.png", 7)
+        good = [painter.submit("pattern", data, tmp_path / f"p{i}.png", 7) for i in range(3)]
+        with pytest.raises(RuntimeError, match="pickle"):
+            bad()
+        for wait in good:
+            wait()
+    finally:
+        painter.close()
+    assert not (tmp_path / "bad.png").exists() and all((tmp_path / f"p{i}.png").exists() for i in range(3))
