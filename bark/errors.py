@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import attrs
 
-__all__ = ["Ref", "BarkError", "NonFiniteStateError", "show"]
+__all__ = ["Ref", "BarkError", "NonFiniteStateError", "show", "one_line"]
 
 
 def show(value: Any) -> str:
@@ -28,6 +28,13 @@ def show(value: Any) -> str:
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(show(v) for v in value) + "]"
     return repr(value)
+
+
+def one_line(err: BaseException) -> str:
+    """An unexpected error in one line, to report and go on (a picture that could not be drawn): its
+    type and the first line of its message, at most 200 characters of it."""
+    text = str(err)
+    return f"{type(err).__name__}: {text.splitlines()[0][:200] if text else ''}"
 
 
 @attrs.frozen

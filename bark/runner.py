@@ -35,7 +35,7 @@ from typing import Callable
 import attrs
 
 from bark import checkpoint
-from bark.errors import BarkError, NonFiniteStateError
+from bark.errors import BarkError, NonFiniteStateError, one_line
 from bark.folder import OutputFolder
 from bark.fracture import Dissipation
 from bark.output import Frames, StatisticsSeries, run_summary, write_run
@@ -234,5 +234,5 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
             outcome.drawing_stopped = True
         except Exception as err:  # a picture never costs the data: say what failed, keep the rest
-            outcome.failed.append(f"{name}: could not be drawn ({type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''})")
+            outcome.failed.append(f"{name}: could not be drawn ({one_line(err)})")
     return outcome

@@ -24,6 +24,7 @@ from pathlib import Path
 import attrs
 import numpy as np
 
+from bark.errors import one_line
 from bark.output import unwrap
 from bark.stepping import cores
 from bark.units import metres
@@ -175,7 +176,7 @@ def _draw_jobs(jobs, replies) -> None:
             _draw(*job)
             reply = None
         except Exception as err:  # reported by the command, one line
-            reply = f"{type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''}"
+            reply = one_line(err)
         try:
             replies.send(reply)
         except OSError:  # the command is gone
@@ -250,7 +251,7 @@ class Painter:
             except (EOFError, OSError):  # killed (a signal stopped the drawing), or died
                 gone = True
             except Exception as err:  # its data could not be sent (pickled): that picture fails, no other
-                job.outcome = f"{type(err).__name__}: {str(err).splitlines()[0][:200] if str(err) else ''}"
+                job.outcome = one_line(err)
             finally:
                 job.done.set()
 
