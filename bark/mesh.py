@@ -4,8 +4,8 @@ Written with meshio (imported here only, when a scene asks for the mesh): ``tree
 (cell data ``patch``, ``patch_size``, ``base``, ``born``; point colours) and ``tree.ply`` for Blender
 (vertex colours ``red``, ``green``, ``blue``).  The VTU file is binary and uncompressed: meshio's zlib
 compression took 15 times as long as the writing itself (0.35 s of every whole-tree run) to make the
-file 45 % smaller.  Each leaf base is a quad of its own — four corners,
-not shared with its neighbours — so bases that have moved apart show the crack between them.
+file 45 % smaller.  Each leaf base is a quad of its own — four corners, not shared with its
+neighbours — so bases that have moved apart show the crack between them.
 
 A base's rhomboid is fixed when it joins the trunk (:func:`bark.tree.leaf_corners`, at the radius it
 joined at) and carried with it: its corners keep their arc length and height offsets from the base's

@@ -124,8 +124,6 @@ class Signals:
     another process beside the final writes, and one that came meanwhile stops them once those are
     done (a picture already drawn is kept)."""
 
-    REASONS = REASONS  # the words of the one line (bark_cli.REASONS)
-
     def __init__(self) -> None:
         self.received: int | None = None
         self.count = 0
@@ -144,7 +142,7 @@ class Signals:
     def reason(self) -> str | None:
         """The runner asks after every advance: from the first, a signal waits for the step to end."""
         self.started = True
-        return None if self.received is None else self.REASONS[self.received]
+        return None if self.received is None else REASONS[self.received]
 
     @contextlib.contextmanager
     def draw(self):
@@ -156,7 +154,7 @@ class Signals:
 
     def __enter__(self) -> "Signals":
         if threading.current_thread() is threading.main_thread():
-            for sig in self.REASONS:
+            for sig in REASONS:
                 self._previous[sig] = signal.signal(sig, self._handle)
         return self
 
