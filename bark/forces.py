@@ -75,7 +75,7 @@ class Mechanics:
 def spring_geometry(x: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Vector ``d = x_j − x_i`` and length ``|d|`` of every spring ``(i, j)``."""
     d = np.take(x, pairs[:, 1], axis=0) - np.take(x, pairs[:, 0], axis=0)
-    return d, np.sqrt(np.einsum("ij,ij->i", d, d))
+    return d, physics.length(d[:, 0], d[:, 1], d[:, 2])
 
 
 def order_keys(pairs: np.ndarray) -> np.ndarray:

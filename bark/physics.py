@@ -13,8 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold", "no_breaking",
+__all__ = ["length", "tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold", "no_breaking",
            "as_given"]
+
+
+def length(d0, d1, d2):
+    """Length of a spring whose end-to-end vector is ``(d0, d1, d2)``, summed in this order: a rest
+    length is taken by it, and every tension measured by it, so a spring made at rest has tension
+    exactly 0 (in every backend, in a join made in Python or inside a kernel call)."""
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
 
 
 def tension(length, rest, k):

@@ -51,6 +51,7 @@ NAME = "numba"
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 inline = numba.njit(inline="always", error_model="numpy")
 
+_length = inline(physics.length)
 _tension = inline(physics.tension)
 _force_scale = inline(physics.spring_force_scale)
 _base_force = inline(physics.base_force)
@@ -75,7 +76,7 @@ def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, k, w0, w1, w2, wt, loa
         d0 = b0[q] - a0[q]
         d1 = b1[q] - a1[q]
         d2 = b2[q] - a2[q]
-        length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        length = _length(d0, d1, d2)
         t = _tension(length, rest[q], k)
         g = _force_scale(t, length)
         on = live[q]
@@ -649,7 +650,7 @@ def _measure(x, pi, pj, rest, k, inv_fmax, intact, out):
         d0 = x0[pj[s]] - x0[pi[s]]
         d1 = x1[pj[s]] - x1[pi[s]]
         d2 = x2[pj[s]] - x2[pi[s]]
-        t = _tension(np.sqrt(d0 * d0 + d1 * d1 + d2 * d2), rest[s], k)
+        t = _tension(_length(d0, d1, d2), rest[s], k)
         out[s] = t
         if not abs(t) < np.inf:
             finite = False

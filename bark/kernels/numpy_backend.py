@@ -10,7 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from bark import physics
-from bark.forces import SpringOrder, incidence
+from bark.forces import SpringOrder, incidence, spring_geometry
 from bark.kernels import Backend, Plan, Steps
 
 NAME = "numpy"
@@ -33,13 +33,8 @@ class NumpyBackend(Backend):
             self._inc_key = key
         return self._inc
 
-    def _geometry(self, state, x):
-        p = state.pairs
-        d = np.take(x, p[:, 1], axis=0) - np.take(x, p[:, 0], axis=0)
-        return d, np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])  # in the kernels' order
-
     def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
-        d, length = self._geometry(state, x)
+        d, length = spring_geometry(x, state.pairs)
         t = physics.tension(length, state.rest, mech.k)
         g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
         return np.asarray(self.incidence(state) @ (d * g[:, None]))
@@ -48,7 +43,7 @@ class NumpyBackend(Backend):
         return self._spring_forces(state, mech, x, state.intact)
 
     def measure(self, state, mech, out: np.ndarray) -> float:
-        _, length = self._geometry(state, state.x)
+        _, length = spring_geometry(state.x, state.pairs)
         out[:] = physics.tension(length, state.rest, mech.k)
         if not np.isfinite(out).all():
             return math.nan
@@ -98,7 +93,7 @@ class NumpyBackend(Backend):
             q = plan.prepare(t, plan.params)
             r_x = plan.radius(t, 0.0, q) if plan.uniform else plan.radius(t, x[:, 2], q)
             self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, q))
-            _, length = self._geometry(state, x)
+            _, length = spring_geometry(x, state.pairs)
             t_all = physics.tension(length, state.rest, mech.k)
             if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()):
                 return done, math.nan, live, log
