@@ -27,7 +27,7 @@ import numpy as np
 
 from bark.units import metres
 
-__all__ = ["atomic_write", "write_csv", "write_json", "write_npz", "run_summary", "write_run"]
+__all__ = ["atomic_write", "write_csv", "write_columns", "write_json", "write_npz", "run_summary", "write_run"]
 
 
 def _umask() -> int:
@@ -97,10 +97,21 @@ def _sync_folder(folder: Path) -> None:
 
 
 def write_csv(path: str | Path, rows: list[dict[str, Any]], columns: list[str]) -> Path:
+    """A CSV of ``rows`` (dicts; keys not in ``columns`` left out, missing ones empty)."""
+    return _write_rows(path, columns, ([row.get(c, "") for c in columns] for row in rows))
+
+
+def write_columns(path: str | Path, columns: dict[str, list]) -> Path:
+    """A CSV of equal-length ``columns`` (name: values), as :func:`write_csv` writes the same rows,
+    with no dict made per row (a break log has tens of thousands)."""
+    return _write_rows(path, list(columns), zip(*columns.values()))
+
+
+def _write_rows(path: str | Path, header: list[str], rows) -> Path:
     def write(fh):
         text = io.TextIOWrapper(fh, encoding="utf-8", newline="")
-        w = csv.DictWriter(text, fieldnames=columns, extrasaction="ignore")
-        w.writeheader()
+        w = csv.writer(text)
+        w.writerow(header)
         w.writerows(rows)
         text.flush()
         text.detach()
@@ -275,12 +286,7 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
         rows = next((a.tables["patches"] for a in analyses.values() if "patches" in a.tables), [])
         write_csv(out / "patches.csv", rows, patch_columns(rows))
     if scene.has("break-log"):
-        log = sim.breaks.arrays()
-        write_csv(
-            out / "breaks.csv",
-            [dict(zip(log, vals)) for vals in zip(*(v.tolist() for v in log.values()))],
-            list(log),
-        )
+        write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()})
     s = sim.state
     if scene.has("state-snapshot"):
         write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases

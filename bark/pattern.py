@@ -35,7 +35,7 @@ from pathlib import Path
 import attrs
 import numpy as np
 
-from bark.analysis import axial_difference, axial_mean, axial_sd, axial_se, principal_axes, tangent_plane
+from bark.analysis import axial_difference, axial_mean, axial_sd, axial_se
 from bark.errors import BarkError
 
 __all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
@@ -181,23 +181,49 @@ class Pattern:
         """Per patch of at least ``min_size`` points: size, centroid, orientation, anisotropy (PCA in
         the patch's tangent plane for points on the trunk, in the plane for 2-D points)."""
         ids, inverse, counts = np.unique(self.patches, return_inverse=True, return_counts=True)
-        order = np.argsort(inverse, kind="stable")
-        groups = np.split(order, np.cumsum(counts)[:-1])
-        kept = [(pid, m) for pid, m in zip(ids, groups) if m.size >= min_size]
-        dim = self.points.shape[1]
-        axes = np.array([principal_axes(tangent_plane(self.points[m]) if self.on_trunk else self.points[m])
-                         for _, m in kept], dtype=float).reshape(-1, 4)
-        return PatchTable(
-            patch=np.array([p for p, _ in kept], dtype=np.int64),
-            size=np.array([m.size for _, m in kept], dtype=np.int64),
-            centroid=np.array([self.points[m].mean(axis=0) for _, m in kept], dtype=float).reshape(-1, dim),
-            orientation_deg=axes[:, 0], anisotropy=axes[:, 1], lambda1=axes[:, 2], lambda2=axes[:, 3],
-            units=self.units,
-        )
+        kept = counts >= min_size
+        rank = np.cumsum(kept) - 1  # a kept patch's row
+        at = kept[inverse.reshape(-1)]
+        points, row, size = np.asarray(self.points, dtype=float)[at], rank[inverse.reshape(-1)][at], counts[kept]
+        centroid, axes = _patch_axes(points, row, size, self.on_trunk)
+        return PatchTable(patch=ids[kept].astype(np.int64), size=size.astype(np.int64), centroid=centroid,
+                          orientation_deg=axes[:, 0], anisotropy=axes[:, 1], lambda1=axes[:, 2], lambda2=axes[:, 3],
+                          units=self.units)
 
     def statistics(self, min_size: int = MIN_PATCH_SIZE) -> "PatternStatistics":
         """The pattern's statistics over its patches of at least ``min_size`` points."""
         return PatternStatistics.of_table(self.patch_table(min_size), name=self.name)
+
+
+def _patch_axes(points: np.ndarray, row: np.ndarray, size: np.ndarray, on_trunk: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Centroids and ``principal_axes`` of the tangent-plane (or 2-D) coordinates of every patch at
+    once: ``points`` with their patch's ``row`` (patches of ``size`` points).  The definitions are
+    ``tangent_plane`` and ``principal_axes``, patch by patch; here their sums go through ``bincount``
+    and the 2 × 2 eigenproblem is solved in closed form (the same values to rounding; an exactly
+    isotropic patch is at 90° as ``eigh`` puts it), so the statistics of a series of thousands of
+    patches cost a few array passes.  A patch of one point has no extent: λ = 0, isotropic, at 90°."""
+    k = len(size)
+
+    def mean(values):
+        return np.bincount(row, weights=values, minlength=k) / size
+
+    centroid = np.column_stack([mean(points[:, d]) for d in range(points.shape[1])]).reshape(k, points.shape[1])
+    if on_trunk:
+        angle = np.arctan2(points[:, 1], points[:, 0])
+        theta = np.arctan2(mean(np.sin(angle)), mean(np.cos(angle)))  # each patch's circular mean
+        rel = points - centroid[row]
+        u = rel[:, 0] * -np.sin(theta)[row] + rel[:, 1] * np.cos(theta)[row]
+        w = rel[:, 2]
+    else:
+        u, w = points[:, 0], points[:, 1]
+    u, w = u - mean(u)[row], w - mean(w)[row]
+    a, b, c = (np.bincount(row, weights=p, minlength=k) / np.maximum(size - 1, 1) for p in (u * u, u * w, w * w))
+    mid, half = 0.5 * (a + c), np.hypot(0.5 * (a - c), b)
+    l1, l2 = np.maximum(mid + half, 0.0), np.maximum(mid - half, 0.0)
+    orientation = np.where(half > 0.0, np.degrees(0.5 * np.arctan2(2.0 * b, a - c)) % 180.0, 90.0)
+    total = l1 + l2
+    anisotropy = np.divide(l1 - l2, total, out=np.zeros(k), where=total > 0)
+    return centroid, np.column_stack([orientation, anisotropy, l1, l2]).reshape(k, 4)
 
 
 def _mirrored_points(points: np.ndarray) -> np.ndarray:

@@ -466,3 +466,40 @@ def test_greedy_patch_colouring_on_random_cracks(seed, broken, min_size):
     assert _neighbours_differ(labels, pairs, intact, rgb, min_size)[0]
     small = np.bincount(labels)[labels] < min_size
     assert (rgb[small] == FRAGMENT_GREY).all() and not (rgb[~small] == FRAGMENT_GREY).all(axis=1).any()
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), patches=st.integers(1, 40), on_trunk=st.booleans(),
+       min_size=st.integers(1, 9))
+def test_the_patch_table_is_its_definitions_patch_by_patch(seed, patches, on_trunk, min_size):
+    """The table takes every patch's centroid and PCA in a few array passes; the definitions are
+    ``tangent_plane`` and ``principal_axes`` on each patch alone: the same values to rounding."""
+    from bark.analysis import principal_axes, tangent_plane
+
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(0, patches, int(rng.integers(1, 400))) * 7 - 3  # any ids, interleaved
+    n = len(labels)
+    if on_trunk:  # patches spread round the trunk (some across θ = ±π) and stretched any way
+        theta = np.repeat(rng.uniform(-math.pi, math.pi), n) + rng.normal(0, 0.05, n) + (labels % 5) * 0.7
+        z = rng.normal(0, rng.uniform(0.001, 0.2), n) + labels * 0.01
+        r = rng.uniform(0.1, 2.0)
+        points = np.column_stack([r * np.cos(theta), r * np.sin(theta), z])
+    else:
+        points = rng.normal(0, 1, (n, 2)) @ rng.normal(0, 1, (2, 2)) + labels[:, None]
+    table = Pattern(points=points, patches=labels).patch_table(min_size)
+    ids, counts = np.unique(labels, return_counts=True)
+    assert list(table.patch) == list(ids[counts >= min_size])
+    for k, pid in enumerate(table.patch):
+        mine = points[labels == pid]
+        assert table.size[k] == len(mine)
+        np.testing.assert_allclose(table.centroid[k], mine.mean(axis=0), rtol=1e-12, atol=1e-12)
+        if len(mine) < 2:
+            continue
+        o, a, l1, l2 = principal_axes(tangent_plane(mine) if on_trunk else mine)
+        scale = max(l1, 1e-300)
+        assert table.lambda1[k] == pytest.approx(l1, rel=1e-9, abs=1e-12 * scale)
+        assert table.lambda2[k] == pytest.approx(l2, rel=1e-9, abs=1e-9 * scale)
+        assert table.anisotropy[k] == pytest.approx(a, abs=1e-9)
+        if l1 - l2 > 1e-6 * scale:  # an axis to compare (near-isotropic patches have none to speak of)
+            assert abs((table.orientation_deg[k] - o + 90.0) % 180.0 - 90.0) < 1e-6
+            assert 0.0 <= table.orientation_deg[k] < 180.0
