@@ -321,3 +321,30 @@ def test_a_picture_whose_data_cannot_be_sent_fails_alone(tmp_path, make_sim):
     finally:
         painter.close()
     assert not (tmp_path / "bad.png").exists() and all((tmp_path / f"p{i}.png").exists() for i in range(3))
+
+
+@pytest.mark.parametrize("argv, code, out, err", [
+    (["--version"], 0, "version", ""),
+    (["simulate", "--nosuch"], 2, "", "No such option"),
+    (["simulate", "--n-bases", "-5", "--until-time", "1"], 2, "", "--n-bases -5"),
+])
+def test_the_command_leaves_with_its_status_its_output_and_its_exit_handlers(argv, code, out, err):
+    """The command leaves without Python's teardown (``bark_cli.__main__._leave``), but as
+    ``sys.exit`` would: the same status, all of its output (through pipes, as a shell gives them),
+    and the exit handlers run."""
+    program = ("import atexit, sys\n"
+               "atexit.register(lambda: print('exit handler ran', flush=True))\n"
+               f"sys.argv = ['bark', *{argv!r}]\n"
+               "from bark_cli.__main__ import main\n"
+               "main()\n"
+               "print('never here')\n")
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=REPO_ROOT, timeout=120)
+    assert done.returncode == code, done.stderr
+    assert out in done.stdout and done.stdout.rstrip().endswith("exit handler ran")
+    assert err in done.stderr and "Traceback" not in done.stderr and "never here" not in done.stdout
+
+
+def test_a_message_given_to_sys_exit_is_written_and_the_status_is_1():
+    program = "from bark_cli.__main__ import _leave\n_leave('bark: gone')\n"
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=REPO_ROOT, timeout=60)
+    assert (done.returncode, done.stderr) == (1, "bark: gone\n")
