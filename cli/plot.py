@@ -14,6 +14,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
+from scipy.ndimage import distance_transform_edt  # here, not in raster(): the drawing process imports it while the run goes on
 
 from bark.output import atomic_write
 
@@ -99,8 +100,6 @@ def raster(uv: np.ndarray, colours: np.ndarray, width: float, z_lo: float, z_hi:
     each cell takes the colour of a base in it, and a cell with none that of the nearest base
     (``scipy.ndimage.distance_transform_edt``).  What a scatter of millions of points would show,
     in linear time."""
-    from scipy.ndimage import distance_transform_edt
-
     n = uv.shape[0]
     aspect = (z_hi - z_lo) / width or 1.0
     cells = min(n, RASTER_CELLS)
