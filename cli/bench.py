@@ -342,11 +342,12 @@ def scenes(scenes, repeats):
     from rich.table import Table
 
     runs = {scene: _run_words(scene) for scene in scenes}
-    # each run reports its own peak resident memory (RUSAGE_CHILDREN would give the largest so far)
-    child = ("import resource, sys\nfrom bark_cli.main import cli\ncode = 0\n"
-             "try:\n    cli.main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"
-             "print('PEAK_KIB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
-             "sys.exit(code)")
+    # the command as `bark` runs it (its entry point: how it starts and leaves included), each run
+    # reporting its own peak resident memory as it leaves (RUSAGE_CHILDREN would give the largest so far)
+    child = ("import atexit, resource, sys\n"
+             "atexit.register(lambda: print('PEAK_KIB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr))\n"
+             "sys.argv = ['bark', *sys.argv[1:]]\n"
+             "from bark_cli.__main__ import main\nmain()\n")
     times = {s: [] for s in scenes}
     peaks = {s: [] for s in scenes}
     for _ in range(repeats):

@@ -256,3 +256,19 @@ def test_unknown_command_is_one_line(runner):
     result = runner.invoke(cli, ["grow"])
     assert result.exit_code == 2
     assert _names(_one_line(result), "grow")
+
+
+def test_bench_scenes_times_the_command_as_bark_runs_it(tmp_path):
+    """Each run is a fresh process through the command's entry point (how it starts and leaves
+    included), its own peak memory reported as it leaves; the table has a row per scene."""
+    import shlex
+
+    scene = shlex.quote(str(REPO_ROOT / "examples" / "scenes" / "vertical.toml"))
+    result = CliRunner().invoke(cli, ["bench", "scenes", f"{scene} --until-time 0.5 --n-bases 300",
+                                      f"{scene} --until-time 0.5 --n-bases 600", "--repeats", "1"])
+    assert result.exit_code == 0, result.output
+    rows = [line for line in result.output.splitlines() if "vertical.toml" in line]
+    assert len(rows) == 2
+    for row in rows:  # wall s, time vs first, peak MiB, memory vs first: all measured, all positive
+        figures = [float(v) for v in re.findall(r"│ ([0-9.]+) +(?=│)", row)]
+        assert len(figures) == 4 and all(v > 0 for v in figures), row
