@@ -210,7 +210,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
     return Plan(
         h=clock.step, times=clock.times(n), update=sim.integrator.update, radius=sim.growth.compiled,
-        params=sim.growth.compiled_params() if compiled else np.empty(0), uniform=sim.growth.uniform,
+        params=sim.growth.params_array if compiled else np.empty(0), uniform=sim.growth.uniform,
         rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
         accept_load=1.0 + sim.numerics.overshoot_tol if watches_overshoot(sim) and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,

@@ -51,6 +51,7 @@ function serves arrays and scalars alike.
 from __future__ import annotations
 
 import abc
+import functools
 from typing import Any, Callable, ClassVar
 
 import attrs
@@ -145,11 +146,18 @@ class Growth(Strategy):
         """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""
         compiled, owner = _form(self, "compiled"), _form_owner(self, "compiled")
         prepare = getattr(self, "compiled_time", None) or as_given
-        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, prepare(t, self.compiled_params()))
+        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, prepare(t, self.params_array))
 
     def compiled_params(self) -> np.ndarray:
         """The ``params`` array of the compiled form."""
         return np.empty(0)
+
+    @functools.cached_property
+    def params_array(self) -> np.ndarray:
+        """``compiled_params()``, made once: a strategy's parameters never change, and the engine
+        asks for them at every call of its kernel and every radius it takes in Python.  Not to be
+        written into."""
+        return np.ascontiguousarray(self.compiled_params(), dtype=float)
 
     def weights_form(self) -> Callable | None:
         """``compiled_weights`` where radii are summed from it — a compiled radius that depends on

@@ -244,7 +244,7 @@ def join_radii(sim) -> np.ndarray:
     weights = growth.weights_form()
     if len(times) and weights is not None:
         # radius = q(t)[0] + w(z)[0]·q(t)[1] + ..., to the bit: the weights of all sites at once
-        p, prepare = growth.compiled_params(), growth.compiled_time or as_given
+        p, prepare = growth.params_array, growth.compiled_time or as_given
         q = np.array([prepare(float(t), p) for t in times]).reshape(len(times), -1)
         return weighted_radius(q[group].T, np.atleast_2d(np.asarray(weights(z, p), dtype=float)))
     out = np.empty(s.n_bases)

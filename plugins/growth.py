@@ -205,6 +205,8 @@ class BulgeGrowth(Growth):
     def radius(self, t: float, z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, dtype=float)
         if self.compiled is not None:  # the compiled form, as every law that has one is evaluated
+            if z.ndim == 0:  # one height (the top of the trunk): the profile's scalar path, the same bits
+                return np.asarray(super().radius(t, float(z)), dtype=float)
             return np.broadcast_to(super().radius(t, z), z.shape)
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()

@@ -167,6 +167,35 @@ def test_weights_that_are_not_the_radius_are_refused_at_the_first_step():
         sim.run(Stop(until_time=0.5))
 
 
+def test_weights_wrong_only_where_bases_join_later_are_refused_as_they_join():
+    """Bases that join during the run have their weights checked too, in batches as they join: a
+    law whose weights break their promise only above the first trunk's top is refused before the
+    run ends."""
+    from bark.kernels.numba_backend import CHECK_BATCH
+    from bark.lattice import Lattice
+    from bark_plugins.growth import bulge_weights
+
+    lattice = Lattice(n_bases=300 + 2 * CHECK_BATCH, n_start=300, join_rate=400.0, join_every=0.1, rise=0.0005)
+    top = 300 * lattice.rise
+
+    def off_above_the_first_top(z, p):
+        w = bulge_weights(z, p)
+        return np.where(np.asarray(z) > top, np.nextafter(w, 2.0), w)
+
+    @attrs.frozen(kw_only=True)
+    class CarelessAbove(BulgeGrowth):
+        @property
+        def compiled_weights(self):
+            return off_above_the_first_top
+
+    growth = CarelessAbove(base={"name": "sqrt", "G": 0.05},
+                           bulges=[Bulge(z=top + 0.2, half_width=10.0, magnitude=0.01)])
+    sim = build_sim(growth=growth, backend="numba", lattice=lattice)
+    with pytest.raises(BarkError, match="compiled_weights"):
+        sim.run(Stop(until_time=(lattice.n_bases - 300) / lattice.join_rate + 1.0))
+    assert sim.state.n_bases <= 300 + CHECK_BATCH + 100  # refused with its first batch, not at the end
+
+
 def test_a_growth_law_that_writes_radius_again_loses_the_inherited_compiled_forms():
     import attrs
 

@@ -795,9 +795,14 @@ class _Weights:
     """Weight k of base i at ``[k, i]``; capacity for more bases in its columns."""
     count: int = 0
     """Bases done."""
+    checked: int = 0
+    """Bases whose weights have been checked against the law's radius (``_check_weights``)."""
 
 
 _NO_WEIGHTS = (np.empty(0), 0)
+CHECK_BATCH = 1024
+"""The anchors' weights are checked against the growth law's radius when first taken, then in
+batches of this many bases as bases join (a check per join cost 3 % of the whole tree's run)."""
 
 
 def _check_weights(plan: Plan, t: float, z: np.ndarray, weights: np.ndarray) -> None:
@@ -938,11 +943,11 @@ class NumbaBackend(Backend):
             buf = self._buffers[name] = bigger
         return buf[:shape[0]]
 
-    def _live(self, state) -> np.ndarray:
+    def _live(self, state, fr: _Frame | None = None) -> np.ndarray:
         """The kernel's intact mask, copied from the state again unless the state has broken exactly
         what the kernel did: the springs of the last call, and no others (a spring never mends, so
-        the count tells)."""
-        fr = self.frame(state)
+        the count tells).  ``fr``: the state's frame, when the caller has it."""
+        fr = fr or self.frame(state)
         if fr.n_live != np.count_nonzero(state.intact) or state.intact[fr.pending].any():
             fr.forces = None  # of other springs
             valid = fr.ids >= 0
@@ -957,15 +962,15 @@ class NumbaBackend(Backend):
             fr.inv_fmax = np.concatenate([fr.inv_fmax, 1.0 / state.fmax[len(fr.inv_fmax):]])
         return fr.inv_fmax[:state.n_springs]
 
-    def _heights(self, state, plan: Plan) -> tuple:
+    def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
         """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
         the growth law's ``compiled_weights`` of each anchor's height, taken when its base is first
-        seen (an anchor's height never changes) and checked then against the law's own radius;
-        ``(empty, 0)`` for a law without them."""
+        seen (an anchor's height never changes) and checked against the law's own radius then, or
+        with the next ``CHECK_BATCH`` bases that join; ``(empty, 0)`` for a law without them."""
         if plan.weights is None:  # the plan gives them only for a radius that depends on height
             return _NO_WEIGHTS
         key = (plan.weights, plan.params.tobytes())
-        fr = self.frame(state)
+        fr = fr or self.frame(state)
         w = fr.weights
         if w is None or w.key != key:
             w = fr.weights = _Weights(key=key)
@@ -973,19 +978,23 @@ class NumbaBackend(Backend):
         if w.count < n:
             z = np.ascontiguousarray(state.anchor[w.count:n, 2])
             new = np.atleast_2d(np.asarray(plan.weights(z, plan.params), dtype=float))
-            _check_weights(plan, state.t, z, new)
+            if new.shape[1:] != z.shape:
+                _check_weights(plan, state.t, z, new)  # refuses them
             if w.table.shape[1] < n or w.table.shape[0] != len(new):
                 table = np.zeros((len(new), grown(w.table.shape[1], n)))
                 table[:len(w.table), :w.count] = w.table[:, :w.count]
                 w.table = table
             w.table[:, w.count:n] = new
             w.count = n
+            if w.checked == 0 or n - w.checked >= CHECK_BATCH:
+                _check_weights(plan, state.t, np.ascontiguousarray(state.anchor[w.checked:n, 2]), w.table[:, w.checked:n])
+                w.checked = n
         return w.table.ravel(), w.table.shape[1]
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         fr = self.frame(state)
         f = np.empty_like(x, order="F")
-        _spring_forces(x, fr.runs, fr.work, fr.springs[0], mech.k, self._live(state), f)
+        _spring_forces(x, fr.runs, fr.work, fr.springs[0], mech.k, self._live(state, fr), f)
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> float:
@@ -1007,7 +1016,7 @@ class NumbaBackend(Backend):
         if self.threads > 1:
             numba.set_num_threads(self.threads)
         fr = self.frame(state)
-        live = self._live(state)
+        live = self._live(state, fr)
         k = float(mech.k)
         n = state.n_bases
         kept = fr.kept if fr.forces == k and fr.kept <= n else -1  # the kernel compares their positions
@@ -1018,7 +1027,7 @@ class NumbaBackend(Backend):
         constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                      float(plan.accept_load), float(plan.max_batch))
         rest, fmax, inv_fmax = fr.springs
-        heights = self._heights(state, plan)
+        heights = self._heights(state, plan, fr)
 
         def call(times, relax, fresh, kept):
             flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break), int(fresh), self.block,
