@@ -303,12 +303,10 @@ class Simulation:
         ids = s.add_bases(**self._new_bases(theta, z, t))
         self.graph.add_bases(len(ids))
         pairs = self.lattice.new_pairs(ids, self.graph)
-        if len(pairs):
-            ends, local = np.unique(pairs.ravel(), return_inverse=True)
-            local = local.reshape(pairs.shape)
-            positions = np.ascontiguousarray(s.x[ends])  # the springs' ends, row-major, as rest lengths are measured
-            _, rest = spring_geometry(positions, local)
-            fmax = self.growth.adjust_thresholds(0.5 * (positions[local[:, 0], 2] + positions[local[:, 1], 2]),
+        if len(pairs):  # their ends' positions gathered first (np.take of a few rows copies all of x)
+            ends = s.x[pairs.ravel()]
+            _, rest = spring_geometry(ends, np.arange(ends.shape[0]).reshape(-1, 2))
+            fmax = self.growth.adjust_thresholds(0.5 * (ends[0::2, 2] + ends[1::2, 2]),
                                                  self.mechanics.thresholds(len(pairs), self.rng))
             s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
             self.graph.add_springs(pairs)

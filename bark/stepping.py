@@ -204,12 +204,13 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     n = 1
     if compiled and rule is not None:  # halved steps too: the call ends where the clock may double the step
         n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases, 1), most or CHUNK))
-        n = _bounded(sim, stop, clock.times(n), n)
+    times = clock.times(n)
+    n = _bounded(sim, stop, times, n) if n > 1 else n
     ends = clock.ticks + (np.arange(n) + 1) * clock.size  # ticks at the end of each step
     relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
     must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
     return Plan(
-        h=clock.step, times=clock.times(n), update=sim.integrator.update, radius=sim.growth.compiled,
+        h=clock.step, times=times[:n], update=sim.integrator.update, radius=sim.growth.compiled,
         params=sim.growth.params_array if compiled else np.empty(0), uniform=sim.growth.uniform,
         rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
         accept_load=1.0 + sim.numerics.overshoot_tol if watches_overshoot(sim) and clock.can_halve() else math.inf,
