@@ -12,7 +12,8 @@ from bark._validate import construct, non_negative, optional, positive
 from bark.errors import BarkError, Ref
 from bark.strategies import Growth
 
-__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth", "bulge_radius", "bulge_time", "bulge_weights"]
+__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth", "bulge_radius", "bulge_time", "bulge_weights",
+           "sin2_profile"]
 
 
 def sqrt_radius(t, z, p):
@@ -79,21 +80,45 @@ def _base(value):
     raise BarkError("{0}: must be a growth strategy or a table like {{name = 'sqrt', G = 0.014}}", Ref(None, "base", value))
 
 
+def sin2_profile(u):
+    """``sin²(π(u + 1)/2) = cos²(πu/2)`` for ``|u| <= 1``, by arithmetic alone: ``((1 − s)·G(s))²`` with
+    ``s = u²`` and ``G(s) = cos(π√s/2)/(1 − s) = Σ b_n sⁿ``, whose Taylor coefficients are
+    ``b_n = Σ_{k≤n} (−π²/4)^k/(2k)!`` (the series of ``cos(π√s/2)`` summed; the first left out is
+    1.8e−17).  1 at ``u = 0`` and 0 at ``u = ±1`` exactly, even in ``u`` exactly, within 4e−16 of
+    ``sin²`` (closer than ``np.sin`` squared, measured against extended precision).  No call of a
+    transcendental function: the compiled kernel evaluates it for every base inside a bulge at every
+    step, where the sine cost a quarter of the whole tree's kernel time."""
+    s = u * u
+    g = -3.419461019595456e-15 + s * 1.8278159503151067e-17
+    g = 5.26020559053867e-13 + s * g
+    g = -6.513361059074086e-11 + s * g
+    g = 6.321469473201112e-09 + s * g
+    g = -4.64766008408616e-07 + s * g
+    g = 2.473727636465199e-05 + s * g
+    g = -0.0008945229984747746 + s * g
+    g = 0.019968957764878188 + s * g
+    g = -0.23370055013616983 + s * g
+    g = 1.0 + s * g
+    w = (1.0 - s) * g
+    return w * w
+
+
 def bump(z, center, half_width):
-    """The ``sin²`` profile of a bulge: 1 at ``center``, 0 with zero slope at ``center ± half_width``
-    and 0 beyond.  One height (the compiled kernel, per base) takes the sine only inside the bulge;
-    an array of heights takes it of 0 outside.  Both give the same bits."""
+    """The ``sin²`` profile of a bulge (:func:`sin2_profile`): 1 at ``center``, 0 with zero slope at
+    ``center ± half_width`` and 0 beyond.  One height (the compiled kernel, per base) takes it only
+    inside the bulge; an array of heights takes it of ``u = 1`` (exactly 0) outside.  Both give the
+    same bits."""
     if isinstance(z, float):  # one height: most bases are outside every bulge, and cost a comparison
         if not abs(z - center) < half_width:  # outside, without the division (the test below decides)
             return 0.0
         u = (z - center) / half_width
         if abs(u) < 1.0:
-            return np.sin(0.5 * np.pi * (u + 1.0)) ** 2
+            return sin2_profile(u)
         return 0.0
     u = (z - center) / half_width
     inside = np.abs(u) < 1.0
-    u = np.where(inside, u, -1.0)  # u inside, -1 outside (and for a NaN height, as one height gives)
-    return np.sin(0.5 * np.pi * (u + 1.0)) ** 2 * inside
+    u = np.where(inside, u, 1.0)  # u inside, 1 outside (and for a NaN height, as one height gives)
+    return sin2_profile(u) * inside
 
 
 def bulge_time(t, p):

@@ -219,3 +219,34 @@ def test_one_height_and_an_array_of_heights_give_the_same_bits(b, offsets):
     z = np.concatenate([b.z + np.array(offsets) * 2 * b.half_width, b.z + edge, b.z - edge, [b.z, np.nan]])
     one = np.array([bump(float(v), b.z, b.half_width) for v in z])
     np.testing.assert_array_equal(one, bump(z, b.z, b.half_width))
+
+
+def test_the_profile_is_sin_squared_by_its_series():
+    """``sin2_profile`` is sin²(π(u + 1)/2) by a polynomial: its coefficients are the series' (summed
+    here independently, in exact arithmetic with π to 40 digits), it is within 4e-16 of sin² measured
+    in extended precision, exactly 1 at the centre and 0 at the edges, even, and falls monotonically
+    from the centre."""
+    import inspect
+    import re
+    from fractions import Fraction
+
+    from bark_plugins.growth import sin2_profile
+
+    pi = Fraction("3.141592653589793238462643383279502884197")
+    term, total, series = Fraction(1), Fraction(0), []
+    for k in range(11):
+        if k:
+            term = term * -(pi * pi / 4) / ((2 * k - 1) * (2 * k))
+        total += term
+        series.append(float(total))
+    written = [float(v) for v in re.findall(r"[-+]?\d\.\d+(?:e[-+]\d+)?", inspect.getsource(sin2_profile).split('"""')[-1])]
+    assert sorted(written[:11], key=abs) == sorted(series, key=abs)
+
+    u = np.linspace(-1.0, 1.0, 400_001)
+    pi_ld = np.longdouble(4) * np.arctan(np.longdouble(1))
+    exact = np.sin(pi_ld * (u.astype(np.longdouble) + 1) / 2) ** 2
+    assert float(np.max(np.abs(sin2_profile(u) - exact))) < 4e-16
+    assert sin2_profile(0.0) == 1.0 and sin2_profile(1.0) == 0.0 and sin2_profile(-1.0) == 0.0
+    np.testing.assert_array_equal(sin2_profile(u), sin2_profile(-u))
+    right = sin2_profile(u[u >= 0])
+    assert np.all(np.diff(right) <= 0)
