@@ -106,8 +106,8 @@ def sin2_profile(u):
 def bump(z, center, half_width):
     """The ``sin²`` profile of a bulge (:func:`sin2_profile`): 1 at ``center``, 0 with zero slope at
     ``center ± half_width`` and 0 beyond.  One height (the compiled kernel, per base) takes it only
-    inside the bulge; an array of heights takes it of ``u = 1`` (exactly 0) outside.  Both give the
-    same bits."""
+    inside the bulge; an array of heights takes it of ``u = 1`` (exactly 0) outside (``profile``:
+    of those inside only).  All give the same bits."""
     if isinstance(z, float):  # one height: most bases are outside every bulge, and cost a comparison
         if not abs(z - center) < half_width:  # outside, without the division (the test below decides)
             return 0.0
@@ -119,6 +119,18 @@ def bump(z, center, half_width):
     inside = np.abs(u) < 1.0
     u = np.where(inside, u, 1.0)  # u inside, 1 outside (and for a NaN height, as one height gives)
     return sin2_profile(u) * inside
+
+
+def profile(z, center, half_width) -> np.ndarray:
+    """:func:`bump` of an array of heights in Python, evaluated only where a height is inside the
+    bulge (what the engine asks of a join's new bases, which are mostly outside every bulge: no
+    arithmetic at all then).  The same bits as ``bump``."""
+    u = (np.asarray(z, dtype=float) - center) / half_width
+    inside = np.abs(u) < 1.0
+    out = np.zeros(u.shape)
+    if inside.any():
+        out[inside] = sin2_profile(u[inside])
+    return out
 
 
 def bulge_time(t, p):
@@ -159,7 +171,7 @@ def bulge_weights(z, p):
     """:class:`BulgeGrowth`'s ``compiled_weights``: each bulge's profile ``s_b`` at heights ``z``, one
     row per bulge (``p`` as for :func:`bulge_time`)."""
     z = np.asarray(z, dtype=float)
-    return np.array([bump(z, p[4 + 5 * b], p[5 + 5 * b]) for b in range(int(p[3]))]).reshape(-1, z.size)
+    return np.array([profile(z, p[4 + 5 * b], p[5 + 5 * b]) for b in range(int(p[3]))]).reshape(-1, z.size)
 
 
 _BASE_KINDS = {sqrt_radius: 0.0, linear_radius: 1.0}
@@ -185,7 +197,7 @@ class Bulge:
 
     def profile(self, z: np.ndarray) -> np.ndarray:
         """``sin²`` bump: 1 at the peak, 0 with zero slope at ``peak ± half_width``, 0 outside."""
-        return bump(np.asarray(z, dtype=float), self.z, self.half_width)
+        return profile(z, self.z, self.half_width)
 
 
 @attrs.frozen(kw_only=True)

@@ -219,6 +219,7 @@ def test_one_height_and_an_array_of_heights_give_the_same_bits(b, offsets):
     z = np.concatenate([b.z + np.array(offsets) * 2 * b.half_width, b.z + edge, b.z - edge, [b.z, np.nan]])
     one = np.array([bump(float(v), b.z, b.half_width) for v in z])
     np.testing.assert_array_equal(one, bump(z, b.z, b.half_width))
+    np.testing.assert_array_equal(one, b.profile(z))  # the Python path, which skips heights outside
 
 
 def test_the_profile_is_sin_squared_by_its_series():
