@@ -10,7 +10,7 @@ import numpy as np
 
 from bark._validate import construct, non_negative, optional, positive
 from bark.errors import BarkError, Ref
-from bark.strategies import Growth
+from bark.strategies import Growth, weighted_radius
 
 __all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth", "bulge_radius", "bulge_time", "bulge_weights",
            "sin2_profile"]
@@ -244,7 +244,8 @@ class BulgeGrowth(Growth):
         if self.compiled is not None:  # the compiled form, as every law that has one is evaluated
             if z.ndim == 0:  # one height (the top of the trunk): the profile's scalar path, the same bits
                 return np.asarray(super().radius(t, float(z)), dtype=float)
-            return np.broadcast_to(super().radius(t, z), z.shape)
+            p = self.params_array  # heights: q[0] + w_0(z) q[1] + ..., the compiled form's sum to the bit
+            return weighted_radius(bulge_time(t, p), bulge_weights(z, p)).reshape(z.shape)
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:

@@ -251,3 +251,18 @@ def test_the_profile_is_sin_squared_by_its_series():
     np.testing.assert_array_equal(sin2_profile(u), sin2_profile(-u))
     right = sin2_profile(u[u >= 0])
     assert np.all(np.diff(right) <= 0)
+
+
+@given(st.floats(0.0, 300.0), st.lists(st.floats(-1.0, 10.0, allow_nan=False), min_size=1, max_size=30))
+def test_a_bulge_laws_radius_of_heights_is_its_compiled_form_to_the_bit(t, heights):
+    """In Python the law sums its anchors' weights (``compiled_weights``: the profile only where a
+    height is inside a bulge); the kernel calls its compiled form per base: the same bits."""
+    from bark_plugins.growth import bulge_radius, bulge_time
+
+    g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
+                    bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
+                            Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1)])
+    z = np.array(heights)
+    compiled = bulge_radius(t, z, bulge_time(t, g.params_array))
+    np.testing.assert_array_equal(g.radius(t, z), compiled)
+    np.testing.assert_array_equal([float(g.radius(t, v)) for v in z], compiled)
