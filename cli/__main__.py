@@ -6,8 +6,8 @@ traceback from the middle of an import.
 
 Leaving takes a moment too: Python's teardown of numba, scipy and the rest of what a run loaded
 (0.17 s measured after the whole tree, on every run and every sweep point).  Once the command has
-finished (its outputs written and closed, its drawing processes ended), the process runs the exit
-handlers, flushes its output and leaves without that teardown (``_leave``).
+finished (its outputs written and closed, its drawing processes ended) and no other thread is left,
+the process runs the exit handlers, flushes its output and leaves without that teardown (``_leave``).
 """
 
 from __future__ import annotations
@@ -40,10 +40,15 @@ def main() -> None:
 
 def _leave(code) -> None:
     """End the process as ``sys.exit(code)`` would, without the interpreter's teardown: the exit
-    handlers run (``atexit``: multiprocessing's, logging's), output is flushed, then ``os._exit``."""
+    handlers run (``atexit``: multiprocessing's, logging's), output is flushed, then ``os._exit``.
+    While another thread is alive (a sweep's process pool winding down) the interpreter's own exit
+    is taken: it joins threads and runs their exit hooks before the handlers."""
     import atexit
     import os
+    import threading
 
+    if threading.active_count() > 1:
+        sys.exit(code)
     if code is not None and not isinstance(code, int):  # sys.exit's message: to stderr, status 1
         sys.stderr.write(f"{code}\n")
         code = 1
