@@ -18,6 +18,9 @@ def bench():
     """Benchmarks: speed of the step loop, per backend."""
 
 
+PLAIN = ("plain numpy", 1)
+"""The baseline ``bench speed`` measures beside the backends: a plain vectorised numpy step."""
+
 CASES = {
     "default": "the default scene (Table 2 vertical regime)",
     "bulge": "the default scene with two bulges (a radius that depends on height: per-base radii)",
@@ -105,9 +108,6 @@ def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int
             sim.run(Stop(until_time=sim.state.t + steps * sim.clock.h))
             rates[b].append((sim.step_count - s0) / (time.perf_counter() - t0))
     return {b: float(np.median(r)) for b, r in rates.items()}
-
-
-PLAIN = ("plain numpy", 1)
 
 
 def _peak_memory(n: int, backend: tuple, start_t: float, steps: int, case: str = "default") -> float:

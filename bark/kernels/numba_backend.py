@@ -280,12 +280,12 @@ def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
 def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, stride, first):
     """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
     the forces and the update (no calls: SIMD lanes), each base's own radius (a call of the growth law
-    each, which keeps that loop scalar), the surface at those radii (SIMD lanes again), then the
-    anchors at their sites' radii.  The anchors' heights never change, so a law that gives ``compiled_weights`` has each
-    anchor's radius as ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once
+    each, which keeps that loop scalar), the surface at those radii (SIMD lanes again), then the anchors
+    at their sites' radii.  The anchors' heights never change, so a law that gives ``compiled_weights``
+    has each anchor's radius as ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once
     (``weights``: weight k of base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the
-    call; with no weights (stride 0), a call per anchor.  Per base the same operations in the same
-    order as one loop: the same bits.  Returns how many bases went non-finite."""
+    call; with no weights (stride 0), a call per anchor.  Per base the same operations in the same order
+    as one loop: the same bits.  Returns how many bases went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
@@ -724,8 +724,7 @@ def _radii(r) -> np.ndarray:
 PARALLEL_BASES = 16_000
 """Automatic threads (``Numerics.threads = 0``) share a kernel call's blocks among all the cores for
 a lattice of at least this many bases (``bark bench speed --threads 1 --threads 2`` measures where
-that begins to pay);
-below, one thread, and the serial kernel."""
+that begins to pay); below, one thread, and the serial kernel."""
 
 SLACK_RUN = 64
 """A run of at least this many springs gets as many free positions again after it, where springs
