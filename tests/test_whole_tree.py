@@ -91,5 +91,5 @@ def test_the_small_whole_tree_interrupted_and_resumed_ends_bit_for_bit(tmp_path)
     assert out.stop_reason == "interrupted" and 4500 < out.sim.state.n_bases < 7000
     resumed = runner.resume(part)
     assert resumed.sim.state.n_bases == 7000
-    for name in ("breaks.csv", "state.npz", "patches.csv", "statistics.csv", "tree.vtu"):
+    for name in ("breaks.csv", "state.npz", "patches.csv", "statistics.csv", "tree.vtu", "tree.ply"):
         assert (part / name).read_bytes() == (whole / name).read_bytes(), name
