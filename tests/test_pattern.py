@@ -493,7 +493,8 @@ def test_the_patch_table_is_its_definitions_patch_by_patch(seed, patches, on_tru
         mine = points[labels == pid]
         assert table.size[k] == len(mine)
         np.testing.assert_allclose(table.centroid[k], mine.mean(axis=0), rtol=1e-12, atol=1e-12)
-        if len(mine) < 2:
+        if len(mine) < 2:  # no extent: isotropic, at 90° (as eigh puts an isotropic patch)
+            assert (table.lambda1[k], table.lambda2[k], table.anisotropy[k], table.orientation_deg[k]) == (0, 0, 0, 90)
             continue
         o, a, l1, l2 = principal_axes(tangent_plane(mine) if on_trunk else mine)
         scale = max(l1, 1e-300)
