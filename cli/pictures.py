@@ -6,8 +6,8 @@ the machine's other core while the simulation runs, then forks a second (where t
 two cores) and both wait.  At the end the runner hands them the pictures as plain arrays
 (``PatternData``, ...), each taken by whichever is free; they draw and write the files (atomically)
 and say how it went.  Signals belong to the command, not to the painters (they ignore them); a
-signal while they draw stops them at once (the data are already written).  Where ``fork`` is not available the pictures are
-drawn in the command's own process.
+signal while they draw stops them at once (the data are already written).  Where ``fork`` is not
+available the pictures are drawn in the command's own process.
 """
 
 from __future__ import annotations
