@@ -216,7 +216,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         accept_load=1.0 + sim.numerics.overshoot_tol if watches_overshoot(sim) and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
-        weights=sim.growth.weights_form() if compiled else None, threads=sim.numerics.threads,
+        weights=sim.growth.weights_form() if compiled else None, radii=sim.growth.compiled_radii if compiled else None,
+        threads=sim.numerics.threads,
     )
 
 

@@ -41,7 +41,10 @@ strategy in Python once per step.  The function is the definition: the verb is d
   of such parts weighted by functions of height, ``r = q[0] + w_0(z)·q[1] + w_1(z)·q[2] + ...``
   (evaluated left to right), it may give ``compiled_weights(z, params) -> w`` (an array of heights
   in, one row of weights per term out): the anchors, whose heights never change, then have their
-  weights taken once and their radii summed each step, not computed by a call each.
+  weights taken once and their radii summed each step, not computed by a call each.  And it may give
+  ``compiled_radii(t, z, q, out)``: the radius at every height of the array ``z`` written into
+  ``out``, the same bits as ``compiled(t, z[i], q)`` for each — for a law that can do a block of
+  heights faster than one at a time (in SIMD lanes, or skipping what is out of a bulge's reach).
 
 The functions must be importable by name (module-level functions or static methods) to be cached
 on disk; others are compiled once per process.  Written with numpy ufuncs (``np.sqrt``), one
@@ -74,6 +77,7 @@ def weighted_radius(q: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 _FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "compiled_weights": None,
+                                  "compiled_radii": None,
                                   "update": None, "rule": None, "overload_only": False}
 
 
@@ -122,7 +126,8 @@ class Growth(Strategy):
     """Secondary growth: how the trunk radius changes with time (and, for bulges, with height)."""
 
     kind: ClassVar[str] = "growth"
-    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time", "compiled_weights")
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time", "compiled_weights",
+                                                 "compiled_radii")
     compiled: ClassVar[Callable | None] = None
     """Compiled form ``compiled(t, z, params) -> r`` (see the module's docstring), or ``None``."""
     uniform: ClassVar[bool] = False
@@ -136,11 +141,17 @@ class Growth(Strategy):
     to right; ``q = compiled_time(t, params)``).  The anchors' radii are then sums of weights taken once
     per anchor (checked against ``compiled`` then).  A subclass that gives ``compiled`` or
     ``compiled_time`` of its own and not this loses it."""
+    compiled_radii: ClassVar[Callable | None] = None
+    """Optional, beside ``compiled``: ``compiled_radii(t, z, q, out)`` writes the radius at each height
+    of the array ``z`` into ``out``, to the bit what ``compiled(t, z[i], q)`` gives (``q`` as for
+    ``compiled``).  The numba kernel calls it on a block of bases at a time in place of ``compiled``
+    per base.  A subclass that gives ``compiled`` or ``compiled_time`` of its own and not this loses it."""
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
-        if ("compiled" in vars(cls) or "compiled_time" in vars(cls)) and "compiled_weights" not in vars(cls):
-            cls.compiled_weights = None
+        for form in ("compiled_weights", "compiled_radii"):  # they promise the bits of the law's compiled form
+            if ("compiled" in vars(cls) or "compiled_time" in vars(cls)) and form not in vars(cls):
+                setattr(cls, form, None)
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
         """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import attrs
 import numpy as np
 import pytest
@@ -206,7 +208,70 @@ def test_a_growth_law_that_writes_radius_again_loses_the_inherited_compiled_form
         def radius(self, t, z):
             return 2 * super().radius(t, z)
 
-    assert Wider.compiled is None and Wider.compiled_time is None
+    assert Wider.compiled is None and Wider.compiled_time is None and Wider.compiled_radii is None
+
+
+@functools.cache
+def _compiled_radii():
+    """``bulge_radii`` compiled as the kernel compiles it (its helpers inlined)."""
+    import numba
+
+    from bark.kernels.numba_backend import _helpers, _make_jitable
+    from bark_plugins.growth import bulge_radii
+
+    _make_jitable(_helpers(bulge_radii)[1:])
+    return numba.njit(error_model="numpy")(bulge_radii)
+
+
+_odd_heights = st.one_of(st.floats(-1.0, 6.0), st.sampled_from([np.nan, np.inf, -np.inf, 1e308, -1e308, 1e-308, 0.0]),
+                         st.sampled_from([1.55, 2.45, 3.55, 4.45, 2.0, 4.0]).map(lambda z: float(np.nextafter(z, z + np.array([-1.0, 0.0, 1.0]))[0])))
+
+
+@given(t=st.floats(0.0, 1e4), heights=st.lists(_odd_heights, min_size=0, max_size=40),
+       extra=st.sampled_from([None, 0.0, -0.0, 1e308, np.inf, -np.inf, np.nan]))
+def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, heights, extra):
+    """``compiled_radii`` (what the kernel calls on a block of bases: no branch per height, and a
+    bulge the block is out of reach of skipped) gives, to the bit, what ``compiled`` gives height by
+    height — blocks inside, outside and across either bulge's edge, NaN and infinite heights, an
+    extra radius that is huge, infinite or NaN (never skipped then: 0·inf is NaN per height too)."""
+    from bark_plugins.growth import bulge_radii, bulge_radius, bulge_time
+
+    g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
+                    bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
+                            Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1)])
+    assert g.compiled_radii is bulge_radii
+    q = bulge_time(t, g.params_array)
+    if extra is not None:
+        q[2] = extra
+    z = np.array(heights, dtype=float)
+    out = np.full(len(z), -1.0)
+    _compiled_radii()(t, z, q, out)
+    with np.errstate(invalid="ignore"):  # 0·inf, per height
+        one_by_one = np.array([bulge_radius(t, float(v), q) for v in z])
+    np.testing.assert_array_equal(out.view(np.int64), one_by_one.view(np.int64))
+
+
+def test_a_law_without_a_block_form_steps_to_the_same_bits():
+    """The kernel calls a law's ``compiled`` per height when the law gives no ``compiled_radii``: the
+    same state, to the bit, as with the bulge law's block form."""
+    from bark import stepping
+    from bark.lattice import Lattice
+
+    @attrs.frozen(kw_only=True)
+    class PerHeight(BulgeGrowth):
+        compiled_radii = None
+
+    runs = {}
+    for law in (BulgeGrowth, PerHeight):
+        growth = law(base={"name": "sqrt", "G": 0.05}, bulges=[Bulge(z=0.05, half_width=0.03, magnitude=0.01, G=0.02)])
+        sim = build_sim(growth=growth, backend="numba", lattice=Lattice(n_bases=600, n_start=400, join_rate=100.0))
+        sim.run(Stop(until_time=1.5))
+        runs[law] = sim
+    a, b = runs.values()
+    assert stepping.plan(a, None).radii is not None and stepping.plan(b, None).radii is None
+    assert a.state.n_bases == b.state.n_bases > 400 and a.n_broken == b.n_broken
+    for name in ("x", "v", "anchor"):
+        np.testing.assert_array_equal(getattr(a.state, name), getattr(b.state, name))
 
 
 @given(bulges, st.lists(st.floats(-1.0, 1.0, allow_nan=False), max_size=20))

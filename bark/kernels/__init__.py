@@ -86,6 +86,9 @@ class Plan:
     weights: Callable | None = None
     """The growth law's ``compiled_weights(z, params) -> w`` (``bark.strategies.Growth``), or ``None``:
     the anchors' radii as weighted sums (their heights never change), in place of a call per anchor."""
+    radii: Callable | None = None
+    """The growth law's ``compiled_radii(t, z, q, out)`` (``bark.strategies.Growth``), or ``None``: the
+    radius at a block of heights at once, in place of ``radius`` called per height (the same bits)."""
     threads: int = 1
     """Threads the call may share its work among (``Numerics.threads``: 0 = the backend decides);
     the result does not depend on it."""

@@ -219,7 +219,7 @@ def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update):
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_before, from_radius, heights, block):
+def _base_pass(bases, c, b, hm, h, t, update, radii, params, uniform, r_now, r_before, from_radius, heights, block):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
@@ -239,7 +239,7 @@ def _base_pass(bases, c, b, hm, h, t, update, radius, params, uniform, r_now, r_
         if uniform:
             block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, r_now, r_before, from_radius)
         else:
-            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, radius, params, weights, stride, lo)
+            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, radii, params, weights, stride, lo)
     return block_bad.sum() == 0
 
 
@@ -277,23 +277,23 @@ def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
 
 
 @inline
-def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, stride, first):
+def _per_base_radius(bases, c, b, hm, h, t, update, radii, params, weights, stride, first):
     """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
-    the forces and the update (no calls: SIMD lanes), each base's own radius (a call of the growth law
-    each, which keeps that loop scalar), the surface at those radii (SIMD lanes again), then the anchors
-    at their sites' radii.  The anchors' heights never change, so a law that gives ``compiled_weights``
-    has each anchor's radius as ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once
-    (``weights``: weight k of base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the
-    call; with no weights (stride 0), a call per anchor.  Per base the same operations in the same order
-    as one loop: the same bits.  Returns how many bases went non-finite."""
+    the forces and the update (no calls: SIMD lanes), the radius at each base's height (the growth
+    law's block form, ``radii``: ``Growth.compiled_radii``, or its ``compiled`` called per height), the
+    surface at those radii (SIMD lanes again), then the anchors at their sites' radii.  The anchors'
+    heights never change, so a law that gives ``compiled_weights`` has each anchor's radius as
+    ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once (``weights``: weight k of
+    base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
+    (stride 0), the block form at the anchors' heights.  Per base the same operations in the same
+    order as one loop: the same bits.  Returns how many bases went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
         x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update)
     by_weights = stride > 0
-    r_at = np.empty(n)  # each base's radius at its height: calls, so a loop of its own (the rest in SIMD lanes)
-    for q in range(n):
-        r_at[q] = radius(t, x2[q], params)
+    r_at = np.empty(n)  # each base's radius at its height
+    radii(t, x2, params, r_at)
     bad = 0
     for q in range(n):
         px, py, pz = x0[q], x1[q], x2[q]
@@ -315,8 +315,7 @@ def _per_base_radius(bases, c, b, hm, h, t, update, radius, params, weights, str
             for q in range(n):
                 ax[q] = ax[q] + w[q] * coefficient
     else:
-        for q in range(n):
-            ax[q] = radius(t, az[q], params)
+        radii(t, az, params, ax)
     for q in range(n):
         ra = ax[q]
         ax[q] = ra * dx[q]
@@ -358,7 +357,7 @@ def _refresh(x, runs, rest, k, live, f, work, first):
 
 @inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
-                  start, update, rule, radius, prepare):
+                  start, update, rule, radius, prepare, radii):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log)``, the load NaN if that step went non-finite.
 
@@ -403,7 +402,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         t = times[step]
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
-        finite = _base_pass(bases, c, b, hm, h, t, update, radius, q, uniform, r_now, r_before,
+        finite = _base_pass(bases, c, b, hm, h, t, update, radii, q, uniform, r_now, r_before,
                             uniform and step > 0, heights, block)
         r_before = r_now
         before = n_log
@@ -496,18 +495,19 @@ def _last_load(x, runs, rest, k, live, inv_fmax, work, broke):
 
 _WRAPPER = '''"""Generated by bark: its stepping kernel specialised for {names}.  Safe to delete."""
 import numba
-from bark.kernels.numba_backend import _steps_kernel, inline
+from bark.kernels.numba_backend import _steps_kernel, each_height, inline
 {imports}
 _update = inline({update})
 _rule = inline({rule})
 _radius = inline({radius})
 _prepare = inline({prepare})
+_radii = {radii}
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
 def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights, start):
     return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log,
-                         heights, start, _update, _rule, _radius, _prepare)
+                         heights, start, _update, _rule, _radius, _prepare, _radii)
 '''
 _SPECIALIZED: dict[tuple, object] = {}
 
@@ -564,26 +564,37 @@ def _make_jitable(functions) -> None:
             _JITABLE.add(fn)
 
 
-def specialized(update, rule, radius, prepare=physics.as_given, parallel=False):
-    """The stepping kernel with ``update``, ``rule``, ``radius`` and ``prepare`` inlined (compiled once
-    per combination and kept on disk; see the module's docstring), its block loops shared among
-    threads if ``parallel``.  Functions that cannot be imported by name (lambdas, local functions) get
-    a wrapper compiled in this process only."""
-    parts = (update, rule, radius, prepare)
-    key = (*parts, bool(parallel))
+def each_height(radius):
+    """The block form (``Growth.compiled_radii``) of a growth law that gives none: its compiled
+    ``radius`` called for each height."""
+    def radii(t, z, q, out):
+        for i in range(z.shape[0]):
+            out[i] = radius(t, z[i], q)
+    return inline(radii)
+
+
+def specialized(update, rule, radius, prepare=physics.as_given, radii=None, parallel=False):
+    """The stepping kernel with ``update``, ``rule``, ``radius``, ``prepare`` and ``radii`` (the growth
+    law's block form; ``None``: ``radius`` per height) inlined (compiled once per combination and
+    kept on disk; see the module's docstring), its block loops shared among threads if ``parallel``.
+    Functions that cannot be imported by name (lambdas, local functions) get a wrapper compiled in
+    this process only."""
+    parts = (update, rule, radius, prepare) + (() if radii is None else (radii,))
+    key = (update, rule, radius, prepare, radii, bool(parallel))
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
     helpers = [h for fn in parts for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
     names = [_importable(fn) for fn in parts]
     if None in names:
-        u, r, g, p = (inline(fn) for fn in parts)
+        u, r, g, p = (inline(fn) for fn in parts[:4])
+        block = each_height(g) if radii is None else inline(radii)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
         def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
                   start):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
-                                 log, heights, start, u, r, g, p)
+                                 log, heights, start, u, r, g, p, block)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -598,6 +609,7 @@ def specialized(update, rule, radius, prepare=physics.as_given, parallel=False):
         refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
     text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
                            update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3],
+                           radii="each_height(_radius)" if radii is None else f"inline({refs[4]})",
                            parallel=bool(parallel))
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
@@ -1011,7 +1023,7 @@ class NumbaBackend(Backend):
         those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
         fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
-        kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare, parallel=self.threads > 1)
+        kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare, plan.radii, parallel=self.threads > 1)
         if self.threads > 1:
             numba.set_num_threads(self.threads)
         fr = self.frame(state)
