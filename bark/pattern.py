@@ -527,6 +527,16 @@ def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = 
     return rgb[labels]
 
 
+def label_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
+    """Each base's colour as an index (uint8) into ``PALETTE`` followed by ``FRAGMENT_GREY``: what
+    :func:`patch_colours` gives without the springs (the colour follows the label), as indices."""
+    labels = np.asarray(labels, dtype=np.int64)
+    sizes = np.bincount(labels) if labels.size else np.zeros(0, np.int64)
+    index = (np.arange(sizes.size) % len(PALETTE)).astype(np.uint8)
+    index[sizes < min_size] = len(PALETTE)
+    return index[labels]
+
+
 def simulation_colours(sim, min_size: int) -> np.ndarray:
     """:func:`patch_colours` of a simulation's patches now, neighbours never sharing a colour."""
     return patch_colours(sim.patch_labels(), min_size, sim.state.pairs, sim.state.intact)

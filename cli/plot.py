@@ -100,6 +100,12 @@ def raster(uv: np.ndarray, colours: np.ndarray, width: float, z_lo: float, z_hi:
     each cell takes the colour of a base in it, and a cell with none that of the nearest base
     (``scipy.ndimage.distance_transform_edt``).  What a scatter of millions of points would show,
     in linear time."""
+    return raster_values(uv, np.round(np.asarray(colours) * 255).astype(np.uint8), width, z_lo, z_hi)
+
+
+def raster_values(uv: np.ndarray, values: np.ndarray, width: float, z_lo: float, z_hi: float) -> np.ndarray:
+    """:func:`raster` of any value per base (``values``: one row per base, e.g. RGBA, or a palette
+    index): ``(rows, columns, ...)``, row 0 at ``z_lo``."""
     n = uv.shape[0]
     aspect = (z_hi - z_lo) / width or 1.0
     cells = min(n, RASTER_CELLS)
@@ -107,8 +113,9 @@ def raster(uv: np.ndarray, colours: np.ndarray, width: float, z_lo: float, z_hi:
     ny = int(np.clip(cells / nx, 16, 8192))
     ix = np.clip((uv[:, 0] / width * nx).astype(np.int64), 0, nx - 1)
     iy = np.clip(((uv[:, 1] - z_lo) / ((z_hi - z_lo) or 1.0) * ny).astype(np.int64), 0, ny - 1)
-    image = np.zeros((ny, nx, 4), np.uint8)
-    image[iy, ix] = np.round(np.asarray(colours) * 255).astype(np.uint8)
+    values = np.asarray(values)
+    image = np.zeros((ny, nx, *values.shape[1:]), values.dtype)
+    image[iy, ix] = values
     empty = np.ones((ny, nx), bool)
     empty[iy, ix] = False
     if empty.any():

@@ -149,14 +149,16 @@ def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
     assert int(rows[-1]["n_broken"]) > 0 and rows[-1]["n_patches"] != ""
 
 
-@pytest.mark.parametrize("n", [500, 40_000])  # drawn as dots, and as a raster
+@pytest.mark.parametrize("n", [500, 60_000])  # drawn as dots, and as a raster (over SPRINGS_UP_TO)
 def test_each_animation_frame_shows_its_own_pattern_only(tmp_path, n):
     """Each frame is drawn over the axes drawn once: nothing of the frame before shows through (a frame
     is the same image whether another came before it or not)."""
     from PIL import Image
 
     from bark.output import Frames
+    from bark.pattern import PALETTE
     from bark_cli.animation import write_gif
+    from bark_cli.plot import SPRINGS_UP_TO
 
     rng = np.random.default_rng(3)
 
@@ -177,6 +179,12 @@ def test_each_animation_frame_shows_its_own_pattern_only(tmp_path, n):
         earlier = np.asarray(a.convert("RGB"))
     np.testing.assert_array_equal(later, own)
     assert np.count_nonzero((earlier != later).any(axis=-1)) > 1000  # and the two frames do differ
+    if n > SPRINGS_UP_TO:  # composed in the patches' own palette: each patch's colour exactly
+        colours = {tuple(c) for c in own.reshape(-1, 3)}
+        assert {tuple(c) for c in PALETTE} <= colours
+    dark = own.max(axis=-1) < 100
+    spine = int(np.flatnonzero(dark.mean(axis=1) > 0.5)[0])  # the axes' top edge: a dark line across
+    assert np.count_nonzero(dark[:spine]) > 50  # above it, the title, in dark ink
 
 
 def test_graphml_is_the_graph_of_record(tmp_path):

@@ -468,6 +468,18 @@ def test_greedy_patch_colouring_on_random_cracks(seed, broken, min_size):
     assert (rgb[small] == FRAGMENT_GREY).all() and not (rgb[~small] == FRAGMENT_GREY).all(axis=1).any()
 
 
+@given(st.lists(st.integers(0, 60), max_size=300), st.integers(1, 9))
+def test_label_colours_index_the_colours_that_follow_the_labels(labels, min_size):
+    """The animation colours a frame by palette index (``label_colours``): the same colours as
+    ``patch_colours`` without springs gives, fragments grey."""
+    from bark.pattern import FRAGMENT_GREY, PALETTE, label_colours, patch_colours
+
+    labels = np.array(labels, dtype=np.int64)
+    index = label_colours(labels, min_size)
+    assert index.dtype == np.uint8 and index.shape == labels.shape
+    np.testing.assert_array_equal(np.vstack([PALETTE, FRAGMENT_GREY])[index], patch_colours(labels, min_size))
+
+
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), patches=st.integers(1, 40), on_trunk=st.booleans(),
        min_size=st.integers(1, 9))
