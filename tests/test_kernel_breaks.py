@@ -4,11 +4,14 @@ graph, the same events, the same stopping step — and Python must still see eve
 
 from __future__ import annotations
 
+import functools
 import math
 
 import attrs
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from bark import Stop
 from bark.errors import NonFiniteStateError
@@ -163,6 +166,36 @@ def test_break_springs_logs_a_batch_in_step_order():
     assert log["spring"].tolist() == [4, 6, 9] and log["step"].tolist() == [2, 3, 3]
     assert log["t"].tolist() == [0.2, 0.3, 0.3] and log["tension"].tolist() == [4.0, 6.0, 9.0]
     assert _graph_matches_arrays(sim)
+
+
+@given(st.lists(st.tuples(st.integers(0, 40), st.integers(1, 4)), max_size=30), st.booleans())
+def test_break_springs_logs_any_batch_by_step_then_id_each_once(batch, presorted):
+    """Whatever the order and repeats of a batch (sorted already, as the kernel gives it, or not),
+    the log is each intact id once, at its earliest step, ordered by step then id."""
+    sim = _small_sim()
+    batch = sorted(set(batch), key=lambda p: (p[1], p[0])) if presorted else batch
+    ids, steps = [p[0] for p in batch], [p[1] for p in batch]
+    sim.break_springs([3], step=0)  # one broken before: ignored when given again
+    first = {}
+    for i, k in zip(ids, steps):
+        first[i] = min(first.get(i, k), k)
+    want = sorted(((k, i) for i, k in first.items() if i != 3))
+    got = sim.break_springs(ids, np.arange(sim.state.n_springs, dtype=float), step=steps, t=[0.1 * k for k in steps])
+    assert got.tolist() == [i for _, i in want]
+    log = sim.breaks.arrays()
+    assert log["spring"].tolist() == [3] + [i for _, i in want] and log["step"].tolist() == [0] + [k for k, _ in want]
+    assert _graph_matches_arrays(sim)
+
+
+@functools.cache
+def _small_sim_state():
+    return build_sim(n_bases=120, backend="numpy")
+
+
+def _small_sim():
+    import copy
+
+    return copy.deepcopy(_small_sim_state())
 
 
 @pytest.mark.parametrize("return_on_break", [False, True])

@@ -1024,7 +1024,7 @@ class NumbaBackend(Backend):
         fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
         kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare, plan.radii, parallel=self.threads > 1)
-        if self.threads > 1:
+        if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
             numba.set_num_threads(self.threads)
         fr = self.frame(state)
         live = self._live(state, fr)
