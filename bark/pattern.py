@@ -507,9 +507,23 @@ def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = 
     the graph of neighbours is coloured greedily (``networkx.greedy_color``, largest first; a map
     needs few colours).  Without them a patch's colour follows its label, stable from frame to frame
     of an animation."""
+    return np.vstack([PALETTE, FRAGMENT_GREY])[_colour_of_label(labels, min_size, pairs, intact)][
+        np.asarray(labels, dtype=np.int64)]
+
+
+def label_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
+    """Each base's colour as an index (uint8) into ``PALETTE`` followed by ``FRAGMENT_GREY``: what
+    :func:`patch_colours` gives without the springs (the colour follows the label), as indices."""
+    return _colour_of_label(labels, min_size)[np.asarray(labels, dtype=np.int64)]
+
+
+def _colour_of_label(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = None,
+                     intact: np.ndarray | None = None) -> np.ndarray:
+    """Each label's colour (uint8) as an index into ``PALETTE`` followed by ``FRAGMENT_GREY``, the
+    grey's for fragments (see :func:`patch_colours`)."""
     labels = np.asarray(labels, dtype=np.int64)
     sizes = np.bincount(labels) if labels.size else np.zeros(0, np.int64)
-    index = np.arange(sizes.size) % len(PALETTE)
+    index = (np.arange(sizes.size) % len(PALETTE)).astype(np.uint8)
     if pairs is not None and labels.size:
         import networkx as nx
 
@@ -522,19 +536,8 @@ def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = 
         graph.add_edges_from(np.unique(np.sort(across, axis=1), axis=0).tolist())
         for label, colour in nx.greedy_color(graph, strategy="largest_first").items():
             index[label] = colour % len(PALETTE)
-    rgb = PALETTE[index]
-    rgb[sizes < min_size] = FRAGMENT_GREY
-    return rgb[labels]
-
-
-def label_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
-    """Each base's colour as an index (uint8) into ``PALETTE`` followed by ``FRAGMENT_GREY``: what
-    :func:`patch_colours` gives without the springs (the colour follows the label), as indices."""
-    labels = np.asarray(labels, dtype=np.int64)
-    sizes = np.bincount(labels) if labels.size else np.zeros(0, np.int64)
-    index = (np.arange(sizes.size) % len(PALETTE)).astype(np.uint8)
     index[sizes < min_size] = len(PALETTE)
-    return index[labels]
+    return index
 
 
 def simulation_colours(sim, min_size: int) -> np.ndarray:
