@@ -85,11 +85,13 @@ def _cells(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.
     background = np.asarray(axes)
     own = np.asarray(axes.getpalette()[:3 * (int(background.max()) + 1)], dtype=np.uint8).reshape(-1, 3)
     palette = np.vstack([own, patches])
+    colours = palette.ravel().tolist()
     to_pixels = ax.transData.transform
     inner = ax.bbox.padded(-1.0 - max(s.get_linewidth() for s in ax.spines.values()) * fig.dpi / 72.0)  # spines stay
     font = ImageFont.truetype(_font_file(title), size=title.get_fontsize() * fig.dpi / 72.0)
     box = title.get_window_extent()
     at = ((box.x0 + box.x1) / 2, rows - box.y0)  # the title's middle and its descender line, in image rows
+    above = int(np.ceil(rows - ax.bbox.y1))  # the rows above the axes, where the title is written
     ink = _grey_levels(palette, np.asarray(_rgb(title.get_color())))
     images = []
     for t, r, uv, labels in frames.frames:
@@ -103,13 +105,13 @@ def _cells(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.
             cx = np.clip(((cols + 0.5 - x0) / (x1 - x0) * cells.shape[1]).astype(np.int64), 0, cells.shape[1] - 1)
             cy = np.clip(((ys + 0.5 - y0) / (y1 - y0) * cells.shape[0]).astype(np.int64), 0, cells.shape[0] - 1)
             frame[rows - 1 - ys[:, None], cols[None, :]] = cells[cy[:, None], cx[None, :]]
-        text = Image.new("L", (frame.shape[1], frame.shape[0]), 0)
+        text = Image.new("L", (frame.shape[1], above), 0)
         ImageDraw.Draw(text).text(at, _caption(t, r, labels, min_size), fill=255, font=font, anchor="md")
         coverage = np.asarray(text)
         written = coverage > 0
-        frame[written] = ink[coverage[written]]
+        frame[:above][written] = ink[coverage[written]]
         image = Image.fromarray(frame, mode="P")
-        image.putpalette(palette.ravel().tolist())
+        image.putpalette(colours)
         images.append(image)
     return images
 
