@@ -21,7 +21,7 @@ import attrs
 import numpy as np
 
 from bark import physics
-from bark._validate import in_range, non_negative, optional, positive
+from bark.validators import in_range, non_negative, optional, positive
 from bark.errors import BarkError, Ref
 
 if TYPE_CHECKING:

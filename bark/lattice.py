@@ -17,7 +17,7 @@ import math
 import attrs
 import numpy as np
 
-from bark._validate import INT_MAX, in_range, non_negative, optional, positive, positive_int
+from bark.validators import INT_MAX, in_range, non_negative, optional, positive, positive_int
 from bark.errors import BarkError, Ref
 
 __all__ = ["GOLDEN_ANGLE_DEG", "Lattice"]

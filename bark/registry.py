@@ -15,7 +15,7 @@ from __future__ import annotations
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-from bark._validate import construct
+from bark.validators import construct
 from bark.errors import BarkError, Ref
 from bark.strategies import KINDS, Strategy
 

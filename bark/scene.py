@@ -29,7 +29,7 @@ import attrs
 import numpy as np
 
 from bark import effects, registry
-from bark._validate import construct, positive
+from bark.validators import construct, positive
 from bark.errors import BarkError, Ref
 from bark.forces import Mechanics
 from bark.lattice import Lattice

@@ -16,7 +16,7 @@ import attrs
 import numpy as np
 
 from bark import kernels, stepping
-from bark._validate import MISSING, in_range, int_in, one_of, optional, positive, positive_int
+from bark.validators import MISSING, in_range, int_in, one_of, optional, positive, positive_int
 from bark.analysis import count_patches
 from bark.errors import BarkError, NonFiniteStateError, Ref
 from bark.forces import ForceField, Mechanics, spring_geometry

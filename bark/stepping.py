@@ -21,7 +21,7 @@ import attrs
 import numpy as np
 
 from bark import physics
-from bark._validate import int_in, one_of, positive
+from bark.validators import int_in, one_of, positive
 from bark.errors import BarkError, Ref
 from bark.forces import ForceField
 from bark.kernels import BACKENDS, Plan, Steps

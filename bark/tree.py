@@ -38,7 +38,7 @@ import math
 import attrs
 import numpy as np
 
-from bark._validate import in_range, one_of
+from bark.validators import in_range, one_of
 from bark.errors import BarkError, Ref
 from bark.lattice import Lattice
 from bark.physics import as_given

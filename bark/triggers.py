@@ -25,7 +25,7 @@ import math
 
 import attrs
 
-from bark._validate import non_negative, one_of, positive, positive_int
+from bark.validators import non_negative, one_of, positive, positive_int
 
 __all__ = ["Trigger", "Periodic", "Every", "At", "OnEvent", "And", "Or", "Not"]
 

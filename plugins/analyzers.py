@@ -5,7 +5,7 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from bark._validate import positive_int
+from bark.validators import positive_int
 from bark.analysis import patch_statistics, pattern_summary
 from bark.strategies import Analysis, Analyzer
 

@@ -8,7 +8,7 @@ import attrs
 import numpy as np
 
 from bark import physics
-from bark._validate import non_negative, positive
+from bark.validators import non_negative, positive
 from bark.strategies import Breaker
 
 __all__ = ["ThresholdBreaker", "ProbabilisticBreaker"]

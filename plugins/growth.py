@@ -8,7 +8,7 @@ from typing import ClassVar
 import attrs
 import numpy as np
 
-from bark._validate import construct, non_negative, optional, positive
+from bark.validators import construct, non_negative, optional, positive
 from bark.errors import BarkError, Ref
 from bark.strategies import Growth, weighted_radius
 

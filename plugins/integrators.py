@@ -7,7 +7,7 @@ from typing import ClassVar
 import attrs
 import numpy as np
 
-from bark._validate import one_of, positive, positive_int
+from bark.validators import one_of, positive, positive_int
 from bark.errors import BarkError, Ref
 from bark.stability import euler_cromer_h_max
 from bark.strategies import Integrator

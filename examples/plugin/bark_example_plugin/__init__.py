@@ -19,7 +19,7 @@ from typing import ClassVar
 import attrs
 import numpy as np
 
-from bark._validate import positive_int
+from bark.validators import positive_int
 from bark_plugins.breakers import ThresholdBreaker
 
 __all__ = ["MostOverloadedBreaker"]

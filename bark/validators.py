@@ -1,4 +1,5 @@
-"""attrs validators whose messages name the field, the value and what is allowed.
+"""attrs validators whose messages name the field, the value and what is allowed (public: plugins
+validate their fields with these, ``attrs.field(default=0.05, validator=positive)``).
 
 Every strategy and parameter object in bark validates its constructor keywords with these, so that
 a bad value anywhere (Python call, scene file, command line) produces the same one-line
