@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["length", "tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold", "no_breaking",
-           "as_given"]
+__all__ = ["length", "tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold",
+           "threshold_load", "no_breaking", "as_given"]
 
 
 def length(d0, d1, d2):
@@ -53,13 +53,19 @@ def radial_speed(vx, vy, px, py, inv_r2):
     return (vx * px + vy * py) * inv_r2
 
 
-def over_threshold(t, fmax):
-    """The paper's breaking rule: a spring breaks when its tension exceeds its threshold
-    (compression never breaks a spring)."""
-    return t > fmax
+def over_threshold(tension, fmax, params):
+    """The paper's breaking rule (a breaker part's rule): a spring breaks when its tension exceeds
+    its threshold (compression never breaks a spring)."""
+    return tension > fmax
 
 
-def no_breaking(t, fmax):
+def threshold_load(tension, inv_fmax, params):
+    """How far a spring is from the paper's threshold (a breaker part's load): ``tension / f_max``,
+    as a product with the threshold's inverse (1 at breaking)."""
+    return tension * inv_fmax
+
+
+def no_breaking(tension, params):
     """The rule of a layer without fracture: nothing breaks."""
     return False
 

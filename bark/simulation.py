@@ -191,12 +191,13 @@ class Simulation:
                 result = backend.steps(plan)        # each step: forces (eq. 4) -> velocities (eq. 7)
                                                     #   -> positions (eq. 8) -> surface r(t, z) (eq. 9,
                                                     #   radial velocity removed) -> tensions k(|d| - l)
-                                                    #   -> the breakers' rule, if it may act inside
+                                                    #   -> the breakers' part: its rule, its load
                 clock.advance(result.done); t = clock.t     # integer ticks: exact time
                 break_springs(what the rule broke)  # graph and arrays together; logged
-                if the last step went NaN or overshot (adaptive): it was undone;
+                if the last step went NaN or a load overshot (adaptive): it was undone;
                     halve h and go on, or (at the smallest step) raise NonFiniteStateError
-                if the breakers act in Python: break_springs(union of breaker.select(state, tension, rng))
+                if the breakers act in Python (no one part, or its rule named candidates):
+                    break_springs(union of breaker.select(state, tension, rng))
                 if a step broke more than degenerate_fraction of the springs: record a degenerate event
                 if quiet again (adaptive): double h, staying on its grid
                 join(the bases due by now)          # new bases and springs at rest; graph and arrays
@@ -258,10 +259,10 @@ class Simulation:
             raise NonFiniteStateError(
                 f"the state became NaN or infinite at t = {self.clock.t + self.clock.step:.6g} (step "
                 f"{self.step_count + 1}); the simulation holds the last finite state, t = {self.state.t:.6g}")
-        if stepping.watches_overshoot(self) and result.load > 1.0 + self.numerics.overshoot_tol:  # at the smallest step
+        if stepping.steers_step(self) and result.load > 1.0 + self.numerics.overshoot_tol:  # at the smallest step
             self.events.append({"kind": "overshoot", "t": self.state.t, "step": self.step_count, "load": result.load})
-        if not plan.breaking:
-            self._break_selected(result.load)
+        if plan.breaks == "python" or plan.breaks == "candidates" and result.picked:
+            self._break_selected()
         self.clock.relax(result.load)
         due = self.lattice.bases_at(self.state.t) - self.state.n_bases
         if due > 0:  # primary growth has made room at the top: the next bases of the lattice join
@@ -274,9 +275,8 @@ class Simulation:
         while self.advance(None, most=1) == 0:
             pass
 
-    def _break_selected(self, load: float) -> None:
-        picks = [np.asarray(b.select(self.state, self._tension, self.rng), dtype=np.int64)
-                 for b in self.breakers if load > 1.0 or not b.overload_only or b.rule is not None]
+    def _break_selected(self) -> None:
+        picks = [np.asarray(b.select(self.state, self._tension, self.rng), dtype=np.int64) for b in self.breakers]
         if picks:
             ids = np.unique(np.concatenate(picks))
             ids = self.break_springs(ids[self.state.intact[ids]], self._tension)

@@ -6,7 +6,7 @@
   (``t = ticks × h / 2**levels``), never a running sum, so variable steps stay exact and stop times
   are hit exactly.  Adaptive stepping halves the step around breaks and doubles it back on its grid.
 * :func:`plan` — the fast-path policy: how many steps the next call takes and what may happen inside
-  it, from what the parts declare (compiled forms, breaking rules) and what must be seen from Python
+  it, from what the parts declare (compiled forms, breaker parts) and what must be seen from Python
   (stop conditions, triggers, adaptive halving).
 * :func:`python_step` — one step for parts without a compiled form (an integrator that solves a
   linear system, a growth law given only as ``radius``), with the same result as a kernel call.
@@ -20,13 +20,14 @@ import os
 import attrs
 import numpy as np
 
-from bark import physics
+from bark import parts, physics
+from bark.parts import NO_BREAKING, BreakerPart
 from bark.validators import int_in, one_of, positive
 from bark.errors import BarkError, Ref
 from bark.forces import ForceField
 from bark.kernels import BACKENDS, Plan, Steps
 
-__all__ = ["Numerics", "Clock", "plan", "watches_overshoot", "python_step", "stable_step", "check_countable",
+__all__ = ["Numerics", "Clock", "plan", "steers_step", "breaking_part", "python_step", "stable_step", "check_countable",
            "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
 
 DEFAULT_DT = 0.3
@@ -56,7 +57,9 @@ class Numerics:
     """fixed: refuse a dt above the integrator's stability limit; auto: split it into sub-steps;
     adaptive: also halve steps around breaks to keep overshoot below overshoot_tol."""
     overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
-    """Adaptive stepping: largest relative overshoot tension/fmax − 1 allowed at a break."""
+    """Adaptive stepping: largest overshoot of a breaker's load past 1 allowed at a break (the load is
+    the breaker's own measure of how far a spring is from breaking: tension/f_max for the threshold
+    breaker)."""
     max_halvings: int = attrs.field(default=10, validator=int_in(1, 40))
     """Adaptive stepping: the smallest step is the full step / 2**max_halvings (at most 40)."""
     backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
@@ -191,18 +194,22 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     """The next call: how many steps of what size, and what may happen inside it.
 
     Many steps go in one call when the integrator and the growth law have compiled forms and the
-    breakers can be watched by one rule; the call then ends where a stop condition can next hold, a
-    trigger is next due or bases next join, and — at a halved step — after a quiet step that ends on
-    the grid of the next larger step, where the clock doubles the step (``Plan.relax``).  Springs
-    break inside the call when every breaker has the same compiled rule (a step that adaptive
-    stepping undoes is replayed from the call's start, its breaks with it); otherwise the call ends
-    after the first step in which the rule picks a spring, and the breakers select in Python (an
-    ``overload_only`` breaker is watched by the threshold rule)."""
+    breakers share one part (``Breaker.part``); the call then ends where a stop condition can next
+    hold, a trigger is next due or bases next join, and — at a halved step — after a quiet step that
+    ends on the grid of the next larger step, where the clock doubles the step (``Plan.relax``).
+    Springs the part's rule picks break inside the call when the part decides (a step that adaptive
+    stepping undoes is replayed from the call's start, its breaks with it); when it names candidates,
+    the call ends after the first step in which it names one, and the breakers select in Python.
+    Breakers with no part, or with different parts, are asked in Python after every step (one step
+    a call), and the step is held to their loads in Python (``python_step``) if any of them has one."""
     clock = sim.clock
-    rule, breaking = _rule(sim.breakers)
-    compiled = sim.integrator.update is not None and sim.growth.compiled is not None
+    part = breaking_part(sim.breakers)
+    steers = steers_step(sim)
+    compiled = sim.integrator.update is not None and sim.growth.compiled is not None \
+        and (part is not None or not steers)
+    breaks = "python" if part is None or not compiled else "kernel" if part.decides else "candidates"
     n = 1
-    if compiled and rule is not None:  # halved steps too: the call ends where the clock may double the step
+    if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
         n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases, 1), most or CHUNK))
     times = clock.times(n)
     n = _bounded(sim, stop, times, n) if n > 1 else n
@@ -212,8 +219,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     return Plan(
         h=clock.step, times=times[:n], update=sim.integrator.update, radius=sim.growth.compiled,
         params=sim.growth.params_array if compiled else np.empty(0), uniform=sim.growth.uniform,
-        rule=rule if rule is not None else physics.no_breaking, breaking=breaking and rule is not None and compiled,
-        accept_load=1.0 + sim.numerics.overshoot_tol if watches_overshoot(sim) and clock.can_halve() else math.inf,
+        breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
+        accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
         weights=sim.growth.weights_form() if compiled else None, radii=sim.growth.compiled_radii if compiled else None,
@@ -221,25 +228,22 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     )
 
 
-def watches_overshoot(sim) -> bool:
-    """Whether steps are held to the overshoot tolerance: adaptive stepping, and breakers to break
-    springs at their thresholds (with none, a spring's tension over its threshold is no overshoot:
-    nothing breaks there, and halving the step would not change it)."""
-    return sim.clock.levels > 0 and bool(sim.breakers)
+def steers_step(sim) -> bool:
+    """Whether steps are held to the overshoot tolerance: adaptive stepping, and a breaker whose part
+    has a load (how far a spring is from breaking, by the breaker's own measure).  A breaker without
+    one does not steer: for it a load over 1 is no overshoot, and halving the step would not change
+    what it breaks."""
+    return sim.clock.levels > 0 and any(b.part_ is not None and b.part_.load is not None for b in sim.breakers)
 
 
-def _rule(breakers) -> tuple:
-    """``(rule, breaking)``: the one rule that says which springs the breakers would pick — and
-    whether it is exactly what they break (their shared compiled rule), or only when to ask them (the
-    threshold, for breakers that break only over it).  ``(None, False)`` when no rule says it."""
+def breaking_part(breakers) -> BreakerPart | None:
+    """The one part the kernel evaluates for ``breakers`` (``NO_BREAKING`` for none), or ``None``
+    where no one part says what they do: a breaker without a part, or breakers with different parts
+    (each is then asked in Python)."""
     if not breakers:
-        return physics.no_breaking, True
-    rules = {b.rule for b in breakers}
-    if len(rules) == 1 and None not in rules:
-        return rules.pop(), True
-    if all(b.rule is not None or b.overload_only for b in breakers) and rules <= {None, physics.over_threshold}:
-        return physics.over_threshold, False
-    return None, False
+        return NO_BREAKING
+    parts = {b.part_ for b in breakers}
+    return parts.pop() if len(parts) == 1 else None
 
 
 def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
@@ -265,7 +269,8 @@ def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
 
 def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
     """One step with the integrator's ``step`` and the growth law's ``radius`` in Python, then the
-    backend's surface constraint and tensions: a kernel call's result, for parts without compiled
+    backend's surface constraint and tensions, and the largest of the breakers' loads (their parts',
+    evaluated on whole arrays: the kernel's bits): a kernel call's result, for parts without compiled
     forms.  A step that goes non-finite or over ``plan.accept_load`` is undone."""
     keep = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
     sim.integrator.step(state, plan.h, sim.forces)
@@ -273,9 +278,9 @@ def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
     r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))
     r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
     sim.backend.constrain(state, r_x, r_a)
-    load = sim.backend.measure(state, mech, tension)
-    if not state.is_finite():
-        load = math.nan
+    finite = sim.backend.measure(state, mech, tension) and state.is_finite()
+    load = max((parts.largest_load(p, state, tension, state.intact) for p in {b.part_ for b in sim.breakers}
+                if p is not None), default=-math.inf) if finite else math.nan
     done = 1
     if math.isnan(load) or load > plan.accept_load:
         for saved, arr in zip(keep, (state.x, state.v, state.anchor)):

@@ -30,9 +30,11 @@ strategy in Python once per step.  The function is the definition: the verb is d
 
 * ``Integrator.update(x, v, f, hm, h) -> (x, v)``: one axis of one base, ``hm = h/m`` (Euler–Cromer:
   ``v ← v + f·hm; x ← x + v·h``).  ``step`` then follows from it.
-* ``Breaker.rule(tension, fmax) -> bool``: whether an intact spring breaks.  ``select`` then follows
-  from it.  A subclass that writes ``select`` again loses the inherited rule (and ``overload_only``)
-  unless it states them again: a compiled rule and a Python ``select`` can never disagree.
+* ``Breaker.part() -> BreakerPart``: its rule, its own load (how far a spring is from breaking,
+  which adaptive stepping holds to its tolerance), the per-spring fields they read and the
+  breaker's numbers (:mod:`bark.parts`).  ``select`` then follows from it.  A subclass that writes
+  ``select`` again and not ``part`` has no part: a compiled rule and a Python ``select`` can never
+  disagree.
 * ``Growth.compiled(t, z, params) -> r`` with ``compiled_params()``, and ``uniform = True`` when
   the radius does not depend on height; ``radius(t, z)`` then follows from it.  A law whose radius
   has parts that depend on time alone (a fading bulge's ``exp``) may also give
@@ -60,6 +62,7 @@ from typing import Any, Callable, ClassVar
 import attrs
 import numpy as np
 
+from bark.parts import BreakerPart, picks
 from bark.physics import as_given
 
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "weighted_radius"]
@@ -77,8 +80,7 @@ def weighted_radius(q: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 _FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "compiled_weights": None,
-                                  "compiled_radii": None,
-                                  "update": None, "rule": None, "overload_only": False}
+                                  "compiled_radii": None, "update": None}
 
 
 def _form_owner(strategy, form: str) -> type | None:
@@ -102,8 +104,7 @@ class Strategy(abc.ABC):
 
     A compiled form is the definition only for the verb it came with: a subclass that writes the
     verb again (``select``, ``step``, ``radius``) and not the compiled form loses the inherited one,
-    so the engine never runs a rule its Python verb no longer follows.  (Likewise a breaker's
-    ``overload_only`` promise.)"""
+    so the engine never runs a rule its Python verb no longer follows."""
 
     kind: ClassVar[str] = ""
     _verb_and_form: ClassVar[tuple[str, ...]] = ()
@@ -218,23 +219,51 @@ class Integrator(Strategy):
         return float("inf")
 
 
+def _declared_part(breaker) -> BreakerPart | None:
+    """The part of the nearest class of ``breaker`` that declares one: a subclass that wrote
+    ``select`` again has no part of its own, but its ``super().select(...)`` still means the
+    parent's rule."""
+    for klass in type(breaker).__mro__:
+        declared = vars(klass).get("part")
+        if declared is not None and declared is not Breaker.part:
+            return declared(breaker)
+    return None
+
+
 @attrs.frozen(kw_only=True)
 class Breaker(Strategy):
-    """Which intact springs break now."""
+    """Which intact springs break now.
+
+    A breaker declares its compiled work as a :class:`~bark.parts.BreakerPart` (``part()``): its
+    rule, its own load (what adaptive stepping holds to its tolerance), the fields they read and its
+    numbers.  ``select`` is then derived from the part.  A class that writes ``select`` and not
+    ``part`` has no part (a rule and a Python ``select`` can never disagree): it runs on the Python
+    path, asked after every step, and does not steer the step."""
 
     kind: ClassVar[str] = "breaker"
-    _verb_and_form: ClassVar[tuple[str, ...]] = ("select", "rule", "overload_only")
-    rule: ClassVar[Callable | None] = None
-    """Compiled form ``rule(tension, fmax) -> bool`` (see the module's docstring), or ``None``."""
-    overload_only: ClassVar[bool] = False
-    """Set ``True`` beside a ``select`` that only ever picks springs whose tension exceeds their
-    ``fmax``: the simulation then asks it only after a step that overloads a spring.  The promise
-    belongs to the ``select`` it is made with: a subclass that writes ``select`` again and does not
-    make the promise again does not have it."""
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "select" in vars(cls) and "part" not in vars(cls):
+            cls.part = Breaker.part
+
+    def part(self) -> BreakerPart | None:
+        """This breaker's compiled work, or ``None`` (its ``select`` alone, in Python)."""
+        return None
+
+    @functools.cached_property
+    def part_(self) -> BreakerPart | None:
+        """``part()``, made once (a strategy's parameters never change; the engine asks at every call
+        of its kernel)."""
+        return self.part()
 
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Ids of intact springs to break, given every spring's current ``tension``."""
-        return np.flatnonzero(state.intact & _form(self, "rule")(tension, state.fmax))
+        """Ids of intact springs to break, given every spring's current ``tension`` (from the part:
+        the live springs its rule picks)."""
+        part = _declared_part(self)
+        if part is None:
+            raise NotImplementedError(f"{type(self).__name__} writes neither select nor part")
+        return picks(part, state, tension, state.intact)
 
 
 @attrs.frozen(kw_only=True)

@@ -375,16 +375,25 @@ def strategies():
     from rich.table import Table
 
     from bark import registry
+    from bark.parts import how_it_runs
 
-    table = Table("kind", "name", "class", "parameters")
+    table = Table("kind", "name", "class", "parameters", "runs")
+    for column in table.columns[:2]:
+        column.no_wrap = True
     for kind in KINDS:
         for name, ep in registry.available(kind).items():
+            runs = ""
             try:
                 cls = registry.load(kind, name)
                 params = ", ".join(f"{a.alias}={a.default!r}" for a in attrs.fields(cls) if a.init)
             except Exception as err:  # a broken plugin must not hide the others
                 params = f"(cannot load: {err})"
-            table.add_row(kind, name, ep.value, escape(params))
+            else:
+                try:
+                    runs = how_it_runs(registry.create(kind, name))
+                except Exception:  # noqa: BLE001 (a strategy with required parameters: known once given)
+                    runs = "(once its parameters are given)"
+            table.add_row(kind, name, ep.value, escape(params), escape(runs))
     Console().print(table)
 
 

@@ -94,8 +94,9 @@ def test_degenerate_events_match_with_the_exact_lattice(make_sim):
 
 
 def test_a_subclass_that_changes_select_is_asked(make_sim):
-    """A breaker that inherits a rule but writes ``select`` again loses the rule (and the
-    overload-only promise) unless it states them again: its ``select`` is always the one asked."""
+    """A breaker that inherits a part but writes ``select`` again loses the part unless it declares
+    one again: its ``select`` is always the one asked, and ``super().select`` still means the
+    parent's rule."""
     calls = []
 
     class EveryOther(ThresholdBreaker):
@@ -103,18 +104,18 @@ def test_a_subclass_that_changes_select_is_asked(make_sim):
             calls.append(1)
             return super().select(state, tension, rng)[::2]
 
-    class Lower(ThresholdBreaker):  # the trap: breaks below the threshold, inherits the promise
+    class Lower(ThresholdBreaker):  # the trap: breaks below the threshold, inherits the part
         def select(self, state, tension, rng):
             return np.flatnonzero(state.intact & (tension > 0.5 * state.fmax))
 
     class Promised(EveryOther):
-        overload_only = True
+        def part(self):
+            return attrs.evolve(ThresholdBreaker().part(), decides=False)
 
-    assert ThresholdBreaker.rule is not None
-    assert EveryOther.rule is None and not EveryOther.overload_only
-    assert Lower.rule is None and not Lower.overload_only
-    assert Promised.rule is None and Promised.overload_only
-    assert ProbabilisticBreaker.rule is None
+    assert ThresholdBreaker().part_ is not None and ThresholdBreaker().part_.decides
+    assert EveryOther().part_ is None and Lower().part_ is None
+    assert Promised().part_ is not None and not Promised().part_.decides
+    assert not ProbabilisticBreaker().part_.decides and ProbabilisticBreaker().part_.load is None
     sim = make_sim(n_bases=300, backend="numba", breakers=[EveryOther()])
     sim.run(Stop(until_time=4.0))
     assert calls and sim.n_broken > 0

@@ -30,15 +30,18 @@ def plugin_path(tmp_path_factory):
     return target
 
 
-def _bark(plugin_path, *args, **kw):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
+def _bark(plugin_path, *args, env=None, **kw):
+    env = {**os.environ, **(env or {}), "PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
     return subprocess.run([sys.executable, "-m", "bark_cli", *args], env=env, capture_output=True, text=True, **kw)
 
 
 def test_example_plugin_is_listed(plugin_path):
-    result = _bark(plugin_path, "strategies")
+    result = _bark(plugin_path, "strategies", env={"COLUMNS": "200"})
     assert result.returncode == 0, result.stderr
-    assert "most-overloaded" in result.stdout and "max_per_step" in result.stdout
+    rows = {line.split("│")[2].strip(): line for line in result.stdout.splitlines() if line.count("│") > 4}
+    assert "max_per_step" in rows["most-overloaded"] and "select in Python" in rows["most-overloaded"]
+    assert "eps=0.05" in rows["strain"] and rows["strain"].rstrip(" │").endswith("compiled")
+    assert "a=0.5" in rows["power-law"] and rows["power-law"].rstrip(" │").endswith("compiled")
 
 
 def test_example_plugin_is_selected_and_runs(plugin_path, tmp_path):

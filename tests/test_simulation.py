@@ -360,7 +360,7 @@ def test_observe_called_after_every_advance(make_sim, backend):
 
 
 def test_observe_sees_every_step_when_a_breaker_must(make_sim):
-    """A breaker with no rule and no overload-only promise is asked after every step."""
+    """A breaker whose part names every stretched spring a candidate is asked after every step."""
     from bark_plugins.breakers import ProbabilisticBreaker
 
     sim = make_sim(breakers=[ProbabilisticBreaker()])

@@ -5,15 +5,14 @@ platforms).  The Simulation never knows which runs.
 method                                          does
 =============================================  ====================================================
 ``spring_forces(state, mech, x) -> f``          the intact springs' forces (eq. 1) on every base at ``x``
-``measure(state, mech, out) -> load``           every spring's tension ``k(|d| − l)`` into ``out``;
-                                                returns the largest ``tension / fmax`` over intact
-                                                springs (NaN if any tension is not finite)
+``measure(state, mech, out) -> finite``         every spring's tension ``k(|d| − l)`` into ``out``;
+                                                returns whether all of them are finite
 ``constrain(state, r_x, r_anchor)``             eq. 9 on the bases (radial velocity removed) and
                                                 the anchors (radius × fixed direction)
 ``steps(state, mech, plan, tension) -> Steps``  up to ``len(plan.times)`` whole steps of an integrator
                                                 with a compiled form (``Integrator.update``): forces,
-                                                update, surface, tensions, and the breaking rule if
-                                                the plan carries one (``Breaker.rule``); the per-step
+                                                update, surface, tensions, and the breakers' part
+                                                (``Breaker.part``: its rule and load); the per-step
                                                 and the many-step paths are this one call
 ``patch_labels(state) -> labels``               connected components of the intact springs, numbered
                                                 in order of each component's smallest base
@@ -39,6 +38,7 @@ import numpy as np
 
 from bark import physics
 from bark.errors import BarkError, Ref
+from bark.parts import NO_BREAKING, BreakerPart
 
 __all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
 
@@ -61,12 +61,13 @@ class Plan:
     """Its parameters."""
     uniform: bool
     """The radius does not depend on height: evaluated once per step, not per base."""
-    rule: Callable
-    """A breaking rule ``rule(tension, fmax) -> bool`` (``bark.physics.no_breaking``: none)."""
-    breaking: bool = True
-    """Springs the rule picks break inside the call, which goes on.  ``False``: nothing breaks inside;
-    the call ends after the first step in which the rule picks a spring, for the breakers to judge
-    in Python."""
+    breaker: BreakerPart = NO_BREAKING
+    """The breakers' part (``bark.parts``): its rule picks springs, its load steers the step."""
+    breaks: str = "kernel"
+    """``kernel``: springs the rule picks break inside the call, which goes on.  ``candidates``:
+    nothing breaks inside; the call ends after the first step in which the rule picks a spring, for
+    the breakers to judge in Python.  ``python``: the breakers judge in Python after every step (the
+    part is ``NO_BREAKING``)."""
     accept_load: float = math.inf
     """A step whose load exceeds this is undone and the call ends (adaptive stepping halves it)."""
     return_on_break: bool = False
@@ -105,14 +106,16 @@ class Steps:
     done: int
     """Steps taken and kept (a step undone for ``accept_load`` or a non-finite state is not counted)."""
     load: float
-    """Largest tension / threshold over intact springs after the last step tried; NaN if that step
-    went non-finite (it was undone)."""
+    """Largest load (the breaker part's) over intact springs after the last step tried, ``-inf`` for
+    a part without one; NaN if that step went non-finite (it was undone)."""
     broken: np.ndarray
     """Springs the rule broke, in order of step then id (the caller applies them: ``break_springs``)."""
     step: np.ndarray
     """The step of the call (from 1) each broke in."""
     tension: np.ndarray
     """Each one's tension when it broke."""
+    picked: bool = False
+    """Whether the rule named a candidate in the last step kept (``Plan.breaks == "candidates"``)."""
 
 
 class Backend:
@@ -123,7 +126,7 @@ class Backend:
     def spring_forces(self, state, mech, x: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
-    def measure(self, state, mech, out: np.ndarray) -> float:
+    def measure(self, state, mech, out: np.ndarray) -> bool:
         raise NotImplementedError
 
     def constrain(self, state, r_x, r_anchor) -> None:

@@ -57,7 +57,18 @@ _force_scale = inline(physics.spring_force_scale)
 _base_force = inline(physics.base_force)
 _surface_scale = inline(physics.surface_scale)
 _radial_speed = inline(physics.radial_speed)
-_no_breaking = inline(physics.no_breaking)
+
+
+@inline
+def _never(tension, length, rest, fmax, inv_fmax, params):
+    """The kernel's rule where none is asked (a pass for forces alone)."""
+    return False
+
+
+@inline
+def _no_load(tension, length, rest, fmax, inv_fmax, params):
+    """The kernel's load where none is asked."""
+    return -np.inf
 
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
@@ -67,9 +78,12 @@ on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,19
 
 
 @inline
-def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, k, w0, w1, w2, wt, loads, rule):
+def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp):
     """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
-    with ``loads``, also whether every live tension is finite and whether ``rule`` picks a live spring."""
+    with ``loads``, also the breaker part's load into ``wl`` and whether its ``rule`` picks each live
+    spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, bp)``:
+    the generated adapters pass on what the part reads), and return whether every live tension is
+    finite and every live load a number (not NaN) and whether the rule picked a live spring."""
     finite = True
     hit = False
     for q in range(rest.shape[0]):
@@ -86,8 +100,12 @@ def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, k, w0, w1, w2, wt, loa
         w1[q] = g * d1
         w2[q] = g * d2
         if loads:
-            finite = finite & ((abs(t) < np.inf) | (not on))
-            hit = hit | (on & rule(t, fmax[q]))
+            lq = load(t, length, rest[q], fmax[q], inv[q], bp)
+            pq = on & rule(t, length, rest[q], fmax[q], inv[q], bp)
+            wl[q] = lq
+            wp[q] = pq
+            finite = finite & (((abs(t) < np.inf) & (lq == lq)) | (not on))
+            hit = hit | pq
     return finite, hit
 
 
@@ -117,26 +135,26 @@ def _gather_forces(u, w, i0, o, n, lo, hi):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"nnan", "nsz"})
-def _largest_load(wt, live, inv_fmax):
-    """The largest ``tension · 1/fmax`` of the live springs of a run (``-inf`` if none).  A maximum is
-    exact in any order, so it may be taken in SIMD lanes (what these flags allow; the call that gets
-    a NaN here reports NaN from its finiteness check instead)."""
+def _largest_load(wl, live):
+    """The largest load ``wl`` of the live springs of a run (``-inf`` if none).  A maximum is exact in
+    any order, so it may be taken in SIMD lanes (what these flags allow; the call that gets a NaN
+    here reports NaN from its finiteness check instead)."""
     top = -np.inf
     for q in range(live.shape[0]):
-        load = wt[q] * inv_fmax[q] if live[q] else -np.inf
+        load = wl[q] if live[q] else -np.inf
         top = max(top, load)
     return top
 
 
 @inline
-def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, breaking, rule,
+def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, breaking, rule, load, bp,
                  log_id, log_step, log_t, n_log, step, block):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
-    finite and apply the rule: with ``breaking``, a spring it picks is marked broken in ``live`` (the
-    call's working copy), left out of ``f`` (what a fresh pass after the break gives, to the bit) and
-    logged; without, it is only noted.  With ``tops`` too: find the largest tension / threshold
-    (``t · 1/fmax``; else ``-inf``).  Returns ``(largest load, all tensions finite, log length,
-    whether the rule picked a spring)``.
+    finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
+    ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
+    the bit) and logged; without, it is only noted.  With ``tops`` too: find the largest of the part's
+    loads (else ``-inf``).  Returns ``(largest load, all tensions finite, log length, whether the rule
+    picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
     ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes, a block of
@@ -149,7 +167,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
     backend's sum."""
     x0, x1, x2 = x
     f0, f1, f2 = f
-    w0, w1, w2, wt = work
+    w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
     top = -np.inf
     finite = True
@@ -165,9 +183,10 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
             a, e = i0 + lo, i0 + hi
             block_finite[blk], block_hit[blk] = _run_forces(
                 x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
-                fm[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], loads, rule)
+                fm[lo:hi], inv[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi], loads,
+                rule, load, bp)
             if loads and tops:
-                block_top[blk] = _largest_load(wt[lo:hi], lv[lo:hi], inv[lo:hi])
+                block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
         hit = False
         for blk in range(nb):
             finite = finite & block_finite[blk]
@@ -178,7 +197,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
                 if not block_hit[blk]:
                     continue
                 for q in range(blk * block, min(n, (blk + 1) * block)):
-                    if lv[q] and rule(wt[q], fm[q]):
+                    if wp[q]:
                         if breaking:
                             lv[q] = False
                             log_id[n_log] = s0 + q
@@ -329,7 +348,7 @@ def _refresh(x, runs, rest, k, live, f, work, first):
     for each run, the springs with an end there, computed as the full pass computes them and added
     in its order — so each of those bases gets the bits of a full pass."""
     x0, x1, x2 = x
-    w0, w1, w2, wt = work
+    w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
     f0, f1, f2 = f
     for q in range(first, f0.shape[0]):  # written out: a loop over the tuple, inlined here, left them as they were
@@ -343,8 +362,8 @@ def _refresh(x, runs, rest, k, live, f, work, first):
             continue
         a, m = i0 + lo, n - lo
         _run_forces(x0[a:a + m], x1[a:a + m], x2[a:a + m], x0[a + o:a + o + m], x1[a + o:a + o + m],
-                    x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n], k,
-                    w0, w1, w2, wt, False, _no_breaking)
+                    x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n],
+                    rest[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest)
         ours = max(0, first - a)  # of these, the first whose first end is a base from `first` on
         for u, w in ((f0, w0), (f1, w1), (f2, w2)):
             second = u[a + o:a + o + m]
@@ -356,10 +375,12 @@ def _refresh(x, runs, rest, k, live, f, work, first):
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
-                  start, update, rule, radius, prepare, radii):
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+                  heights, start, update, rule, load, radius, prepare, radii):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
-    load of the last step, length of the break log)``, the load NaN if that step went non-finite.
+    load of the last step, length of the break log, whether the rule named a candidate in the last
+    step)``, the load NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
+    part's (its numbers ``bp``).
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
@@ -384,8 +405,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         f0[:] = 0.0
         f1[:] = 0.0
         f2[:] = 0.0
-        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule,
-                     log_id, log_step, log_t, 0, 0, block)
+        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule, load,
+                     bp, log_id, log_step, log_t, 0, 0, block)
     elif fresh < x0.shape[0]:
         _refresh((x0, x1, x2), runs, rest, k, live, f, work, fresh)
     may_relax = False
@@ -398,6 +419,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
     n_log = 0
     before = 0
     r_before = 0.0
+    picked = False
     for step in range(times.shape[0]):
         t = times[step]
         q = prepare(t, params)  # the growth law's time-only part, once a step
@@ -407,8 +429,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         r_before = r_now
         before = n_log
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work,
-                                                          True, tops, breaking, rule, log_id, log_step, log_t,
-                                                          n_log, step + 1, block)
+                                                          True, tops, breaking, rule, load, bp, log_id, log_step,
+                                                          log_t, n_log, step + 1, block)
         finite = finite and springs_finite
         done = step + 1
         if not finite or top > accept_load or picked:
@@ -422,10 +444,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
             ax[q] = r_before * dx[q]
             ay[q] = r_before * dy[q]
     if finite and not tops and done > 0:
-        top = _last_load((x0, x1, x2), runs, rest, k, live, inv_fmax, work, log_id[before:n_log])
+        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, work, log_id[before:n_log], load, bp)
     if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
-    return done, (top if finite else np.nan), n_log
+    return done, (top if finite else np.nan), n_log, picked and finite
 
 
 @inline
@@ -470,12 +492,12 @@ def _copy_blocks(source, target, first, block):
 
 
 @inline
-def _last_load(x, runs, rest, k, live, inv_fmax, work, broke):
+def _last_load(x, runs, rest, k, live, fmax, inv_fmax, work, broke, load, bp):
     """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
-    those it broke): what that step's own pass finds when it looks (the same tensions, and a maximum
+    those it broke): what that step's own pass finds when it looks (the same loads, and a maximum
     is exact), taken once per call instead of every step."""
     x0, x1, x2 = x
-    w0, w1, w2, wt = work
+    w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
     for s in broke:
         live[s] = True
@@ -484,8 +506,9 @@ def _last_load(x, runs, rest, k, live, inv_fmax, work, broke):
         s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
         _run_forces(x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n], x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n],
-                    x2[i0 + o:i0 + o + n], rr, lv, rr, k, w0, w1, w2, wt, False, _no_breaking)
-        top = max(top, _largest_load(wt, lv, inv_fmax[s0:s0 + n]))
+                    x2[i0 + o:i0 + o + n], rr, lv, fmax[s0:s0 + n], inv_fmax[s0:s0 + n], k, w0, w1, w2, wt, wl, wp,
+                    True, _never, load, bp)
+        top = max(top, _largest_load(wl, lv))
     for s in broke:
         live[s] = False
     return top
@@ -495,20 +518,45 @@ def _last_load(x, runs, rest, k, live, inv_fmax, work, broke):
 
 _WRAPPER = '''"""Generated by bark: its stepping kernel specialised for {names}.  Safe to delete."""
 import numba
-from bark.kernels.numba_backend import _steps_kernel, each_height, inline
+from bark.kernels.numba_backend import _no_load, _steps_kernel, each_height, inline
 {imports}
 _update = inline({update})
-_rule = inline({rule})
+_rule_part = inline({rule})
+_load_part = {load}
 _radius = inline({radius})
 _prepare = inline({prepare})
 _radii = {radii}
-
+{adapters}
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights, start):
-    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log,
-                         heights, start, _update, _rule, _radius, _prepare, _radii)
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log, heights, start):
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+                         heights, start, _update, _rule, _load, _radius, _prepare, _radii)
 '''
+
+_ADAPTERS = '''
+
+@inline
+def _rule(tension, length, rest, fmax, inv_fmax, params):
+    return _rule_part({rule_args})
+{load}'''
+_LOAD_ADAPTER = '''
+
+@inline
+def _load(tension, length, rest, fmax, inv_fmax, params):
+    return _load_part({load_args})
+'''
+
+
+def _adapters(part) -> str:
+    """The source of ``_rule`` and ``_load``: the kernel's per-spring signature ``(tension, length,
+    rest, fmax, inv_fmax, params)`` passed on as the breaker part reads it (``_rule_part`` and
+    ``_load_part`` its functions); ``_load = _no_load`` for a part without one."""
+    load = "\n_load = _no_load\n" if part.load is None else \
+        _LOAD_ADAPTER.format(load_args=", ".join((*part.load_reads, "params")))
+    return _ADAPTERS.format(rule_args=", ".join((*part.reads, "params")), load=load)
+
+
 _SPECIALIZED: dict[tuple, object] = {}
 
 
@@ -573,44 +621,125 @@ def each_height(radius):
     return inline(radii)
 
 
-def specialized(update, rule, radius, prepare=physics.as_given, radii=None, parallel=False):
-    """The stepping kernel with ``update``, ``rule``, ``radius``, ``prepare`` and ``radii`` (the growth
-    law's block form; ``None``: ``radius`` per height) inlined (compiled once per combination and
-    kept on disk; see the module's docstring), its block loops shared among threads if ``parallel``.
-    Functions that cannot be imported by name (lambdas, local functions) get a wrapper compiled in
-    this process only."""
-    parts = (update, rule, radius, prepare) + (() if radii is None else (radii,))
-    key = (update, rule, radius, prepare, radii, bool(parallel))
+def adapted(part):
+    """The breaker part's rule and load as the kernel calls them, ``(tension, length, rest, fmax,
+    inv_fmax, params)`` (inlined where called), compiled in this process."""
+    _make_jitable([h for fn in (part.rule, part.load) if fn is not None for h in _helpers(fn)[1:]])
+    scope = {"inline": inline, "_no_load": _no_load, "_rule_part": inline(part.rule),
+             "_load_part": None if part.load is None else inline(part.load)}
+    exec(_adapters(part), scope)
+    return scope["_rule"], scope["_load"]
+
+
+def part_on_springs(part):
+    """``evaluate(tension, length, rest, fmax, inv_fmax) -> (picked, load)``: the part's rule and
+    load at each spring of the arrays, compiled as the stepping kernel compiles them (the contract
+    kit holds them against the part's functions on whole arrays, ``bark.testing``)."""
+    rule, load = adapted(part)
+    params = part.params
+
+    @numba.njit(error_model="numpy")
+    def each(tension, length, rest, fmax, inv_fmax, params, picked, loads):
+        for q in range(tension.shape[0]):
+            picked[q] = rule(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], params)
+            loads[q] = load(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], params)
+
+    def evaluate(tension, length, rest, fmax, inv_fmax):
+        picked, loads = np.zeros(len(tension), np.bool_), np.empty(len(tension))
+        each(*(np.ascontiguousarray(a, dtype=float) for a in (tension, length, rest, fmax, inv_fmax)), params,
+             picked, loads)
+        return picked, loads
+
+    return evaluate
+
+
+def radius_at_heights(radius, prepare=physics.as_given):
+    """``evaluate(t, z, params) -> r``: a growth law's compiled radius at each height of ``z``, its
+    per-step part taken once, compiled as the stepping kernel compiles them (for the contract kit)."""
+    g, p = inline(radius), inline(prepare)
+    _make_jitable([h for fn in (radius, prepare) for h in _helpers(fn)[1:]])
+
+    @numba.njit(error_model="numpy")
+    def each(t, z, params, out):
+        q = p(t, params)
+        for i in range(z.shape[0]):
+            out[i] = g(t, z[i], q)
+
+    def evaluate(t, z, params):
+        z = np.ascontiguousarray(z, dtype=float)
+        out = np.empty(z.shape[0])
+        each(float(t), z, np.ascontiguousarray(params, dtype=float), out)
+        return out
+
+    return evaluate
+
+
+def update_on_axis(update):
+    """``evaluate(x, v, f, hm, h) -> (x, v)``: an integrator's compiled update at each entry, compiled
+    as the stepping kernel compiles it (for the contract kit)."""
+    u = inline(update)
+    _make_jitable(_helpers(update)[1:])
+
+    @numba.njit(error_model="numpy")
+    def each(x, v, f, hm, h, x_out, v_out):
+        for i in range(x.shape[0]):
+            x_out[i], v_out[i] = u(x[i], v[i], f[i], hm, h)
+
+    def evaluate(x, v, f, hm, h):
+        x, v, f = (np.ascontiguousarray(a, dtype=float) for a in (x, v, f))
+        x_out, v_out = np.empty_like(x), np.empty_like(v)
+        each(x, v, f, float(hm), float(h), x_out, v_out)
+        return x_out, v_out
+
+    return evaluate
+
+
+def specialized(update, breaker, radius, prepare=physics.as_given, radii=None, parallel=False):
+    """The stepping kernel with ``update``, the breaker part's rule and load (``breaker``, a
+    :class:`~bark.parts.BreakerPart`), ``radius``, ``prepare`` and ``radii`` (the growth law's block
+    form; ``None``: ``radius`` per height) inlined (compiled once per combination and kept on disk;
+    see the module's docstring), its block loops shared among threads if ``parallel``.  Functions
+    that cannot be imported by name (lambdas, local functions) get a wrapper compiled in this process
+    only."""
+    key = (update, breaker.rule, breaker.reads, breaker.load, breaker.load_reads, radius, prepare, radii,
+           bool(parallel))
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
+    forms = (update, breaker.rule, radius, prepare)
+    parts = forms + tuple(fn for fn in (breaker.load, radii) if fn is not None)
     helpers = [h for fn in parts for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
     names = [_importable(fn) for fn in parts]
     if None in names:
-        u, r, g, p = (inline(fn) for fn in parts[:4])
+        u, g, p = (inline(fn) for fn in (update, radius, prepare))
         block = each_height(g) if radii is None else inline(radii)
+        rule, load = adapted(breaker)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
-        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags, log, heights,
-                  start):
-            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
-                                 log, heights, start, u, r, g, p, block)
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+                  heights, start):
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
+                                 flags, log, heights, start, u, rule, load, g, p, block)
 
         _SPECIALIZED[key] = steps
         return steps
+    adapters = _adapters(breaker)
     digest = hashlib.sha256()
-    for part in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in parts),
-                 *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names), f"parallel={bool(parallel)}"):
-        digest.update(part.encode())
+    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in parts),
+                  *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names), adapters,
+                  f"parallel={bool(parallel)}"):
+        digest.update(piece.encode())
     imports, refs = [], []
     for i, (module, qualname) in enumerate(names):
         head, _, rest = qualname.partition(".")
         imports.append(f"from {module} import {head} as _f{i}")
         refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
+    extra = iter(refs[4:])
+    load = f"inline({next(extra)})" if breaker.load is not None else "None"
     text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
-                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3],
-                           radii="each_height(_radius)" if radii is None else f"inline({refs[4]})",
-                           parallel=bool(parallel))
+                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3], load=load,
+                           radii="each_height(_radius)" if radii is None else f"inline({next(extra)})",
+                           adapters=adapters, parallel=bool(parallel))
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
     spec = importlib.util.spec_from_file_location(name, path)
@@ -650,13 +779,12 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
     no = np.empty(0)
     no_i = np.empty(0, dtype=np.int64)
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, (f[:, 0], f[:, 1], f[:, 2]), work,
-                 False, False, False, _no_breaking, no_i, no_i, no, 0, 0, BLOCK)
+                 False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK)
 
 
 @jit
-def _measure(x, pi, pj, rest, k, inv_fmax, intact, out):
+def _measure(x, pi, pj, rest, k, out):
     x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
-    top = -np.inf
     finite = True
     for s in range(pi.shape[0]):
         d0 = x0[pj[s]] - x0[pi[s]]
@@ -664,13 +792,8 @@ def _measure(x, pi, pj, rest, k, inv_fmax, intact, out):
         d2 = x2[pj[s]] - x2[pi[s]]
         t = _tension(_length(d0, d1, d2), rest[s], k)
         out[s] = t
-        if not abs(t) < np.inf:
-            finite = False
-        elif intact[s]:
-            load = t * inv_fmax[s]
-            if load > top:
-                top = load
-    return top if finite else np.nan
+        finite = finite & (abs(t) < np.inf)
+    return finite
 
 
 @jit
@@ -791,8 +914,6 @@ class _Frame:
     refresh_from: int = 0
     """Bases from this id on have springs (or are bases) that came after those forces: theirs are
     made again at the next call, the others' kept (``NumbaBackend.steps``)."""
-    inv_fmax: np.ndarray = attrs.field(factory=lambda: np.empty(0))
-    """``1 / fmax`` in id order, for ``measure`` (taken when first asked, extended as springs come)."""
     weights: "_Weights | None" = None
     """The anchors' growth-law weights (``NumbaBackend._heights``)."""
 
@@ -937,7 +1058,7 @@ class NumbaBackend(Backend):
         fr.bases = (*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
                     *(a[:, i] for i in range(3)), d[:, 0], d[:, 1])
         longest = int(fr.runs[1].max(initial=1))
-        fr.work = tuple(self._space(f"work{i}", (longest,)) for i in range(4))
+        fr.work = (*(self._space(f"work{i}", (longest,)) for i in range(5)), self._space("picks", (longest,), np.bool_))
         fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(3))
         fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
 
@@ -965,13 +1086,6 @@ class NumbaBackend(Backend):
             fr.live[valid] = state.intact[fr.ids[valid]]
             fr.n_live = int(np.count_nonzero(fr.live))
         return fr.live
-
-    def _inverse_thresholds(self, state) -> np.ndarray:
-        """``1 / fmax`` in id order (for ``measure``), extended as springs are appended."""
-        fr = self.frame(state)
-        if len(fr.inv_fmax) < state.n_springs:
-            fr.inv_fmax = np.concatenate([fr.inv_fmax, 1.0 / state.fmax[len(fr.inv_fmax):]])
-        return fr.inv_fmax[:state.n_springs]
 
     def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
         """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
@@ -1008,9 +1122,8 @@ class NumbaBackend(Backend):
         _spring_forces(x, fr.runs, fr.work, fr.springs[0], mech.k, self._live(state, fr), f)
         return f
 
-    def measure(self, state, mech, out: np.ndarray) -> float:
-        return float(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k,
-                              self._inverse_thresholds(state), state.intact, out))
+    def measure(self, state, mech, out: np.ndarray) -> bool:
+        return bool(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
@@ -1023,7 +1136,7 @@ class NumbaBackend(Backend):
         those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
         fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
-        kernel = specialized(plan.update, plan.rule, plan.radius, plan.prepare, plan.radii, parallel=self.threads > 1)
+        kernel = specialized(plan.update, plan.breaker, plan.radius, plan.prepare, plan.radii, parallel=self.threads > 1)
         if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
             numba.set_num_threads(self.threads)
         fr = self.frame(state)
@@ -1040,27 +1153,29 @@ class NumbaBackend(Backend):
         rest, fmax, inv_fmax = fr.springs
         heights = self._heights(state, plan, fr)
 
+        bp = plan.breaker.params
+
         def call(times, relax, fresh, kept):
-            flags = (bool(plan.uniform), bool(plan.breaking), bool(plan.return_on_break), int(fresh), self.block,
+            flags = (bool(plan.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(fresh), self.block,
                      int(kept))
-            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, flags,
-                          fr.log, heights, start)
+            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
+                          flags, fr.log, heights, start)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         relax = plan.relax_flags()
-        done, load, n_log = call(times, relax, fresh, kept)
+        done, load, n_log, picked = call(times, relax, fresh, kept)
         valid = True  # the forces in f are of the positions the last call ended with
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
             for keep, arr in zip(fr.start, (state.x, state.v, state.anchor)):
                 np.copyto(arr, keep)
             live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
-            n_log, valid = 0, done > 1
+            n_log, valid, picked = 0, done > 1, False
             if done > 1:
-                n_log = call(times[: done - 1], relax[: done - 1], 0, -1)[2]
+                n_log, picked = call(times[: done - 1], relax[: done - 1], 0, -1)[2:]
             done -= 1
         if valid:  # for the next call (the kernel has put the positions it ended with in start)
             fr.forces, fr.kept, fr.refresh_from = k, n, n
-        if not plan.breaking:  # the breakers judge in Python: they see every tension of the state left
+        if plan.breaks != "kernel":  # the breakers judge in Python: they see every tension of the state left
             self.measure(state, mech, tension)
         positions, step, t = (a[:n_log] for a in fr.log)
         ids = fr.ids[positions]
@@ -1069,7 +1184,8 @@ class NumbaBackend(Backend):
             ids, step, t = ids[by], step[by], t[by]
         fr.n_live -= n_log  # the simulation breaks these in the state next (Simulation.break_springs)
         fr.pending = ids
-        return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy())
+        return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy(),
+                     picked=bool(picked))
 
     def patch_labels(self, state) -> np.ndarray:
         labels = np.empty(state.n_bases, dtype=np.int32)

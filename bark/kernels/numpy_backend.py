@@ -12,6 +12,7 @@ import scipy.sparse as sp
 from bark import physics
 from bark.forces import SpringOrder, incidence, spring_geometry
 from bark.kernels import Backend, Plan, Steps
+from bark.parts import largest_load, picks
 
 NAME = "numpy"
 
@@ -42,13 +43,10 @@ class NumpyBackend(Backend):
     def spring_forces(self, state, mech, x) -> np.ndarray:
         return self._spring_forces(state, mech, x, state.intact)
 
-    def measure(self, state, mech, out: np.ndarray) -> float:
+    def measure(self, state, mech, out: np.ndarray) -> bool:
         _, length = spring_geometry(state.x, state.pairs)
         out[:] = physics.tension(length, state.rest, mech.k)
-        if not np.isfinite(out).all():
-            return math.nan
-        live = state.intact
-        return float(np.max(out[live] * (1.0 / state.fmax[live]))) if live.any() else -math.inf
+        return bool(np.isfinite(out).all())
 
     def constrain(self, state, r_x, r_anchor) -> None:
         x, v = state.x, state.v
@@ -63,13 +61,13 @@ class NumpyBackend(Backend):
 
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
         start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
-        done, load, live, log = self._run(state, mech, plan, plan.times, tension)
+        done, load, live, log, candidate = self._run(state, mech, plan, plan.times, tension)
         if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
             for keep, arr in zip(start, (state.x, state.v, state.anchor)):
                 arr[...] = keep
-            _, _, live, log = self._run(state, mech, plan, plan.times[:done], tension)
+            _, _, live, log, candidate = self._run(state, mech, plan, plan.times[:done], tension)
         broke = [b for b, _, _ in log]
-        return Steps(done=done, load=load,
+        return Steps(done=done, load=load, picked=candidate,
                      broken=np.concatenate(broke) if log else np.empty(0, np.int64),
                      step=np.concatenate([np.full(b.size, s, np.int64) for b, s, _ in log]) if log else np.empty(0, np.int64),
                      tension=np.concatenate([t for _, _, t in log]) if log else np.empty(0))
@@ -77,7 +75,9 @@ class NumpyBackend(Backend):
     def _run(self, state, mech, plan: Plan, times: np.ndarray, tension: np.ndarray):
         """Steps at ``times``; stops after a step that ends the call (see ``Plan``).  Returns the steps
         kept (a failed last step is not counted, but the state holds it: the caller replays), the
-        last load, the working intact mask and the breaks."""
+        last load, the working intact mask, the breaks and whether the rule named a candidate in the
+        last step."""
+        part, breaking = plan.breaker, plan.breaks == "kernel"
         live = state.intact.copy()
         log: list[tuple[np.ndarray, int, np.ndarray]] = []
         fs = self._spring_forces(state, mech, state.x, live)
@@ -95,23 +95,23 @@ class NumpyBackend(Backend):
             self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, q))
             _, length = spring_geometry(x, state.pairs)
             t_all = physics.tension(length, state.rest, mech.k)
-            if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()):
-                return done, math.nan, live, log
-            load = float(np.max(t_all[live] * (1.0 / state.fmax[live]))) if live.any() else -math.inf
+            load = largest_load(part, state, t_all, live, length)
+            if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()) or math.isnan(load):
+                return done, math.nan, live, log, False
             if load > plan.accept_load:
-                return done, load, live, log
+                return done, load, live, log, False
             tension[:] = t_all
             done = step
-            picked = np.flatnonzero(live & plan.rule(t_all, state.fmax))
-            if plan.breaking and picked.size:
+            picked = picks(part, state, t_all, live, length)
+            if breaking and picked.size:
                 live[picked] = False
                 log.append((picked, step, t_all[picked]))
             fs = self._spring_forces(state, mech, x, live)
-            if picked.size and (not plan.breaking or plan.return_on_break or picked.size > plan.max_batch):
-                break
+            if picked.size and (not breaking or plan.return_on_break or picked.size > plan.max_batch):
+                return done, load, live, log, not breaking
             if relax[step - 1] and load <= 1.0:  # quiet again on the coarser grid: the clock doubles the step
                 break
-        return done, load, live, log
+        return done, load, live, log, False
 
     def patch_labels(self, state) -> np.ndarray:
         """Connected components of the intact springs (scipy.sparse.csgraph)."""

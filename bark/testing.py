@@ -1,0 +1,299 @@
+"""A contract kit for strategy authors (after scikit-learn's ``check_estimator``).
+
+``check_strategy(MyBreaker)`` runs, in your own test suite, what bark asks of every strategy; its
+built-in strategies pass the same checks in bark's CI::
+
+    from bark.testing import check_strategy
+
+    def test_my_breaker_keeps_the_contract():
+        check_strategy(MyBreaker, {"eps": 0.03})
+
+What is checked (each failure an ``AssertionError`` naming the promise and the value that broke it):
+
+* **construction** — an attrs class of one of bark's kinds; ``type(s)(**s.params())`` and a pickle
+  round trip give an equal strategy (what sweeps, checkpoints and worker processes rely on);
+* **validation** — a bad value for any field (NaN, ±inf, ±1e308, 1e-308, 0, negatives, text, None,
+  drawn by hypothesis) is refused with a one-line :class:`~bark.errors.BarkError`, or accepted and
+  then usable (a breaker's part, a growth law's radius are made without an error) — never another
+  exception or a traceback;
+* **the verb equals the part** — a breaker's ``select`` picks what its part's rule picks (when the
+  part decides), a growth law's ``radius`` is its compiled form's, an integrator's ``step`` its
+  update's; a part's functions are elementwise (arrays give what each element gives);
+* **numpy equals numba, to the bit** — the part compiled as the stepping kernel compiles it gives
+  the bits of its functions on whole arrays, and a short simulation with the strategy ends in the
+  same state and break log on both backends (skipped, and said so in the returned names, where numba
+  is not installed).
+
+Needs hypothesis (``pip install bark[test]``).
+"""
+
+from __future__ import annotations
+
+import math
+import pickle
+from typing import Any
+
+import attrs
+import numpy as np
+
+from bark.errors import BarkError
+from bark.parts import spring_inputs
+from bark.strategies import KINDS, Breaker, Growth, Integrator, Strategy
+from bark.validators import construct
+
+__all__ = ["check_strategy"]
+
+BAD_VALUES = (math.nan, math.inf, -math.inf, 1e308, -1e308, 1e-308, 0.0, -1.0, -0, 2**63, "text", None, [1.0])
+
+
+def check_strategy(cls: type, params: dict[str, Any] | None = None, *, examples: int = 40) -> list[str]:
+    """Check that the strategy class ``cls``, constructed with ``params`` (default: its defaults),
+    keeps bark's contract (see the module's docstring).  Returns the names of the checks that ran;
+    raises ``AssertionError`` at the first promise broken."""
+    from hypothesis import HealthCheck, settings
+
+    assert isinstance(cls, type) and issubclass(cls, Strategy) and cls.kind in KINDS, \
+        f"{cls!r} is not a bark strategy class (a subclass of Growth, Integrator, Breaker or Analyzer)"
+    assert attrs.has(cls), f"{cls.__name__} is not an attrs class: decorate it with @attrs.frozen(kw_only=True)"
+    params = dict(params or {})
+    strategy = construct(cls, params, f"{cls.kind} {cls.__name__}")
+    profile = settings(max_examples=examples, deadline=None, database=None, derandomize=True, report_multiple_bugs=False,
+                       suppress_health_check=list(HealthCheck))
+    ran = [_construction(strategy), _validation(cls, params, profile)]
+    if isinstance(strategy, Breaker):
+        ran += _breaker(strategy, profile)
+    elif isinstance(strategy, Growth):
+        ran += _growth(strategy, profile)
+    elif isinstance(strategy, Integrator):
+        ran += _integrator(strategy, profile)
+    if not isinstance(strategy, (Breaker, Growth, Integrator)):
+        return ran
+    ran.append(_backends(strategy) if _have_numba() else "numpy = numba: skipped (numba is not installed)")
+    return ran
+
+
+def _have_numba() -> bool:
+    from bark import kernels
+
+    return kernels.available("numba")
+
+
+def _construction(strategy) -> str:
+    name = type(strategy).__name__
+    again = type(strategy)(**strategy.params())
+    assert again == strategy, f"{name}(**params()) gives {again!r}, not {strategy!r}: keep every parameter as given"
+    try:
+        copy = pickle.loads(pickle.dumps(strategy))
+    except Exception as err:  # noqa: BLE001
+        raise AssertionError(f"{name} cannot be pickled ({type(err).__name__}: {err}): sweeps and checkpoints "
+                             "need it; define the class at a module's top level") from err
+    assert copy == strategy, f"{name} does not survive pickling: {copy!r} != {strategy!r}"
+    return "construction and pickling"
+
+
+def _validation(cls, params, profile) -> str:
+    from hypothesis import given
+    from hypothesis import strategies as st
+
+    fields = [a.alias for a in attrs.fields(cls) if a.init]
+    if not fields:
+        return "validation (no parameters)"
+    values = st.one_of(st.sampled_from(BAD_VALUES), st.floats(allow_nan=True, allow_infinity=True), st.integers(),
+                       st.text(max_size=5))
+
+    @profile
+    @given(st.sampled_from(fields), values)
+    def refused_in_one_line(field, value):
+        try:
+            accepted = construct(cls, {**params, field: value}, f"{cls.kind} {cls.__name__}")
+        except BarkError as err:
+            assert "\n" not in str(err), f"{cls.__name__}({field}={value!r}): a message of several lines: {err}"
+            return
+        except Exception as err:  # noqa: BLE001 (the point: nothing else may escape)
+            raise AssertionError(f"{cls.__name__}({field}={value!r}) raised {type(err).__name__}: {err} — "
+                                 "validate the field (bark.validators) so that it is a one-line BarkError") from err
+        try:
+            _use(accepted)
+        except Exception as err:  # noqa: BLE001
+            raise AssertionError(f"{cls.__name__}({field}={value!r}) was accepted, then failed with "
+                                 f"{type(err).__name__}: {err} — validate the field (bark.validators) so that "
+                                 "it is refused with a one-line BarkError") from err
+
+    refused_in_one_line()
+    return "validation"
+
+
+def _use(strategy) -> None:
+    """What the engine asks of a strategy before it runs: a breaker's part, a growth law's radius and
+    compiled parameters."""
+    if isinstance(strategy, Breaker):
+        strategy.part()
+    elif isinstance(strategy, Growth):
+        strategy.radius(1.0, np.array([0.0, 0.5]))
+        strategy.compiled_params()
+
+
+# -- breakers --------------------------------------------------------------------------------------
+
+def _spring_data():
+    """Random springs as a :class:`~bark.state.State` (each on a pair of bases of its own, along x,
+    so that its measured length is the drawn one exactly), with their tensions and lengths."""
+    from hypothesis import strategies as st
+    from hypothesis.extra import numpy as hnp
+
+    from bark.state import State
+
+    @st.composite
+    def springs(draw):
+        m = draw(st.integers(1, 40))
+        rest = draw(hnp.arrays(float, m, elements=st.floats(1e-4, 10.0)))
+        length = rest * draw(hnp.arrays(float, m, elements=st.floats(0.0, 3.0)))
+        fmax = draw(hnp.arrays(float, m, elements=st.floats(1e-4, 1.0)))
+        k = draw(st.floats(1e-3, 100.0))
+        x = np.zeros((2 * m, 3))
+        x[1::2, 0] = length
+        state = State.empty(2 * m, m)
+        state.add_bases(x=x, v=np.zeros_like(x), anchor=x, anchor_dir=np.tile([1.0, 0.0], (2 * m, 1)),
+                        born=np.zeros(2 * m))
+        state.add_springs(pairs=np.arange(2 * m).reshape(m, 2), rest=rest, fmax=fmax,
+                          intact=draw(hnp.arrays(bool, m)))
+        state.h = draw(st.floats(1e-4, 1.0))
+        return state, k * (length - rest), length
+
+    return springs()
+
+
+def _breaker(breaker, profile) -> list[str]:
+    from hypothesis import given
+
+    part = breaker.part_
+    name = type(breaker).__name__
+    if part is None:
+        return ["part: none (select runs in Python after every step)"]
+    evaluate = _compiled_part(part)
+
+    @profile
+    @given(_spring_data())
+    def part_is_elementwise_and_select_follows(data):
+        state, tension, length = data
+        rule_in = spring_inputs(state, tension, part.reads, length)
+        picked = np.broadcast_to(part.rule(*rule_in, part.params), tension.shape)
+        one_by_one = [bool(part.rule(*(a[i] for a in rule_in), part.params)) for i in range(tension.size)]
+        assert picked.tolist() == one_by_one, f"{name}'s rule on arrays is not its rule on each spring"
+        if part.load is not None:
+            load_in = spring_inputs(state, tension, part.load_reads, length)
+            loads = np.broadcast_to(part.load(*load_in, part.params), tension.shape)
+            each = [float(part.load(*(a[i] for a in load_in), part.params)) for i in range(tension.size)]
+            assert np.array_equal(loads, each, equal_nan=True), f"{name}'s load on arrays is not its load on each spring"
+        if part.decides:
+            chosen = np.sort(np.asarray(breaker.select(state, tension, np.random.default_rng(0))))
+            assert chosen.tolist() == np.flatnonzero(state.intact & picked).tolist(), \
+                f"{name}.select does not pick what its part's rule picks"
+        if evaluate is not None:
+            got_picked, got_loads = evaluate(tension, length, state.rest, state.fmax, 1.0 / state.fmax)
+            assert got_picked.tolist() == picked.tolist(), f"{name}'s rule compiled (numba) differs from numpy"
+            if part.load is not None:
+                assert np.array_equal(got_loads, loads, equal_nan=True), \
+                    f"{name}'s load compiled (numba) differs from numpy: {got_loads} != {loads}"
+
+    part_is_elementwise_and_select_follows()
+    return ["breaker part: elementwise, select follows" + (", compiled = numpy" if evaluate else "")]
+
+
+def _compiled_part(part):
+    if not _have_numba():
+        return None
+    from bark.kernels.numba_backend import part_on_springs
+
+    return part_on_springs(part)
+
+
+# -- growth laws and integrators -------------------------------------------------------------------
+
+def _growth(growth, profile) -> list[str]:
+    from hypothesis import given
+    from hypothesis import strategies as st
+    from hypothesis.extra import numpy as hnp
+
+    name = type(growth).__name__
+    if growth.compiled is None:
+        return ["growth: no compiled form (radius runs in Python)"]
+    evaluate = None
+    if _have_numba():
+        from bark.kernels.numba_backend import radius_at_heights
+        from bark.physics import as_given
+
+        evaluate = radius_at_heights(growth.compiled, growth.compiled_time or as_given)
+
+    @profile
+    @given(st.floats(0.0, 1e4), hnp.arrays(float, st.integers(1, 30), elements=st.floats(-10.0, 10.0)))
+    def radius_is_the_compiled_form(t, z):
+        r = np.broadcast_to(growth.radius(t, z), z.shape)
+        each = [float(np.broadcast_to(growth.radius(t, zi), ())) for zi in z.tolist()]
+        assert np.array_equal(r, each, equal_nan=True), f"{name}.radius on an array is not its radius at each height"
+        if evaluate is not None:
+            got = evaluate(t, 0.0 * z if growth.uniform else z, growth.params_array)
+            assert np.array_equal(got, r, equal_nan=True), f"{name}'s compiled radius (numba) differs from numpy at t = {t}"
+
+    radius_is_the_compiled_form()
+    return ["growth: radius is the compiled form" + (", compiled = numpy" if evaluate else "")]
+
+
+def _integrator(integrator, profile) -> list[str]:
+    from hypothesis import given
+    from hypothesis import strategies as st
+    from hypothesis.extra import numpy as hnp
+
+    name = type(integrator).__name__
+    if integrator.update is None:
+        return ["integrator: no compiled update (step runs in Python)"]
+    if not _have_numba():
+        return ["integrator: update (compiled check skipped: numba is not installed)"]
+    from bark.kernels.numba_backend import update_on_axis
+
+    evaluate = update_on_axis(integrator.update)
+    finite = st.floats(-1e3, 1e3)
+
+    @profile
+    @given(st.integers(1, 30).flatmap(lambda n: st.tuples(*(hnp.arrays(float, n, elements=finite) for _ in range(3)))),
+           st.floats(1e-6, 1.0), st.floats(1e-3, 10.0))
+    def update_compiled_is_numpy(xvf, h, m):
+        x, v, f = xvf
+        want = integrator.update(x, v, f, h / m, h)
+        got = evaluate(x, v, f, h / m, h)
+        assert all(np.array_equal(a, b) for a, b in zip(got, want)), f"{name}'s compiled update (numba) differs from numpy"
+
+    update_compiled_is_numpy()
+    return ["integrator: compiled update = numpy"]
+
+
+# -- a short run on both backends ------------------------------------------------------------------
+
+def _backends(strategy) -> str:
+    """A short growing, cracking run with ``strategy`` in place of the default of its kind, on the
+    numpy and the numba backend: the same state, steps and break log, to the bit."""
+    from bark import registry
+    from bark.forces import Mechanics
+    from bark.lattice import Lattice
+    from bark.scene import DEFAULT_STRATEGIES
+    from bark.simulation import Simulation, Stop
+    from bark.stepping import Numerics
+
+    parts = {kind: registry.create(kind, DEFAULT_STRATEGIES[kind]) for kind in ("growth", "integrator", "breaker")}
+    parts[strategy.kind] = strategy
+    parts["breakers"] = [parts.pop("breaker")]
+    runs = []
+    for backend in ("numpy", "numba"):
+        sim = Simulation(lattice=Lattice(n_bases=300, jitter=0.05), mechanics=Mechanics(fmax_spread=0.05),
+                         numerics=Numerics(dt=0.05, backend=backend), seed=1, **parts)  # Table 2's k, c, b, m
+        sim.run(Stop(until_time=25.0))  # past the first breaks of Table 2's vertical regime
+        runs.append(sim)
+    a, b = runs
+    name = type(strategy).__name__
+    for field in ("x", "v", "anchor", "intact"):
+        assert np.array_equal(getattr(a.state, field), getattr(b.state, field)), \
+            f"a run with {name}: state.{field} differs between the numpy and numba backends"
+    la, lb = a.breaks.arrays(), b.breaks.arrays()
+    assert a.step_count == b.step_count and all(np.array_equal(la[k], lb[k]) for k in la), \
+        f"a run with {name}: steps or break logs differ between the numpy and numba backends"
+    return f"numpy = numba to the bit (a run of {a.step_count} steps, {len(la['spring'])} breaks)"
