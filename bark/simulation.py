@@ -2,8 +2,8 @@
 
 The leaf-base graph (networkx) is the topology of record: nodes are leaf bases, edges are *intact*
 springs.  :class:`~bark.state.State` mirrors it as arrays for the hot loop; :meth:`Simulation.join`
-(bases joining the mechanics) and :meth:`Simulation.break_springs` are the only places topology
-changes — in both at once.  Step control and the fast-path policy are :mod:`bark.stepping`'s; the
+(bases joining the mechanics), :meth:`Simulation.break_springs` and :meth:`Simulation.mend_springs` are
+the only places topology changes — in both at once.  Step control and the fast-path policy are :mod:`bark.stepping`'s; the
 compute backend is :mod:`bark.kernels`'; the state is data.
 """
 
@@ -362,10 +362,25 @@ class Simulation:
         values = np.asarray(tension)[order] if tension_of_ids else np.asarray(tension)[ids[order]]
         ids = ids[order]
         if ids.size:
-            s.intact[ids] = False
+            s.set_intact(ids, False)
             self.graph.remove_springs(s.pairs[ids])
             if self.record_breaks:
                 self.breaks.record(ids, s.pairs, steps[order], times[order], values)
+            self._labels = None
+        return ids
+
+    def mend_springs(self, ids) -> np.ndarray:
+        """Make the broken springs ``ids`` intact again, in the graph and in the arrays (the model
+        never does: a broken spring stays broken; this is for tools, and for models of their own that
+        heal).  Intact ids are ignored; returns the ids mended.  Their breaks stay in the break log."""
+        s = self.state
+        ids = np.unique(np.asarray(ids, dtype=np.int64).reshape(-1))
+        if ids.size and (ids[0] < 0 or ids[-1] >= s.n_springs):
+            raise IndexError(f"spring ids must be in [0, {s.n_springs}): got {ids[0] if ids[0] < 0 else ids[-1]}")
+        ids = ids[~s.intact[ids]]
+        if ids.size:
+            s.set_intact(ids, True)
+            self.graph.add_springs(s.pairs[ids])
             self._labels = None
         return ids
 

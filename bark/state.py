@@ -2,7 +2,7 @@
 
 The networkx graph held by :class:`bark.simulation.Simulation` is the topology of record (which bases
 exist, which springs are intact); :class:`State` mirrors it as flat arrays for the hot loop.  Only
-``Simulation.break_springs`` and ``Simulation.join`` change the topology, in both at once.
+``Simulation.break_springs``, ``mend_springs`` and ``join`` change the topology, in both at once.
 
 **Fields are declared once** (after LAMMPS's atom styles): ``BASE_FIELDS`` and ``SPRING_FIELDS``
 list every per-base and per-spring array with its shape and type; growing, copying, checkpointing
@@ -36,7 +36,7 @@ SPRING_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
     "pairs": ((2,), "uint32"),        # the two bases (i, j); d = x_j − x_i; never changed (springs are appended)
     "rest": ((), "float64"),          # rest length, taken when the spring was made; never changed
     "fmax": ((), "float64"),          # breaking threshold, per spring (never per base), set then too
-    "intact": ((), "bool"),           # changed only by Simulation.break_springs
+    "intact": ((), "bool"),           # changed only by State.set_intact (Simulation.break_springs, mend_springs)
 }
 MIN_CAPACITY = 64
 
@@ -72,6 +72,20 @@ def _field(name: str, doc: str) -> property:
     return property(lambda self: self._view(name), set_rows, doc=doc)
 
 
+def _flags(name: str, doc: str) -> property:
+    """A field of flags that only :meth:`State.set_intact` changes: a read-only view of its rows."""
+
+    def get(self) -> np.ndarray:
+        rows = self._view(name)
+        rows.flags.writeable = False
+        return rows
+
+    def refuse(self, value) -> None:
+        raise AttributeError(f"state.{name} changes only through Simulation.break_springs and mend_springs")
+
+    return property(get, refuse, doc=doc)
+
+
 @attrs.define(eq=False)
 class State:
     """Positions, velocities and springs of the leaf-base layer at time ``t``.
@@ -90,6 +104,10 @@ class State:
     """Simulated time."""
     h: float = 0.0
     """Length of the step that led to this state (rate-based breakers use it)."""
+    intact_version: int = 0
+    """How many times the intact flags have been edited (``set_intact``): a backend's copy of them
+    is in step while this is the count it saw.  Appended springs do not count (backends extend
+    their copies with them)."""
     _store: dict[str, np.ndarray] = attrs.field(factory=dict, repr=False)
 
     @classmethod
@@ -114,7 +132,7 @@ class State:
     pairs = _field("pairs", "Spring ends ``(i, j)``, ``(m, 2)``; row = spring id.")
     rest = _field("rest", "Rest length of every spring, ``(m,)``.")
     fmax = _field("fmax", "Breaking threshold of every spring, ``(m,)``.")
-    intact = _field("intact", "Whether each spring is intact, ``(m,)`` bool.")
+    intact = _flags("intact", "Whether each spring is intact, ``(m,)`` bool (read-only: ``set_intact``).")
 
     @property
     def capacity(self) -> tuple[int, int]:
@@ -124,6 +142,13 @@ class State:
     def arrays(self) -> dict[str, np.ndarray]:
         """Every field's active rows, by name (views)."""
         return {name: self._view(name) for name in (*BASE_FIELDS, *SPRING_FIELDS)}
+
+    def set_intact(self, ids: np.ndarray, value: bool) -> None:
+        """Mark springs ``ids`` intact (``value`` true) or broken: the one way the flags change, one
+        edit (``intact_version``).  ``Simulation.break_springs`` and ``mend_springs`` call it, and
+        change the graph of record with it."""
+        self._store["intact"][np.asarray(ids, dtype=np.int64)] = bool(value)
+        self.intact_version += 1
 
     # -- growing --------------------------------------------------------------------------------
 

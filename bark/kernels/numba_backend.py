@@ -902,6 +902,8 @@ class _Frame:
     """How many are ``True``."""
     pending: np.ndarray
     """Springs the last call broke (ids): the state has them broken once the simulation has taken them."""
+    version: int
+    """The state's ``intact_version`` when ``live`` was last in step with it."""
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
@@ -932,6 +934,7 @@ class _Weights:
 
 
 _NO_WEIGHTS = (np.empty(0), 0)
+_NO_IDS = np.empty(0, np.int64)
 CHECK_BATCH = 1024
 """The anchors' weights are checked against the growth law's radius when first taken, then in
 batches of this many bases as bases join (a check per join cost 3 % of the whole tree's run)."""
@@ -1018,7 +1021,7 @@ class NumbaBackend(Backend):
         return _Frame(state=state, sizes=(), bases=(), runs=(position, lengths.copy(), first_i, offsets), room=room,
                       first_keys=self._order.keys[starts] if len(starts) else np.empty(0, np.uint64),
                       springs=springs, ids=by_position, live=live, n_live=int(np.count_nonzero(live)),
-                      pending=np.empty(0, np.int64), work=(),
+                      pending=_NO_IDS, version=state.intact_version, work=(),
                       start=(), log=())
 
     def _extend(self, fr: _Frame, state) -> bool:
@@ -1076,15 +1079,21 @@ class NumbaBackend(Backend):
         return buf[:shape[0]]
 
     def _live(self, state, fr: _Frame | None = None) -> np.ndarray:
-        """The kernel's intact mask, copied from the state again unless the state has broken exactly
-        what the kernel did: the springs of the last call, and no others (a spring never mends, so
-        the count tells).  ``fr``: the state's frame, when the caller has it."""
+        """The kernel's intact mask, in step with the state's: copied again unless the flags are as
+        the kernel knows them — not edited since it last looked (``State.intact_version``), or edited
+        once, by the breaking of exactly the springs of its last call (what ``Simulation.advance``
+        does next: those are broken, and as many are intact as the kernel counts).  ``fr``: the
+        state's frame, when the caller has it."""
         fr = fr or self.frame(state)
-        if fr.n_live != np.count_nonzero(state.intact) or state.intact[fr.pending].any():
+        edits = state.intact_version - fr.version
+        took_breaks = edits == 1 and fr.pending.size > 0 and fr.n_live == np.count_nonzero(state.intact) \
+            and not state.intact[fr.pending].any()
+        if not (edits == 0 and fr.pending.size == 0 or took_breaks):
             fr.forces = None  # of other springs
             valid = fr.ids >= 0
             fr.live[valid] = state.intact[fr.ids[valid]]
             fr.n_live = int(np.count_nonzero(fr.live))
+        fr.version, fr.pending = state.intact_version, _NO_IDS
         return fr.live
 
     def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
