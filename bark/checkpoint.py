@@ -265,11 +265,29 @@ def load(folder: str | Path, warn: Callable[[str], None] | None = None):
     return (*restore(arrays, meta, used), used)
 
 
+def _check_strategies(scene: dict, path: Path) -> None:
+    """Refuse, in one line, to resume with a strategy that cannot be had here (a plugin not
+    installed, a class whose module is not importable): never another in its place, and not a
+    damaged checkpoint (the previous one records the same)."""
+    from bark import registry
+    from bark.scene import STRATEGY_SECTIONS
+
+    for section, kind in STRATEGY_SECTIONS.items():
+        name = scene.get(section, {}).get("name") if isinstance(scene.get(section), dict) else None
+        if isinstance(name, str):
+            try:
+                registry.load(kind, name)
+            except BarkError as err:
+                where = repr(str(path.parent)).replace("{", "{{").replace("}", "}}")
+                raise BarkError(f"cannot resume the run in {where}: " + err.template, *err.refs) from None
+
+
 def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
     """Rebuild ``(scene, simulation, stop, meta, recorded)`` from verified checkpoint parts."""
     from bark.scene import Scene
     from bark.simulation import Stop
 
+    _check_strategies(meta["scene"], path)
     try:
         scene = Scene.from_dict(meta["scene"])
         stop = Stop(**meta["stop"])

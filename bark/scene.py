@@ -205,8 +205,6 @@ class Scene:
     run: RunSettings
     strategies: dict[str, Any]
     """The strategy instances, by section: growth, integrator, breaker, analyzer."""
-    names: dict[str, str]
-    """The registered name of each strategy, by section."""
     wanted: tuple[str, ...] = effects.DEFAULT
     """The effects the scene asked for (``[effects] want``)."""
     frame_every: float = 10.0
@@ -219,6 +217,13 @@ class Scene:
     """Side of the windows of summary.json's ``windows`` (length units; ``EffectSettings.window``)."""
     dome: Dome = attrs.field(factory=Dome)
     """The apical dome's profile (``bark.tree.Dome``): drawn in tree.png."""
+
+    @property
+    def names(self) -> dict[str, str]:
+        """How each strategy is recorded, by section: its entry-point name, or the import path
+        ``module:Class`` of one not registered (``bark.registry.name_of``) — of the instances the scene
+        holds, so a scene whose strategies were replaced (``attrs.evolve``) records what it runs."""
+        return {section: registry.name_of(strategy) for section, strategy in self.strategies.items()}
 
     @property
     def effects(self) -> dict[str, str]:
@@ -258,7 +263,7 @@ class Scene:
         resolved = effects.resolve(wanted)
         if run.until_patches is not None and "fracture" not in resolved:
             raise BarkError("{0} needs the effect 'fracture' (no fracture, no patches)", Ref("run", "until_patches", run.until_patches))
-        strategies, names = {}, {}
+        strategies, names = {}, {}  # names as given: a strategy is recorded by Scene.names, from its class
         for section, kind in STRATEGY_SECTIONS.items():
             params = dict(data.get(section, {}))
             name = params.pop("name", DEFAULT_STRATEGIES[section])
@@ -278,7 +283,6 @@ class Scene:
             name=meta.name,
             description=meta.description,
             strategies=strategies,
-            names=names,
             wanted=tuple(wanted),
             frame_every=eff.frame_every,
             series_every=eff.series_every,
@@ -357,11 +361,7 @@ def _plain(value):
         from bark.strategies import Strategy
 
         if isinstance(value, Strategy):  # a nested strategy (a bulge law's base) is named as in a scene
-            from bark import registry
-
-            name = next((n for n, ep in registry.available(value.kind).items()
-                         if ep.value.endswith(":" + type(value).__name__)), type(value).__name__)
-            params = {"name": name, **params}
+            params = {"name": registry.name_of(value), **params}
         return params
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
