@@ -2,9 +2,9 @@
 
 The leaf-base graph (networkx) is the topology of record: nodes are leaf bases, edges are *intact*
 springs.  :class:`~bark.state.State` mirrors it as arrays for the hot loop; :meth:`Simulation.join`
-(bases joining the mechanics), :meth:`Simulation.break_springs` and :meth:`Simulation.mend_springs` are
-the only places topology changes — in both at once.  Step control and the fast-path policy are :mod:`bark.stepping`'s; the
-compute backend is :mod:`bark.kernels`'; the state is data.
+(bases joining the mechanics), :meth:`Simulation.break_springs` and :meth:`Simulation.mend_springs`
+are the only places topology changes — in both at once.  Step control and the fast-path policy are
+:mod:`bark.stepping`'s; the compute backend is :mod:`bark.kernels`'; the state is data.
 """
 
 from __future__ import annotations
@@ -257,8 +257,8 @@ class Simulation:
                 self.clock.halve()  # the step was undone: take it again, smaller
                 return result.done
             raise NonFiniteStateError(
-                f"the state became NaN or infinite at t = {self.clock.t + self.clock.step:.6g} (step "
-                f"{self.step_count + 1}); the simulation holds the last finite state, t = {self.state.t:.6g}")
+                f"the state (or a breaker's load) became NaN or infinite at t = {self.clock.t + self.clock.step:.6g} "
+                f"(step {self.step_count + 1}); the simulation holds the last finite state, t = {self.state.t:.6g}")
         if stepping.steers_step(self) and result.load > 1.0 + self.numerics.overshoot_tol:  # at the smallest step
             self.events.append({"kind": "overshoot", "t": self.state.t, "step": self.step_count, "load": result.load})
         if plan.breaks == "python" or plan.breaks == "candidates" and result.picked:

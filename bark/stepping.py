@@ -279,8 +279,8 @@ def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
     r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
     sim.backend.constrain(state, r_x, r_a)
     finite = sim.backend.measure(state, mech, tension) and state.is_finite()
-    load = max((parts.largest_load(p, state, tension, state.intact) for p in {b.part_ for b in sim.breakers}
-                if p is not None), default=-math.inf) if finite else math.nan
+    loads = [parts.largest_load(p, state, tension, state.intact) for p in {b.part_ for b in sim.breakers} if p is not None]
+    load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
     done = 1
     if math.isnan(load) or load > plan.accept_load:
         for saved, arr in zip(keep, (state.x, state.v, state.anchor)):

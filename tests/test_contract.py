@@ -149,3 +149,25 @@ def test_a_part_is_one_value_compared_by_its_work():
     with pytest.raises(ValueError, match="each field once"):
         BreakerPart(rule=np.greater, reads=("tension", "stress"))
     assert not a.params.flags.writeable
+
+
+def nan_load(tension, params):
+    return tension + params[0]  # params[0] is NaN: a defective load
+
+
+@attrs.frozen(kw_only=True)
+class NaNLoad(ThresholdBreaker):
+    def part(self):
+        return attrs.evolve(super().part(), load=nan_load, load_reads=("tension",), params=[np.nan])
+
+
+@pytest.mark.parametrize("backend, integrator", [("numba", "euler-cromer"), ("numpy", "euler-cromer"),
+                                                 ("numba", "implicit-overdamped")])
+def test_a_load_that_goes_nan_stops_the_run_never_silently(backend, integrator):
+    from bark.errors import NonFiniteStateError
+
+    sim = build_sim(n_bases=200, stepping="adaptive", backend=backend, breakers=[NaNLoad()],
+                    integrator=registry.create("integrator", integrator))
+    with pytest.raises(NonFiniteStateError):
+        sim.run(Stop(until_time=2.0))
+    assert sim.step_count == 0 and np.isfinite(sim.state.x).all()
