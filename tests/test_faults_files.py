@@ -245,6 +245,7 @@ def test_empty_out_is_the_current_folder(tmp_path, monkeypatch):
     assert (tmp_path / "summary.json").is_file()
 
 
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 @settings(max_examples=25, deadline=None)
 @given(name=st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="/\0"), min_size=1, max_size=300))
 def test_any_folder_name(tmp_path_factory, name):

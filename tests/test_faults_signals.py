@@ -59,6 +59,7 @@ POINTS = random.Random(20261122).sample([0.05 * k for k in range(1, 30)], 4)
 CASES = [(signal.SIGINT, POINTS[0]), (signal.SIGTERM, POINTS[1]), (signal.SIGKILL, POINTS[2]), (signal.SIGKILL, POINTS[3])]
 
 
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 @pytest.mark.parametrize("sig, delay", CASES, ids=[f"{signal.Signals(s).name}-{d:.2f}s" for s, d in CASES])
 def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted, sig, delay):
     out = tmp_path / "out"
@@ -88,6 +89,7 @@ def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted,
     assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 def test_stopped_twice_and_resumed_twice_is_byte_identical(tmp_path, uninterrupted):
     out = tmp_path / "out"
     proc = _start(out, "--checkpoint-every", "0.2")

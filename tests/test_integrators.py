@@ -148,6 +148,7 @@ implicit_mechanics = st.builds(
 @example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), stiffness_steps=0.2, amplitude=0.08, seed=0)  # dt = 0.01
 @example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), stiffness_steps=20.0, amplitude=0.08, seed=1)  # dt = 1
 @example(mechanics=Mechanics(k=100.0, c=0.0, b=0.1, m=0.01, f_max=NO_BREAKS), stiffness_steps=1e3, amplitude=0.08, seed=2)
+@pytest.mark.slow  # seconds of implicit solves: the quick subset (-m "not slow") leaves it out
 def test_implicit_step_dissipates_energy_without_growth(mechanics, stiffness_steps, amplitude, seed):
     """With G = 0 the overdamped dynamics is a gradient flow, and the implicit step never raises the
     elastic energy — for dt up to 1000 × b/k, i.e. up to ~300 000 × the Euler–Cromer limit of the
@@ -182,6 +183,7 @@ def test_implicit_step_dissipates_energy_without_growth(mechanics, stiffness_ste
 )
 @example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), dt=0.01, amplitude=0.3, G=0.1, breaking=False, seed=0)
 @example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), dt=5.0, amplitude=0.3, G=0.1, breaking=True, seed=0)
+@pytest.mark.slow  # seconds of implicit solves: the quick subset (-m "not slow") leaves it out
 def test_implicit_step_stays_bounded_with_growth_and_large_displacements(mechanics, dt, amplitude, G, breaking, seed):
     """Any dt up to 50 (over 10⁴ × the stiff scene's explicit limit), large displacements, growth,
     breaking: the state stays finite and the elastic energy stays below a generous multiple of what

@@ -126,6 +126,7 @@ def test_console_script_is_registered():
     assert scripts == {"bark": "bark_cli.__main__:main"}
 
 
+@pytest.mark.slow  # a wheel built: the quick subset (-m "not slow") leaves it out
 def test_a_built_wheel_has_every_module(tmp_path):
     """An editable install maps folders, so it hides a package missing from the wheel's list: build
     the real wheel, install it apart, and import every module of bark, bark_plugins and bark_cli."""

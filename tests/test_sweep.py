@@ -85,6 +85,7 @@ def test_the_table_does_not_depend_on_the_number_of_workers(tmp_path):
     assert _rows(tmp_path / "one.sqlite") == _rows(tmp_path / "two.sqlite")
 
 
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 def test_the_same_sweep_on_dask_gives_the_same_table(tmp_path):
     distributed = pytest.importorskip("distributed")
     plan = Sweep(base=TINY, axes=_grid(2), seeds=(0, 1))
@@ -148,7 +149,8 @@ def test_sweep_command_writes_its_table_and_montage(tmp_path):
     (["--grid", "growth.G=1:inf:3"], "must be finite"),
     (["--grid", "growth.G=0.01,0.01"], "given twice"),
     (["--workers", "2", "--dask", "tcp://127.0.0.1:1"], "not both"),
-    (["--dask", "tcp://127.0.0.1:1"], "--dask tcp://127.0.0.1:1: no Dask scheduler"),
+    pytest.param(["--dask", "tcp://127.0.0.1:1"], "--dask tcp://127.0.0.1:1: no Dask scheduler",
+                 marks=pytest.mark.slow),  # Dask's connection timeout: 10 s
     (["--set", "lattice.n_bases=-5"], "--set lattice.n_bases=-5"),
 ])
 def test_bad_sweep_options_are_one_line_and_write_nothing(tmp_path, args, message):
@@ -187,6 +189,7 @@ def _wait_for_runs(db: Path, at_least: int, proc: subprocess.Popen, limit_s: flo
     raise AssertionError("the sweep did not get going")
 
 
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc to find the worker processes")
 def test_a_killed_worker_loses_no_finished_run_and_the_rerun_finishes(tmp_path):
     out = tmp_path / "s"
@@ -210,6 +213,7 @@ def test_a_killed_worker_loses_no_finished_run_and_the_rerun_finishes(tmp_path):
     assert len(_rows(out / "sweep.sqlite")) == 6
 
 
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_a_sweep_stopped_halfway_goes_on_without_running_a_finished_point_again(tmp_path, sig):
     out = tmp_path / "s"
