@@ -4,19 +4,13 @@ The model is Dale, Runions, Hobill & Prusinkiewicz (2014), "Modelling biomechani
 patterning in grasstrees".  See ARCHITECTURE.md for the data model, the loop and the plugin contract.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
 from bark.errors import BarkError, NonFiniteStateError
-from bark.forces import Mechanics
-from bark.lattice import Lattice
-from bark.simulation import BreakLog, Simulation, Stop
-from bark.state import State
-from bark.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
-
-try:
-    __version__ = version("bark")
-except PackageNotFoundError:  # running from a source tree that was never installed
-    __version__ = "0+unknown"
+from bark.model.forces import Mechanics
+from bark.model.lattice import Lattice
+from bark.engine.simulation import BreakLog, Simulation, Stop
+from bark.model.state import State
+from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
+from bark.version import __version__
 
 __all__ = [
     "Analysis",

@@ -37,8 +37,8 @@ import attrs
 import numpy as np
 
 from bark.errors import BarkError
-from bark.parts import spring_inputs
-from bark.strategies import KINDS, Breaker, Growth, Integrator, Strategy
+from bark.contract.parts import spring_inputs
+from bark.contract.strategies import KINDS, Breaker, Growth, Integrator, Strategy
 from bark.validators import construct
 
 __all__ = ["check_strategy"]
@@ -73,7 +73,7 @@ def check_strategy(cls: type, params: dict[str, Any] | None = None, *, examples:
 
 
 def _have_numba() -> bool:
-    from bark import kernels
+    from bark.engine import kernels
 
     return kernels.available("numba")
 
@@ -136,12 +136,12 @@ def _use(strategy) -> None:
 # -- breakers --------------------------------------------------------------------------------------
 
 def _spring_data():
-    """Random springs as a :class:`~bark.state.State` (each on a pair of bases of its own, along x,
+    """Random springs as a :class:`~bark.model.state.State` (each on a pair of bases of its own, along x,
     so that its measured length is the drawn one exactly), with their tensions and lengths."""
     from hypothesis import strategies as st
     from hypothesis.extra import numpy as hnp
 
-    from bark.state import State
+    from bark.model.state import State
 
     @st.composite
     def springs(draw):
@@ -203,7 +203,7 @@ def _breaker(breaker, profile) -> list[str]:
 def _compiled_part(part):
     if not _have_numba():
         return None
-    from bark.kernels.numba_backend import part_on_springs
+    from bark.engine.kernels.numba_backend import part_on_springs
 
     return part_on_springs(part)
 
@@ -220,8 +220,8 @@ def _growth(growth, profile) -> list[str]:
         return ["growth: no compiled form (radius runs in Python)"]
     evaluate = None
     if _have_numba():
-        from bark.kernels.numba_backend import radius_at_heights
-        from bark.physics import as_given
+        from bark.engine.kernels.numba_backend import radius_at_heights
+        from bark.model.physics import as_given
 
         evaluate = radius_at_heights(growth.compiled, growth.compiled_time or as_given)
 
@@ -249,7 +249,7 @@ def _integrator(integrator, profile) -> list[str]:
         return ["integrator: no compiled update (step runs in Python)"]
     if not _have_numba():
         return ["integrator: update (compiled check skipped: numba is not installed)"]
-    from bark.kernels.numba_backend import update_on_axis
+    from bark.engine.kernels.numba_backend import update_on_axis
 
     evaluate = update_on_axis(integrator.update)
     finite = st.floats(-1e3, 1e3)
@@ -272,12 +272,12 @@ def _integrator(integrator, profile) -> list[str]:
 def _backends(strategy) -> str:
     """A short growing, cracking run with ``strategy`` in place of the default of its kind, on the
     numpy and the numba backend: the same state, steps and break log, to the bit."""
-    from bark import registry
-    from bark.forces import Mechanics
-    from bark.lattice import Lattice
-    from bark.scene import DEFAULT_STRATEGIES
-    from bark.simulation import Simulation, Stop
-    from bark.stepping import Numerics
+    from bark.contract import registry
+    from bark.model.forces import Mechanics
+    from bark.model.lattice import Lattice
+    from bark.engine.scene import DEFAULT_STRATEGIES
+    from bark.engine.simulation import Simulation, Stop
+    from bark.engine.stepping import Numerics
 
     parts = {kind: registry.create(kind, DEFAULT_STRATEGIES[kind]) for kind in ("growth", "integrator", "breaker")}
     parts[strategy.kind] = strategy

@@ -6,11 +6,13 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 DAYS_PER_TIME_UNIT = 88.5
 METRES_PER_LENGTH_UNIT = 0.3
 DAYS_PER_YEAR = 365.25
 
-__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "years", "metres"]
+__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "years", "metres", "unwrap"]
 
 
 def years(t):
@@ -21,3 +23,10 @@ def years(t):
 def metres(length):
     """A length (length units) in metres."""
     return length * METRES_PER_LENGTH_UNIT
+
+
+def unwrap(x: np.ndarray, radius: float) -> np.ndarray:
+    """``(arc length, height)`` of 3-D points on the trunk, arc length ``r·θ`` in ``[0, 2πr)`` with θ
+    increasing to the right as seen from outside the trunk (bark's convention)."""
+    theta = np.mod(np.arctan2(x[:, 1], x[:, 0]), 2 * np.pi)
+    return np.column_stack([radius * theta, x[:, 2]])

@@ -11,7 +11,7 @@ a real parameter lies in ``[1e-12, 1e12]`` (``positive``) or ``[0, 1e12]`` (``no
 that products and squares of a few of them stay far from overflow and underflow; an integer count
 fits the 32-bit indices the kernels use.  Limits that depend on several settings at once (a lattice
 with no springs, a stop condition that can never hold, more steps than time can count) are checked
-where those settings meet (``bark.scene``, ``bark.simulation``).
+where those settings meet (``bark.engine.scene``, ``bark.engine.simulation``).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The development animation: the unwrapped pattern through time, like the paper's videos S1–S3.
 
-Frames are recorded along the way (``bark.output.Frames``, an action on ``Every(frame_every)``),
+Frames are recorded along the way (``bark.io.recorders.Frames``, an action on ``Every(frame_every)``),
 only when a scene asks for the ``animation`` effect; this module draws them into a GIF with
 Pillow (matplotlib's own image dependency), with the figure bounded as ``pattern.png``'s is.
 
@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from bark.analysis import count_patches
-from bark.output import Frames, atomic_write
+from bark.model.graph import count_patches
+from bark.io.recorders import Frames
+from bark.io.files import atomic_write
 from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, patch_colours, raster_values
 
 
@@ -73,9 +74,9 @@ def _dots(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.I
 
 def _cells(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.Image]:
     """Each frame's raster placed into the axes drawn once, as palette images (see the module's
-    docstring): the axes' own colours first, then the patches' (``bark.pattern.PALETTE``, then the
+    docstring): the axes' own colours first, then the patches' (``bark.analysis.pattern.PALETTE``, then the
     fragments' grey)."""
-    from bark.pattern import FRAGMENT_GREY, PALETTE, label_colours
+    from bark.analysis.pattern import FRAGMENT_GREY, PALETTE, label_colours
 
     fig.canvas.draw()
     rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]

@@ -10,7 +10,7 @@ import tracemalloc
 import click
 import numpy as np
 
-from bark.simulation import Stop
+from bark.engine.simulation import Stop
 
 
 @click.group()
@@ -41,7 +41,7 @@ def _case(n: int, case: str) -> dict:
 def _phase_sim(n: int, backend: str, start_t: float, case: str = "default", threads: int = 0):
     """``case`` at ``n`` bases on ``backend`` (with ``threads``), stepped as the paper did (fixed
     dt = 0.01, so that a step is the same work whatever the backend), compiled and run up to ``start_t``."""
-    from bark.scene import Scene, merge
+    from bark.engine.scene import Scene, merge
 
     run = {"backend": backend, "threads": threads, "dt": 0.01, "stepping": "fixed", "until_time": 1e6}  # the bench stops it
     sim = Scene.from_dict(merge(_case(n, case), {"run": run})).simulation()
@@ -154,7 +154,7 @@ def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_pat
     from rich.table import Table
 
     backends = (("numpy", 1), *[(b, t) for b in dict.fromkeys(backends) if b != "numpy" for t in dict.fromkeys(thread_counts)])
-    from bark.scene import Scene
+    from bark.engine.scene import Scene
 
     for n in sizes:  # every size is a valid scene that fits in memory, before any work
         Scene.from_dict({"lattice": {"n_bases": n}, "run": {"until_time": 1e6}}).memory_estimate()
@@ -183,14 +183,14 @@ def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_pat
         table.add_row(*(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r.values()))
     Console(width=140).print(table)
     if csv_path:
-        from bark.output import write_csv
+        from bark.io.files import write_csv
 
         write_csv(csv_path, rows, list(rows[0]))
 
 
 def _accuracy_methods(quick: bool, integrators=()):
     """Position and pattern methods to study, of the given integrators (none given: all)."""
-    from bark.accuracy import Method
+    from bark.studies.accuracy import Method
 
     ec, io = "euler-cromer", "implicit-overdamped"
     position = {Method(ec): [0.16, 0.08, 0.04, 0.02, 0.01], Method(io): [0.16, 0.08, 0.04, 0.02, 0.01]}
@@ -233,16 +233,16 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, ou
     from rich.console import Console
     from rich.table import Table
 
-    from bark.accuracy import METRICS, pareto_front, pattern_study, position_study
-    from bark.output import write_csv, write_json
-    from bark.scene import RunSettings, read_toml
+    from bark.studies.accuracy import METRICS, pareto_front, pattern_study, position_study
+    from bark.io.files import write_csv, write_json
+    from bark.engine.scene import RunSettings, read_toml
     from bark_cli.plot import plot_work_precision
 
     console = Console(width=150)
     scene = read_toml(scene_file) if scene_file else {}
     scene.pop("run", None)  # the study sets dt, stepping, seed and stop itself
-    from bark.folder import writable_folder
-    from bark.scene import Scene, merge
+    from bark.io.folder import writable_folder
+    from bark.engine.scene import Scene, merge
     from bark_cli.options import NAMER, Provenance
 
     NAMER.set(Provenance(aliases={("run", "dt"): "--reference-dt", ("run", "until_time"): "--until-time",

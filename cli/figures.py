@@ -1,4 +1,4 @@
-"""The paper's statistical figures, drawn from ``bark.pattern`` / ``bark.compare`` objects.
+"""The paper's statistical figures, drawn from ``bark.analysis.pattern`` / ``bark.analysis.compare`` objects.
 
 * ``plot_radial``: orientation × anisotropy per patch on a polar plot (Fig. 6B / 7B): angle =
   orientation (90° = up the trunk), radius = anisotropy 0–1, each patch drawn at θ and θ + 180° (an
@@ -20,8 +20,8 @@ from matplotlib import colormaps
 from matplotlib.colors import LogNorm, Normalize
 from matplotlib.ticker import MaxNLocator
 
-from bark.compare import QUANTITIES, Comparison
-from bark.pattern import PatternStatistics
+from bark.analysis.compare import QUANTITIES, Comparison
+from bark.analysis.pattern import PatternStatistics
 from bark_cli.options import value_text
 from bark_cli.plot import new_figure, save_figure
 
@@ -189,7 +189,7 @@ def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | No
 
 
 def plot_fracture_history(history, path: str | Path) -> Path:
-    """A run's fracture history (``bark.fracture.FractureHistory``): broken springs and cracks (top),
+    """A run's fracture history (``bark.analysis.fracture.FractureHistory``): broken springs and cracks (top),
     patches and the damping's power per base (bottom) against time in years; the initial fractures
     (the most cracks at once) and the initial fracture phase marked."""
     from bark.units import years
@@ -223,7 +223,7 @@ def plot_fracture_history(history, path: str | Path) -> Path:
 def plot_power_law(x: np.ndarray, y: np.ndarray, groups: np.ndarray, fit, path: str | Path, group_label: str,
                    xlabel: str) -> Path:
     """Initial fractures against the dissipation rate on log–log axes, one colour per value of
-    ``groups`` (a swept setting), with the fitted power law ``fit`` (``bark.fracture.PowerLaw``)."""
+    ``groups`` (a swept setting), with the fitted power law ``fit`` (``bark.analysis.fracture.PowerLaw``)."""
     fig = new_figure(figsize=(6.0, 4.6), dpi=130)
     ax = fig.add_subplot()
     values = sorted(set(groups.tolist()))

@@ -5,7 +5,7 @@
     bark strategies                                      # what is installed, by kind
     bark bench speed                                     # steps per second
 
-The CLI parses and reports; running a scene to its outputs is the library's (``bark.runner``).
+The CLI parses and reports; running a scene to its outputs is the library's (``bark.studies.runner``).
 Errors in what the user typed (an option value, a scene key, a file) print one line naming the
 option or scene key as the user gave it, and exit with status 2, before anything is written.
 """
@@ -21,8 +21,8 @@ import threading
 import click
 
 from bark.errors import BarkError
-from bark.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
-from bark.strategies import KINDS
+from bark.engine.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
+from bark.contract.strategies import KINDS
 from bark_cli import REASONS, Interrupted
 from bark_cli.options import (NAMER, LazyHelpOption, Provenance, name_ref, overrides_from, parameter_options,
                               setting_value, split_setting)
@@ -63,7 +63,7 @@ def cli():
 
 def _strategy_option(kind: str):
     def text() -> str:
-        from bark import registry
+        from bark.contract import registry
 
         return (f"{kind.capitalize()} strategy, by name: {', '.join(registry.available(kind)) or 'none installed'} "
                 f"(`bark strategies` shows their parameters). [default: {DEFAULT_STRATEGIES[kind]}]")
@@ -257,7 +257,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
     pattern.png, patches.csv, breaks.csv, summary.json, state.npz, checkpoint.npz) to --out.
     Any --until-* option replaces the scene's stop conditions.  Ctrl-C or SIGTERM stops between
     steps, writes the outputs and a checkpoint, and prints the command that goes on."""
-    from bark import runner
+    from bark.studies import runner
 
     if resume is not None:
         given = [p for p, v in ctx.params.items()
@@ -337,8 +337,7 @@ def plan(scene_file):
     from rich.markup import escape
     from rich.table import Table
 
-    from bark.effects import EFFECTS
-    from bark.scene import available_memory
+    from bark.engine.scene import available_memory
 
     prov = Provenance()
     NAMER.set(prov.name)
@@ -346,7 +345,7 @@ def plan(scene_file):
     resolved = scene.effects
     parts = scene.components()  # what would be built, without building it
     table = Table("effect", "in the run", "why", "what it does", title=f"bark plan — {scene.name or scene_file or 'default scene'}")
-    for name, effect in EFFECTS.items():
+    for name, effect in scene.known_effects.items():
         on = name in resolved
         table.add_row(name, "yes" if on else "no", resolved.get(name, "not asked for"), escape(effect.does),
                       style=None if on else "dim")
@@ -374,8 +373,8 @@ def strategies():
     from rich.markup import escape
     from rich.table import Table
 
-    from bark import registry
-    from bark.parts import how_it_runs
+    from bark.contract import registry
+    from bark.contract.parts import how_it_runs
 
     table = Table("kind", "name", "class", "parameters", "runs")
     for column in table.columns[:2]:

@@ -1,8 +1,8 @@
 """Command-line options generated from the parameter classes, so options and fields never drift —
 and the way back: naming a scene setting in the terms the user typed it.
 
-Every init field of :class:`~bark.lattice.Lattice`, :class:`~bark.forces.Mechanics` and
-:class:`~bark.scene.RunSettings` becomes ``--field-name`` (underscores → dashes).  Its help is the
+Every init field of :class:`~bark.model.lattice.Lattice`, :class:`~bark.model.forces.Mechanics` and
+:class:`~bark.engine.scene.RunSettings` becomes ``--field-name`` (underscores → dashes).  Its help is the
 field's docstring (meaning and units), read only when help is shown; a field validated by ``one_of``
 lists its choices.  An option left out is ``None`` and leaves the scene's value alone.
 
@@ -25,9 +25,9 @@ import attrs
 import click
 
 from bark.errors import Ref, show
-from bark.forces import Mechanics
-from bark.lattice import Lattice
-from bark.scene import RUN_FIELDS, STRATEGY_SECTIONS, RunSettings
+from bark.model.forces import Mechanics
+from bark.model.lattice import Lattice
+from bark.engine.scene import RUN_FIELDS, STRATEGY_SECTIONS, RunSettings
 
 SECTIONS = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings}
 SHORTCUTS = {("growth", "r0"): "--r0", ("growth", "G"): "-G", (None, "out"): "--out", (None, "resume"): "--resume",

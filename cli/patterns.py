@@ -1,7 +1,7 @@
 """``bark analyze`` and ``bark compare``: patterns measured and compared as in the paper.
 
 A PATTERN argument is a run's output folder (its state.npz), a state file (.npz), a CSV of leaf-base
-centres (simulated, or digitised from a photograph: the format is in ``bark.pattern``) or a TOML
+centres (simulated, or digitised from a photograph: the format is in ``bark.analysis.pattern``) or a TOML
 summary of a published pattern (``[pattern]``: n_patches, mean_orientation_deg, sd_orientation_deg,
 optionally mean_anisotropy and sd_anisotropy).  Every argument is read and checked before anything
 is written.
@@ -23,7 +23,7 @@ def _namer() -> None:
 
 
 def _read_all(paths, min_size):
-    from bark.pattern import read
+    from bark.analysis.pattern import read
 
     return [read(p, min_size) for p in paths]
 
@@ -61,8 +61,8 @@ def analyze(pattern, min_size, out):
     paper's Fig. 6B, C / 7B, C)."""
     from rich.console import Console
 
-    from bark.folder import writable_folder
-    from bark.output import write_csv, write_json
+    from bark.io.folder import writable_folder
+    from bark.io.files import write_csv, write_json
 
     _namer()
     (stats,) = _read_all([pattern], min_size)
@@ -100,10 +100,10 @@ def compare(patterns, min_size, mirror, out):
     from rich.console import Console
     from rich.table import Table
 
-    from bark.compare import QUANTITIES, compare as compare_all
+    from bark.analysis.compare import QUANTITIES, compare as compare_all
     from bark.errors import BarkError
-    from bark.folder import writable_folder
-    from bark.output import write_json
+    from bark.io.folder import writable_folder
+    from bark.io.files import write_json
 
     _namer()
     if len(patterns) < 2:

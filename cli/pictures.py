@@ -25,8 +25,8 @@ import attrs
 import numpy as np
 
 from bark.errors import one_line
-from bark.output import unwrap
-from bark.stepping import cores
+from bark.units import unwrap
+from bark.engine.stepping import cores
 from bark.units import metres
 
 
@@ -38,7 +38,7 @@ class PatternData:
     uv: np.ndarray
     labels: np.ndarray
     colours: np.ndarray
-    """RGB (uint8) per base: neighbouring patches never share one (``bark.pattern.patch_colours``)."""
+    """RGB (uint8) per base: neighbouring patches never share one (``bark.analysis.pattern.patch_colours``)."""
     springs: np.ndarray
     n_bases: int
     radius: float
@@ -49,7 +49,7 @@ class PatternData:
     @classmethod
     def of(cls, sim, min_size: int) -> "PatternData":
         s, r = sim.state, sim.radius
-        from bark.pattern import simulation_colours
+        from bark.analysis.pattern import simulation_colours
 
         return cls(uv=unwrap(s.x, r), labels=sim.patch_labels(), colours=simulation_colours(sim, min_size),
                    springs=np.asarray(s.pairs[s.intact]),
@@ -76,9 +76,9 @@ class TreeData:
 
     @classmethod
     def of(cls, sim, min_size: int, dome) -> "TreeData":
-        from bark.mesh import leaf_quads
-        from bark.pattern import simulation_colours
-        from bark.tree import Apex
+        from bark.io.mesh import leaf_quads
+        from bark.analysis.pattern import simulation_colours
+        from bark.model.tree import Apex
 
         quads = leaf_quads(sim)
         depth = quads[..., 1].mean(axis=1)  # towards the viewer

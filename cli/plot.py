@@ -16,7 +16,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from scipy.ndimage import distance_transform_edt  # here, not in raster(): the drawing process imports it while the run goes on
 
-from bark.output import atomic_write
+from bark.io.files import atomic_write
 
 
 def new_figure(**kwargs) -> Figure:
@@ -42,7 +42,7 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     the grey the legend names."""
     from matplotlib.patches import Patch
 
-    from bark.pattern import FRAGMENT_GREY
+    from bark.analysis.pattern import FRAGMENT_GREY
     from bark.units import METRES_PER_LENGTH_UNIT, years
 
     uv, r = data.uv * METRES_PER_LENGTH_UNIT, data.radius * METRES_PER_LENGTH_UNIT  # metres from here on
@@ -125,15 +125,15 @@ def raster_values(uv: np.ndarray, values: np.ndarray, width: float, z_lo: float,
 
 
 def rgba(rgb: np.ndarray) -> np.ndarray:
-    """RGB uint8 (``bark.pattern.patch_colours``) as matplotlib's RGBA floats."""
+    """RGB uint8 (``bark.analysis.pattern.patch_colours``) as matplotlib's RGBA floats."""
     rgb = np.asarray(rgb)
     return np.column_stack([rgb / 255.0, np.ones(len(rgb))])
 
 
 def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
     """RGBA per base by patch label (stable from frame to frame: the animation's colouring), fragment
-    grey under ``min_size``; ``bark.pattern.patch_colours``."""
-    from bark.pattern import patch_colours as rgb
+    grey under ``min_size``; ``bark.analysis.pattern.patch_colours``."""
+    from bark.analysis.pattern import patch_colours as rgb
 
     return rgba(rgb(labels, min_size))
 
@@ -141,7 +141,7 @@ def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
 def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None, title=""):
     """Work-precision diagram: log-log error against wall time, one line per method, one marker per
     dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""
-    from bark.accuracy import METRICS
+    from bark.studies.accuracy import METRICS
 
     fig = new_figure(figsize=(13, 9), dpi=120)
     axes = fig.subplots(2, 2).ravel()

@@ -33,7 +33,7 @@ def _fields(sim, stop) -> dict:
 
 
 class ProgressBar:
-    """An ``observe(sim, stop)`` callback for :func:`bark.runner.run` that shows a progress bar,
+    """An ``observe(sim, stop)`` callback for :func:`bark.studies.runner.run` that shows a progress bar,
     refreshed at most every ``every_s``; it starts at the first call and ends at :meth:`close`."""
 
     def __init__(self, every_s: float = 0.1) -> None:

@@ -17,10 +17,10 @@ CONTEXT = {"help_option_names": ["-h", "--help"]}
 
 def parse_grid(items: tuple[str, ...]):
     """``--grid growth.G=0.007,0.011,0.014`` or ``--grid growth.G=0.005:0.015:5`` (5 values from
-    0.005 to 0.015) → :class:`bark.sweep.Axis` es, and the tables they touch (for messages)."""
+    0.005 to 0.015) → :class:`bark.studies.sweep.Axis` es, and the tables they touch (for messages)."""
     import numpy as np
 
-    from bark.sweep import Axis
+    from bark.studies.sweep import Axis
 
     axes, layer = [], {}
     for item in items:
@@ -66,9 +66,9 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
-    from bark.folder import writable_folder
-    from bark.scene import merge, read_toml
-    from bark.sweep import FIG9_AXES, Axis, Sweep, WorkerDied, run_sweep
+    from bark.io.folder import writable_folder
+    from bark.engine.scene import merge, read_toml
+    from bark.studies.sweep import FIG9_AXES, Axis, Sweep, WorkerDied, run_sweep
     from bark_cli.main import _parse_set
     from bark_cli.options import NAMER, Provenance
 
@@ -101,7 +101,7 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
             click.echo(f"bark: {err}", err=True)
             sys.exit(1)
         except KeyboardInterrupt:
-            from bark.sweep import SweepTable
+            from bark.studies.sweep import SweepTable
 
             with SweepTable(folder / "sweep.sqlite") as table:
                 n = len(table.done() & {p.key for p in plan.points()})
@@ -151,7 +151,7 @@ class _bar:
 
 
 def _finish(plan, folder, counts: dict, quiet: bool) -> None:
-    from bark.sweep import SweepTable
+    from bark.studies.sweep import SweepTable
     from bark_cli.figures import plot_montage
 
     points = plan.points()

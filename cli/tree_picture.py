@@ -1,9 +1,9 @@
 """The whole tree seen from the side (``tree-image`` effect, tree.png; the paper's Fig. 10).
 
-An orthographic view along −y of the trunk's leaf bases — each its rhomboid (``bark.mesh``), coloured
+An orthographic view along −y of the trunk's leaf bases — each its rhomboid (``bark.io.mesh``), coloured
 by patch, fragments grey, cracks showing as the gaps between bases — with the trunk's outline
 (bulges stand out) and the apical dome on top, its leaf bases where Ridley's placement puts them
-(``bark.tree.Apex``).  Only the half facing the viewer is drawn,
+(``bark.model.tree.Apex``).  Only the half facing the viewer is drawn,
 far bases first.  Lengths in metres, the title in years.  A bounded figure: the trunk's height sets
 it, at most ``MAX_HEIGHT_IN`` inches.
 """

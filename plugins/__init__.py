@@ -2,5 +2,5 @@
 
 They are registered in bark's ``pyproject.toml`` under the same entry-point groups a third-party
 plugin uses (``bark.growth``, ``bark.integrator``, ``bark.breaker``, ``bark.analyzer``), so the one
-lookup path in :mod:`bark.registry` serves both.
+lookup path in :mod:`bark.contract.registry` serves both.
 """

@@ -5,9 +5,9 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from bark import physics
-from bark.parts import BreakerPart
-from bark.strategies import Breaker
+from bark.model import physics
+from bark.contract.parts import BreakerPart
+from bark.contract.strategies import Breaker
 from bark.validators import non_negative, positive
 
 __all__ = ["ThresholdBreaker", "ProbabilisticBreaker", "stretched"]
@@ -22,7 +22,7 @@ def stretched(tension, params):
 class ThresholdBreaker(Breaker):
     """The paper's rule: an intact spring breaks when its tension ``k(|d| − l)`` exceeds its own
     threshold ``state.fmax`` (per spring, never collapsed to per base).  Deterministic.  Its part is
-    the rule itself (``bark.physics.over_threshold``), so springs break inside the stepping kernel
+    the rule itself (``bark.model.physics.over_threshold``), so springs break inside the stepping kernel
     and ``select`` follows from the same function; its load is ``tension / f_max``, which adaptive
     stepping keeps from passing 1 by more than the overshoot tolerance."""
 

@@ -10,7 +10,9 @@ import numpy as np
 
 from bark.validators import construct, non_negative, optional, positive
 from bark.errors import BarkError, Ref
-from bark.strategies import Growth, weighted_radius
+from bark.contract.strategies import Growth
+from bark.model.effects import Effect
+from bark.model.physics import weighted_radius
 
 __all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth", "bulge_radius", "bulge_time", "bulge_weights",
            "sin2_profile"]
@@ -67,7 +69,7 @@ def _base(value):
     if isinstance(value, Growth):
         return value
     if isinstance(value, dict):
-        from bark import registry
+        from bark.contract import registry
 
         params = dict(value)
         name = params.pop("name", "sqrt")
@@ -239,6 +241,13 @@ class BulgeGrowth(Growth):
     """The law the bulges sit on (any growth strategy; a scene gives it as a table)."""
     bulges: tuple[Bulge, ...] = attrs.field(default=(), converter=_bulges)
     """The bulges (a scene gives them as an array of tables)."""
+
+    provides: ClassVar[tuple[Effect, ...]] = (
+        Effect("bulges", "bulges raise the trunk locally ([growth] name = 'bulge')", ("secondary-growth",)),)
+
+    def without(self, effect: str) -> Growth:
+        """Without its bulges, the law they sit on: the bulge code is never built."""
+        return self.base
 
     @property
     def compiled(self):

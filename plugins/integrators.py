@@ -9,8 +9,8 @@ import numpy as np
 
 from bark.validators import one_of, positive, positive_int
 from bark.errors import BarkError, Ref
-from bark.stability import euler_cromer_h_max
-from bark.strategies import Integrator
+from bark.model.stability import euler_cromer_h_max
+from bark.contract.strategies import Integrator
 
 __all__ = ["EulerCromer", "ImplicitOverdamped"]
 
@@ -66,6 +66,7 @@ class ImplicitOverdamped(Integrator):
     as at 3000.
     """
 
+    overdamped: ClassVar[bool] = True
     rtol: float = attrs.field(default=1e-8, validator=positive)
     """Relative residual at which CG stops."""
     maxiter: int = attrs.field(default=1000, validator=positive_int)

@@ -20,7 +20,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from bark import Lattice, Mechanics, Simulation
-from bark.stepping import Numerics
+from bark.engine.stepping import Numerics
 from bark_plugins.breakers import ThresholdBreaker
 from bark_plugins.growth import SqrtGrowth
 from bark_plugins.integrators import EulerCromer

@@ -9,16 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bark.analysis import (
-    axial_difference,
-    axial_mean,
-    axial_sd,
-    patch_statistics,
-    pattern_summary,
-    principal_axes,
-    tangent_plane,
-    window_labels,
-)
+from bark.analysis.circular import axial_difference, axial_mean, axial_sd, principal_axes, tangent_plane
+from bark.analysis.patches import patch_statistics, pattern_summary, window_labels
 from bark_plugins.analyzers import PatchAnalyzer
 
 
@@ -229,7 +221,7 @@ def test_patch_analyzer_on_digitised_points():
     points, labels = _digitised_pattern()
     result = PatchAnalyzer(min_size=7).analyze(points, labels)
     assert result.summary["n_patches"] == 2
-    assert len(result.tables["patches"]) == 2
+    assert len(result.patches) == 2
 
 
 def test_pattern_summary_fraction_within_45():
@@ -263,7 +255,7 @@ def test_analyze_a_simulated_pattern(broken_sim):
     assert list(results) == []  # the factory builds simulations without analyzers
     labels = broken_sim.patch_labels()
     analysis = PatchAnalyzer(min_size=7).analyze(broken_sim.state.x, labels)
-    rows = analysis.tables["patches"]
+    rows = analysis.patches
     assert len(rows) == broken_sim.patch_count(7) == analysis.summary["n_patches"]
     assert sum(r["size"] for r in rows) == np.sum(np.bincount(labels)[np.bincount(labels) >= 7])
     for r in rows:
@@ -276,7 +268,7 @@ def test_analyze_a_simulated_pattern(broken_sim):
 
 
 def test_hellinger_matches_the_paper_formula():
-    from bark.analysis import hellinger
+    from bark.analysis.circular import hellinger
 
     assert hellinger(3.0, 2.0, 3.0, 2.0) == 0.0
     # eqs. 12–14 by hand: β = √(2·1·2/(1+4)) = √0.8, γ = −¼·(0−1)²/5 = −0.05
@@ -286,9 +278,9 @@ def test_hellinger_matches_the_paper_formula():
 
 
 def test_orientation_hellinger_treats_orientations_as_axes():
-    from bark.analysis import orientation_hellinger
+    from bark.analysis.circular import orientation_hellinger
 
-    from bark.analysis import axial_sd
+    from bark.analysis.circular import axial_sd
 
     near_horizontal = np.array([175.0, 178.0, 2.0, 5.0])  # around 0° ≡ 180°
     sd = axial_sd(near_horizontal)
@@ -301,7 +293,7 @@ def test_orientation_hellinger_treats_orientations_as_axes():
 
 
 def test_standard_error_difference_is_eq_15_and_asymmetric():
-    from bark.analysis import standard_error_difference
+    from bark.analysis.circular import standard_error_difference
 
     assert standard_error_difference(10.0, 2.0, 16.0) == pytest.approx(3.0)
     assert standard_error_difference(16.0, 0.5, 10.0) == pytest.approx(12.0)

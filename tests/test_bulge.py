@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from bark import Stop
 from bark.errors import BarkError
-from bark.scene import Scene
+from bark.engine.scene import Scene
 from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 from conftest import build_sim
 
@@ -97,8 +97,8 @@ def test_bad_bulge_is_one_line(bulge, key):
 def test_pattern_statistics_per_region_near_bulges_and_away():
     """summary.json ``regions``: each patch counted in the region of its centroid (bulge or straight),
     the two counts adding up to all patches; a trunk without bulges has one region and no table."""
-    from bark import runner
-    from bark.scene import Scene
+    from bark.studies import runner
+    from bark.engine.scene import Scene
 
     data = {"lattice": {"n_bases": 1500}, "growth": {"name": "bulge", "base": {"name": "sqrt", "G": 0.05},
                                                      "bulges": [{"z": 0.2, "half_width": 0.15, "magnitude": 0.01}]},
@@ -173,8 +173,8 @@ def test_weights_wrong_only_where_bases_join_later_are_refused_as_they_join():
     """Bases that join during the run have their weights checked too, in batches as they join: a
     law whose weights break their promise only above the first trunk's top is refused before the
     run ends."""
-    from bark.kernels.numba_backend import CHECK_BATCH
-    from bark.lattice import Lattice
+    from bark.engine.kernels.numba_backend import CHECK_BATCH
+    from bark.model.lattice import Lattice
     from bark_plugins.growth import bulge_weights
 
     lattice = Lattice(n_bases=300 + 2 * CHECK_BATCH, n_start=300, join_rate=400.0, join_every=0.1, rise=0.0005)
@@ -216,7 +216,7 @@ def _compiled_radii():
     """``bulge_radii`` compiled as the kernel compiles it (its helpers inlined)."""
     import numba
 
-    from bark.kernels.numba_backend import _helpers, _make_jitable
+    from bark.engine.kernels.numba_backend import _helpers, _make_jitable
     from bark_plugins.growth import bulge_radii
 
     _make_jitable(_helpers(bulge_radii)[1:])
@@ -254,8 +254,8 @@ def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, height
 def test_a_law_without_a_block_form_steps_to_the_same_bits():
     """The kernel calls a law's ``compiled`` per height when the law gives no ``compiled_radii``: the
     same state, to the bit, as with the bulge law's block form."""
-    from bark import stepping
-    from bark.lattice import Lattice
+    from bark.engine import stepping
+    from bark.model.lattice import Lattice
 
     @attrs.frozen(kw_only=True)
     class PerHeight(BulgeGrowth):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from bark import checkpoint
+from bark.io import checkpoint
 from bark_cli.main import cli
 
 SMALL = ["--n-bases", "600", "-G", "0.03", "--until-time", "40", "--quiet"]
@@ -70,8 +70,9 @@ def test_a_resumed_run_goes_on_with_the_backend_it_had(tmp_path, monkeypatch):
     """``auto`` decides by the process (is numba loaded?) and the time left, and the backends' own
     transcendental functions may differ in the last bit: a resumed run keeps the backend the run was
     on, so it ends bit for bit where the uninterrupted run ends."""
-    from bark import kernels, runner
-    from bark.scene import Scene
+    from bark.engine import kernels
+    from bark.studies import runner
+    from bark.engine.scene import Scene
 
     scene = Scene.from_dict({"lattice": {"n_bases": 600}, "growth": {"G": 0.03}, "run": {"until_time": 20.0}})
     assert scene.run.backend == "auto"

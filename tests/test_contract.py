@@ -13,8 +13,10 @@ import attrs
 import numpy as np
 import pytest
 
-from bark import Stop, registry, stepping
-from bark.parts import BreakerPart, how_it_runs
+from bark import Stop
+from bark.contract import registry
+from bark.engine import stepping
+from bark.contract.parts import BreakerPart, how_it_runs
 from bark.testing import check_strategy
 from bark_plugins.breakers import ProbabilisticBreaker, ThresholdBreaker
 from conftest import REPO_ROOT, build_sim

@@ -10,9 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from bark import Stop
-from bark.effects import DEFAULT, EFFECTS, resolve
+from bark.model.effects import DEFAULT, EFFECTS, resolve
 from bark.errors import BarkError
-from bark.scene import Scene
+from bark.engine.scene import Scene
 from bark_cli.main import cli
 from conftest import REPO_ROOT
 
@@ -124,7 +124,7 @@ def test_plan_shows_different_effect_sets_for_the_three_scenes():
                        if line.count("│") >= 4 and "│ yes" in line}
     assert shown["statistics-only"] == {"secondary-growth", "anchors", "damping", "fracture", "patch-statistics"}
     assert shown["pattern-image"] == {"secondary-growth", "anchors", "damping", "fracture", "pattern-image"}
-    assert shown["everything"] == set(EFFECTS)
+    assert shown["everything"] == set(EFFECTS) | {"bulges"}  # the model's effects and the bulge law's own
 
 
 def _simulate_small(tmp_path, effects_table: str):
@@ -155,8 +155,8 @@ def test_each_animation_frame_shows_its_own_pattern_only(tmp_path, n):
     is the same image whether another came before it or not)."""
     from PIL import Image
 
-    from bark.output import Frames
-    from bark.pattern import PALETTE
+    from bark.io.recorders import Frames
+    from bark.analysis.pattern import PALETTE
     from bark_cli.animation import write_gif
     from bark_cli.plot import SPRINGS_UP_TO
 
@@ -190,7 +190,7 @@ def test_each_animation_frame_shows_its_own_pattern_only(tmp_path, n):
 def test_graphml_is_the_graph_of_record(tmp_path):
     import networkx as nx
 
-    from bark.output import write_graphml
+    from bark.io.output import write_graphml
 
     sim = _scene(DEFAULT).simulation()
     sim.run(Stop(until_time=6.0))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from click.testing import CliRunner
 
-from bark import simulation
+from bark.engine import simulation
 from bark_cli.main import cli
 
 from conftest import assert_clean_outcome

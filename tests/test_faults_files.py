@@ -15,10 +15,11 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bark import checkpoint, runner
+from bark.io import checkpoint
+from bark.studies import runner
 from bark.errors import BarkError
-from bark.folder import OutputFolder
-from bark.scene import Scene
+from bark.io.folder import OutputFolder
+from bark.engine.scene import Scene
 from bark_cli.main import cli
 
 from conftest import assert_clean_outcome
@@ -77,7 +78,7 @@ def _rewrite(path: Path, change) -> None:
     if not keep_sums:
         meta["checksums"] = {k: checkpoint.digest(v) for k, v in arrays.items()}
     path.unlink()
-    from bark.output import write_npz
+    from bark.io.files import write_npz
 
     write_npz(path, compress=False, meta=np.array(json.dumps(meta)), **arrays)
 
@@ -138,7 +139,7 @@ def _rewrite_meta_text(path: Path, text: str) -> None:
         arrays = {k: data[k] for k in data.files}
     arrays["meta"] = np.array(text)
     path.unlink()
-    from bark.output import write_npz
+    from bark.io.files import write_npz
 
     write_npz(path, compress=False, **arrays)
 

@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from bark import checkpoint, runner
+from bark.io import checkpoint
+from bark.studies import runner
 from bark_cli.main import cli
 
 from conftest import REPO_ROOT, assert_clean_outcome
@@ -200,7 +201,7 @@ def test_a_signal_while_the_program_loads_is_one_line(tmp_path, sig):
 
 # a signal raised inside code that a string `exec` runs (importing scipy and numba runs such code),
 # under `python -m`: a finder, installed by a sitecustomize, raises it when a module is looked up —
-# while the program loads (bark_cli.main), between loading and the run's own handlers (bark.runner),
+# while the program loads (bark_cli.main), between loading and the run's own handlers (bark.studies.runner),
 # and while the scene is built (the numba backend)
 _SIGNAL_IN_EXEC = """
 import os, signal, sys
@@ -214,8 +215,8 @@ sys.meta_path.insert(0, _Finder())
 BEFORE_THE_RUN = " before the run began: nothing was run"
 
 
-@pytest.mark.parametrize("module, said", [("bark_cli.main", BEFORE_THE_RUN), ("bark.runner", ""),
-                                          ("bark.kernels.numba_backend", BEFORE_THE_RUN)],
+@pytest.mark.parametrize("module, said", [("bark_cli.main", BEFORE_THE_RUN), ("bark.studies.runner", ""),
+                                          ("bark.engine.kernels.numba_backend", BEFORE_THE_RUN)],
                          ids=["loading", "between", "building"])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: signal.Signals(s).name)
 def test_a_signal_stopping_code_run_by_exec_exits_with_its_status(tmp_path, module, said, sig):

@@ -1,4 +1,4 @@
-"""The forces (eqs. 1–4), as both backends evaluate them from bark.physics, and the thresholds."""
+"""The forces (eqs. 1–4), as both backends evaluate them from bark.model.physics, and the thresholds."""
 
 from __future__ import annotations
 
@@ -10,9 +10,10 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from bark import kernels, physics
-from bark.forces import Mechanics, SpringOrder, incidence, spring_geometry
-from bark.state import State
+from bark.engine import kernels
+from bark.model import physics
+from bark.model.forces import Mechanics, SpringOrder, incidence, spring_geometry
+from bark.model.state import State
 
 BACKENDS = ["numpy", "numba"]
 

@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bark import runner
+from bark.studies import runner
 from bark.errors import BarkError
-from bark.fracture import crack_counts, patch_count, power_law
-from bark.scene import Scene
+from bark.analysis.fracture import crack_counts, patch_count, power_law
+from bark.engine.scene import Scene
 
 A, B, N = 3, 5, 60
 PAIRS = np.array([(i, i + o) for o in (A, B) for i in range(N - o)], dtype=np.int64)
@@ -112,7 +112,7 @@ def test_the_effect_writes_the_history_that_matches_the_run(tmp_path):
 
 def test_the_history_of_a_growing_trunk_counts_bases_from_their_join():
     """A chain of 10 bases of which 5 are there before t = 1; spring (4, 5) breaks at t = 1.5."""
-    from bark.fracture import history
+    from bark.analysis.fracture import history
 
     pairs = np.array([(i, i + 1) for i in range(9)])
     log = {"spring": np.array([4]), "t": np.array([1.5])}

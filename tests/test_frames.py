@@ -10,8 +10,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from bark import Stop
-from bark.kernels import numba_backend
-from bark.lattice import Lattice
+from bark.engine.kernels import numba_backend
+from bark.model.lattice import Lattice
 from bark_plugins.breakers import ProbabilisticBreaker
 from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 from conftest import build_sim

@@ -18,9 +18,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bark import Lattice, Stop, runner
-from bark.scene import Scene
-from bark.strategies import Integrator
+from bark import Lattice, Stop
+from bark.studies import runner
+from bark.engine.scene import Scene
+from bark.contract.strategies import Integrator
 from bark_plugins.integrators import EulerCromer
 
 from conftest import REPO_ROOT, build_sim
@@ -164,7 +165,7 @@ def test_a_third_party_integrator_with_a_compiled_form_takes_the_compiled_path(b
     reference.run(Stop(until_time=5.0))
     assert not np.array_equal(reference.state.x, sim.state.x)  # its own method, not Euler–Cromer's
     if backend == "numba":
-        from bark.kernels import numba_backend
+        from bark.engine.kernels import numba_backend
 
         assert any(key[0] is leapfrog_update for key in numba_backend._SPECIALIZED)
         # and the generated wrapper is a file, cached on disk: it names the plugin's function

@@ -17,12 +17,12 @@ from hypothesis import strategies as st
 
 from bark import Lattice, Mechanics, Simulation, Stop
 from bark.errors import BarkError, NonFiniteStateError
-from bark.forces import stiffness_matvec
-from bark.reference import solve_reference
-from bark.scene import Scene
-from bark.stability import explicit_h_max, lambda_max
-from bark.stepping import SAFETY, Numerics
-from bark.strategies import Growth, Integrator
+from bark.model.forces import stiffness_matvec
+from bark.analysis.reference import solve_reference
+from bark.engine.scene import Scene
+from bark.model.stability import explicit_h_max, lambda_max
+from bark.engine.stepping import SAFETY, Numerics
+from bark.contract.strategies import Growth, Integrator
 from bark_cli.main import cli
 from bark_plugins.breakers import ThresholdBreaker
 from bark_plugins.growth import SqrtGrowth
@@ -639,10 +639,10 @@ def test_cli_runs_stiff_scene_with_substeps_or_implicit(tmp_path, extra):
 ])
 def test_the_backends_agree_to_the_bit(stepping, dt, extra):
     """numpy and numba evaluate the same physics functions in the same order (a base's spring forces
-    are summed in the order of bark.forces.SpringOrder by both, also when bases join during the run
+    are summed in the order of bark.model.forces.SpringOrder by both, also when bases join during the run
     and their springs' ids follow the joins): the same run, bit for bit — positions, break log,
     tensions.  So the backend is a matter of speed alone."""
-    from bark.lattice import Lattice
+    from bark.model.lattice import Lattice
     from bark_plugins.breakers import ProbabilisticBreaker
     from bark_plugins.growth import Bulge, BulgeGrowth
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from bark import Stop
 from bark.errors import NonFiniteStateError
-from bark.triggers import At, Every, OnEvent, Periodic
+from bark.engine.triggers import At, Every, OnEvent, Periodic
 from bark_plugins.breakers import ProbabilisticBreaker, ThresholdBreaker
 from bark_plugins.growth import SqrtGrowth
 from conftest import build_sim
@@ -206,7 +206,7 @@ def test_a_calls_load_is_its_last_steps_largest_load(return_on_break):
     numpy backend, report the same load to the bit, and the same steps and breaks."""
     import copy
 
-    from bark import kernels, stepping
+    from bark.engine import kernels, stepping
 
     sim = build_sim(n_bases=400, G=0.05, dt=0.05, seed=3, backend="numba", stepping="fixed", fmax_spread=0.05)
     stop = Stop(until_time=8.0)

@@ -9,12 +9,12 @@ import meshio
 import numpy as np
 import pytest
 
-from bark import runner
-from bark.lattice import Lattice
-from bark.mesh import leaf_quads
-from bark.pattern import FRAGMENT_GREY, patch_colours, simulation_colours
-from bark.scene import Scene
-from bark.tree import leaf_corners
+from bark.studies import runner
+from bark.model.lattice import Lattice
+from bark.io.mesh import leaf_quads
+from bark.analysis.pattern import FRAGMENT_GREY, patch_colours, simulation_colours
+from bark.engine.scene import Scene
+from bark.model.tree import leaf_corners
 
 
 def shoelace(poly: np.ndarray) -> float:
@@ -101,7 +101,7 @@ def test_mesh_corners_lie_on_the_trunk_and_surround_their_base(meshed):
     assert r == pytest.approx(np.broadcast_to(sim.growth.radius(sim.state.t, quads[..., 2].ravel()), r.size).reshape(r.shape),
                               rel=1e-12)
     assert quads.mean(axis=1) == pytest.approx(sim.state.x, abs=2e-3)  # corners come in opposite pairs
-    from bark.tree import join_radii
+    from bark.model.tree import join_radii
 
     corners = leaf_corners(sim.lattice, join_radii(sim))  # the shape fixed at joining, carried: same diagonals
     for a, b in ((0, 2), (1, 3)):
@@ -117,8 +117,8 @@ def test_join_radii_are_the_growth_laws_radius_at_each_bases_birth_to_the_bit(me
     """With the bulge law's weights (all sites at once) and without (a call per join group)."""
     from types import SimpleNamespace
 
-    from bark import registry
-    from bark.tree import join_radii
+    from bark.contract import registry
+    from bark.model.tree import join_radii
 
     sim = SimpleNamespace(state=meshed[0].sim.state, growth=registry.create("growth", **growth))
     s = sim.state

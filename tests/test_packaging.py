@@ -9,7 +9,7 @@ from importlib import metadata
 
 import pytest
 
-from bark import registry, strategies
+from bark.contract import registry, strategies
 
 BUILTINS = {
     "bark.growth": {"sqrt": strategies.Growth, "linear": strategies.Growth},
@@ -47,7 +47,7 @@ def _run(code: str, cwd) -> subprocess.CompletedProcess:
 
 def test_core_never_imports_click_rich_or_matplotlib(tmp_path):
     code = (
-        "import bark, bark.scene, bark.simulation, bark.output, bark.analysis, bark.registry, sys\n"
+        "import bark, bark.engine.scene, bark.engine.simulation, bark.io.output, bark.analysis.patches, bark.contract.registry, sys\n"
         "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('click', 'rich', 'matplotlib'))\n"
         "assert not bad, bad\n"
     )
@@ -152,7 +152,7 @@ def test_a_built_wheel_has_every_module(tmp_path):
         for pkg, folder in [("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")]
         for py in (REPO_ROOT / folder).rglob("*.py")
     )
-    assert "bark.kernels.numba_backend" in modules
+    assert "bark.engine.kernels.numba_backend" in modules
     # drop the finders of an editable install, which would fill any gap from the source tree
     code = ("import importlib, sys\n"
             "sys.meta_path[:] = [f for f in sys.meta_path\n"

@@ -1,4 +1,4 @@
-"""Patterns on their own (bark.pattern), their comparison (bark.compare), and the commands over them
+"""Patterns on their own (bark.analysis.pattern), their comparison (bark.analysis.compare), and the commands over them
 (bark analyze, bark compare)."""
 
 from __future__ import annotations
@@ -12,11 +12,12 @@ from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bark.analysis import hellinger
-from bark.compare import compare, d_p, distances, pairing, quartet
+from bark.analysis.circular import hellinger
+from bark.analysis.compare import compare, d_p, distances, pairing, quartet
 from bark.errors import BarkError
-from bark.output import patch_columns, write_csv
-from bark.pattern import Pattern, PatternStatistics, axial_se, read, wrapped_normal_se
+from bark.io.output import patch_columns
+from bark.io.files import write_csv
+from bark.analysis.pattern import Pattern, PatternStatistics, axial_se, read, wrapped_normal_se
 from bark_cli.main import cli
 
 finite = st.floats(-50, 50, allow_nan=False)
@@ -57,7 +58,7 @@ def _wrapped_normal(rng, centre, sd_deg, n):
 def test_axial_standard_error_is_the_spread_of_the_mean_over_samples(centre):
     """Fisher's SE of the axial mean agrees with the spread of means over repeated samples (Monte
     Carlo, 4000 samples of 40 orientations; near the 0°/180° wrap too)."""
-    from bark.analysis import axial_difference, axial_mean
+    from bark.analysis.circular import axial_difference, axial_mean
 
     rng = np.random.default_rng(7)
     samples = [_wrapped_normal(rng, centre, 20.0, 40) for _ in range(4000)]
@@ -436,7 +437,7 @@ def _neighbours_differ(labels, pairs, intact, rgb, min_size):
 
 
 def test_no_two_neighbouring_patches_of_a_run_share_a_colour(broken_run):
-    from bark.pattern import patch_colours
+    from bark.analysis.pattern import patch_colours
 
     with np.load(broken_run / "state.npz") as d:
         labels, pairs, intact = d["labels"], d["pairs"], d["intact"]
@@ -454,7 +455,7 @@ def test_greedy_patch_colouring_on_random_cracks(seed, broken, min_size):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from bark.pattern import FRAGMENT_GREY, patch_colours
+    from bark.analysis.pattern import FRAGMENT_GREY, patch_colours
 
     rng = np.random.default_rng(seed)
     n = 400
@@ -472,7 +473,7 @@ def test_greedy_patch_colouring_on_random_cracks(seed, broken, min_size):
 def test_label_colours_index_the_colours_that_follow_the_labels(labels, min_size):
     """The animation colours a frame by palette index (``label_colours``): the same colours as
     ``patch_colours`` without springs gives, fragments grey."""
-    from bark.pattern import FRAGMENT_GREY, PALETTE, label_colours, patch_colours
+    from bark.analysis.pattern import FRAGMENT_GREY, PALETTE, label_colours, patch_colours
 
     labels = np.array(labels, dtype=np.int64)
     index = label_colours(labels, min_size)
@@ -486,7 +487,7 @@ def test_label_colours_index_the_colours_that_follow_the_labels(labels, min_size
 def test_the_patch_table_is_its_definitions_patch_by_patch(seed, patches, on_trunk, min_size):
     """The table takes every patch's centroid and PCA in a few array passes; the definitions are
     ``tangent_plane`` and ``principal_axes`` on each patch alone: the same values to rounding."""
-    from bark.analysis import principal_axes, tangent_plane
+    from bark.analysis.circular import principal_axes, tangent_plane
 
     rng = np.random.default_rng(seed)
     labels = rng.integers(0, patches, int(rng.integers(1, 400))) * 7 - 3  # any ids, interleaved

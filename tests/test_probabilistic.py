@@ -76,7 +76,7 @@ def test_weibull_thresholds_have_their_law(shape):
     """Mean f_max, and the Weibull shape recovered by scipy's fit of 100 000 drawn thresholds."""
     from scipy import stats
 
-    from bark.forces import Mechanics
+    from bark.model.forces import Mechanics
 
     f = Mechanics(f_max=0.005, fmax_weibull_shape=shape).thresholds(100_000, np.random.default_rng(1))
     assert f.mean() == pytest.approx(0.005, rel=0.01)
@@ -86,7 +86,7 @@ def test_weibull_thresholds_have_their_law(shape):
 
 def test_weibull_and_lognormal_spreads_exclude_each_other():
     from bark.errors import BarkError
-    from bark.scene import Scene
+    from bark.engine.scene import Scene
 
     with pytest.raises(BarkError) as err:
         Scene.from_dict({"mechanics": {"fmax_spread": 0.05, "fmax_weibull_shape": 5.0}})

@@ -13,7 +13,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from bark import registry
+from bark.contract import registry
 from bark.errors import BarkError
 
 LAW = '''
@@ -33,8 +33,8 @@ class Law(SqrtGrowth):
 SCRIPT = '''
 import sys
 import attrs
-import bark.runner
-from bark.scene import Scene
+import bark.studies.runner
+from bark.engine.scene import Scene
 {law_import}
 
 scene = Scene.from_dict({{"lattice": {{"n_bases": 300}}, "run": {{"until_time": 30.0, "backend": "numpy"}},
@@ -42,7 +42,7 @@ scene = Scene.from_dict({{"lattice": {{"n_bases": 300}}, "run": {{"until_time": 
 scene = attrs.evolve(scene, strategies={{**scene.strategies, "growth": Law(G=0.03)}})
 steps = iter(range(10**9))
 stop_after = int(sys.argv[2])
-outcome = bark.runner.run(scene, sys.argv[1], checkpoint_every=0,
+outcome = bark.studies.runner.run(scene, sys.argv[1], checkpoint_every=0,
                           interrupted=lambda: "interrupted" if stop_after and next(steps) >= stop_after else None)
 print(outcome.stop_reason)
 '''
@@ -106,12 +106,12 @@ def test_a_law_of_the_script_itself_is_recorded_as_such_and_resumed_only_from_th
     lines = refused.stderr.strip().splitlines()
     assert refused.returncode != 0 and len(lines) == 1 and "__main__:Law" in lines[0]
     assert "resume it from there" in lines[0]
-    again = _python(tmp_path, textwrap.dedent(LAW) + f"\nimport bark.runner\nprint(bark.runner.resume({str(part)!r}).stop_reason)")
+    again = _python(tmp_path, textwrap.dedent(LAW) + f"\nimport bark.studies.runner\nprint(bark.studies.runner.resume({str(part)!r}).stop_reason)")
     assert again.returncode == 0 and again.stdout.split() == ["time"], again.stderr
 
 
 def test_a_scene_names_a_strategy_by_its_import_path(law_module, monkeypatch):
-    from bark.scene import Scene
+    from bark.engine.scene import Scene
 
     monkeypatch.syspath_prepend(str(law_module))
     scene = Scene.from_dict({"growth": {"name": "mylaw:Law", "G": 0.02}})
@@ -119,7 +119,7 @@ def test_a_scene_names_a_strategy_by_its_import_path(law_module, monkeypatch):
     assert scene.to_dict()["growth"] == {"name": "mylaw:Law", "r0": 0.2, "G": 0.02}
     assert registry.name_of(scene.strategies["breaker"]) == "threshold"
     for bad, why in (("mylaw:Nothing", "cannot be imported"), ("no_such_module:Law", "cannot be imported"),
-                     ("bark.scene:Scene", "is not a bark growth strategy")):
+                     ("bark.engine.scene:Scene", "is not a bark growth strategy")):
         with pytest.raises(BarkError, match=why) as err:
             Scene.from_dict({"growth": {"name": bad}})
         assert "\n" not in str(err.value)

@@ -51,7 +51,7 @@ def test_quiet_path_gives_breakers_the_tensions_of_the_state_it_left(make_sim):
 
 def test_patch_labels_agree_between_backends(make_sim):
     """numba's union-find numbers components exactly as scipy's connected_components does."""
-    from bark import kernels
+    from bark.engine import kernels
 
     sim = make_sim(n_bases=400, seed=2, fmax_spread=0.05)
     sim.run(Stop(until_time=4.0))

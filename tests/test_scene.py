@@ -9,8 +9,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from bark.errors import BarkError
-from bark.lattice import GOLDEN_ANGLE_DEG
-from bark.scene import Scene, merge, read_toml
+from bark.model.lattice import GOLDEN_ANGLE_DEG
+from bark.engine.scene import Scene, merge, read_toml
 
 from conftest import REPO_ROOT
 

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from bark import Lattice, Mechanics, Simulation, State, Stop
-from bark.stepping import Numerics
+from bark.engine.stepping import Numerics
 from bark.errors import NonFiniteStateError
 from bark_plugins.breakers import ThresholdBreaker
 from bark_plugins.growth import LinearGrowth, SqrtGrowth
@@ -147,7 +147,7 @@ def test_graph_of_record_agrees_with_arrays_as_bases_join_and_springs_break():
 
 
 def test_the_graph_refuses_a_spring_to_a_base_it_does_not_have():
-    from bark.graph import LeafBaseGraph
+    from bark.model.graph import LeafBaseGraph
 
     g = LeafBaseGraph()
     g.add_bases(3)
@@ -161,7 +161,7 @@ def test_the_graph_refuses_a_spring_to_a_base_it_does_not_have():
 def test_new_pairs_of_a_run_of_new_bases_are_those_of_any_container(offsets, count, data):
     """The springs a run of joining bases makes (found from ranges) are those the general path finds
     asking a plain container which bases are present."""
-    from bark.graph import LeafBaseGraph
+    from bark.model.graph import LeafBaseGraph
 
     a = data.draw(st.integers(0, count - 1))
     b = data.draw(st.integers(a + 1, count))

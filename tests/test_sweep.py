@@ -15,7 +15,7 @@ import pytest
 from click.testing import CliRunner
 
 from bark.errors import BarkError
-from bark.sweep import Axis, Sweep, SweepTable, run_sweep
+from bark.studies.sweep import Axis, Sweep, SweepTable, run_sweep
 from bark_cli.main import cli
 
 TINY = {"lattice": {"n_bases": 300}, "run": {"until_time": 20.0}}
@@ -114,7 +114,7 @@ def test_a_damaged_database_is_one_line(tmp_path):
 def test_a_table_of_an_earlier_bark_gets_the_columns_added_since(tmp_path):
     import sqlite3
 
-    from bark.sweep import RESULT_COLUMNS, SweepTable
+    from bark.studies.sweep import RESULT_COLUMNS, SweepTable
 
     db = tmp_path / "old.sqlite"
     con = sqlite3.connect(db)
@@ -237,7 +237,7 @@ def test_a_sweep_stopped_halfway_goes_on_without_running_a_finished_point_again(
 
 @pytest.mark.parametrize("preset", [None, "5"])
 def test_a_local_worker_takes_its_share_of_the_cores_unless_the_user_set_it(monkeypatch, preset):
-    from bark import sweep
+    from bark.studies import sweep
 
     monkeypatch.setattr(signal, "signal", lambda *a: None)  # the worker's set-up, not this process's
     environment = {k: v for k, v in os.environ.items() if k != "NUMBA_NUM_THREADS"}

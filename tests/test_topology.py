@@ -65,7 +65,7 @@ def test_any_sequence_of_public_edits_keeps_graph_arrays_and_backends_together(e
 
 
 def test_joins_keep_graph_and_arrays_together():
-    from bark.lattice import Lattice
+    from bark.model.lattice import Lattice
 
     sim = build_sim(lattice=Lattice(n_bases=600, n_start=300, join_rate=60.0, jitter=0.05), G=0.05, backend="numba")
     sim.run(Stop(until_time=4.0))

@@ -9,8 +9,8 @@ from scipy.integrate import quad
 from scipy.spatial import cKDTree
 
 from bark.errors import BarkError
-from bark.lattice import Lattice
-from bark.tree import Apex, Dome
+from bark.model.lattice import Lattice
+from bark.model.tree import Apex, Dome
 
 WHOLE_TREE = Lattice(n_bases=70000, n_start=45000, join_rate=101.0, rise=0.00012, offsets=(55, 89))
 FIBONACCI = [1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 144, 233, 377, 610, 987]
@@ -169,7 +169,7 @@ def test_the_phyllotaxis_checks_on_the_exact_lattice(radius):
     """On Table 1's exact lattice: the parastichy angle is that between the lattice vectors of 55 and 89;
     a horizontal line crosses 144 rhomboids around the trunk (each spans 144 rises), 72 on the half a
     viewer sees; a row of rhomboids side by side on that half holds π / |34·φ mod 2π| of them."""
-    from bark.tree import phyllotaxis
+    from bark.analysis.phyllotaxis import phyllotaxis
 
     lattice = Lattice(n_bases=20000, rise=0.00012, offsets=(55, 89), jitter=0.0)
     theta, z = lattice.sites(radius, np.random.default_rng(0), 0, lattice.n_bases)
@@ -187,7 +187,7 @@ def test_the_phyllotaxis_checks_on_the_exact_lattice(radius):
 def test_rhomboids_of_no_width_have_no_count_side_by_side(divergence_deg, partition):
     """A divergence angle that stacks the bases in columns (or as near as a float gets) leaves no
     finite count: ``None``, quietly (no overflow warning, no infinity in summary.json)."""
-    from bark.tree import phyllotaxis
+    from bark.analysis.phyllotaxis import phyllotaxis
 
     lattice = Lattice(n_bases=2000, offsets=(21, 34), divergence_deg=divergence_deg, partition=partition)
     theta, z = lattice.sites(0.2, np.random.default_rng(0), 0, lattice.n_bases)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bark import Stop
-from bark.triggers import At, Every, OnEvent, Periodic
+from bark.engine.triggers import At, Every, OnEvent, Periodic
 
 
 def _fired(sim, trigger, until):

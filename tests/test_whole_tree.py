@@ -11,8 +11,8 @@ import meshio
 import pytest
 from click.testing import CliRunner
 
-from bark import runner
-from bark.scene import Scene
+from bark.studies import runner
+from bark.engine.scene import Scene
 from bark.units import metres, years
 from bark_cli.main import cli
 from conftest import REPO_ROOT
@@ -72,7 +72,7 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
 
 
 def test_the_window_of_the_statistics_is_a_scene_setting(tmp_path):
-    from bark import runner
+    from bark.studies import runner
 
     scene = Scene.from_toml(SCENES / "whole-tree-small.toml",
                             {"effects": {"want": ["bulges", "anchors", "damping", "patch-statistics"], "window": 1.0},

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bark import runner
-from bark.analysis import axial_difference
-from bark.effects import DEFAULT
-from bark.scene import Scene, merge, read_toml
+from bark.studies import runner
+from bark.analysis.circular import axial_difference
+from bark.model.effects import DEFAULT
+from bark.engine.scene import Scene, merge, read_toml
 
 HERE = Path(__file__).resolve().parent
 

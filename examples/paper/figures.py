@@ -91,7 +91,7 @@ def fig9(out: Path, workers: int) -> None:
 def fractures(out: Path, workers: int) -> None:
     import numpy as np
 
-    from bark.fracture import power_law
+    from bark.analysis.fracture import power_law
     from bark_cli.figures import plot_power_law
 
     folder = out / "fractures"

@@ -22,7 +22,7 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from bark.parts import BreakerPart
+from bark.contract.parts import BreakerPart
 from bark.validators import positive_int
 from bark_example_plugin.power_law import PowerLawGrowth
 from bark_example_plugin.strain import StrainBreaker

@@ -2,7 +2,7 @@
 import attrs
 import numpy as np
 
-from bark.strategies import Growth
+from bark.contract.strategies import Growth
 from bark.validators import non_negative, positive
 
 

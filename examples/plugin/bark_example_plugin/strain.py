@@ -1,8 +1,8 @@
 """A strain breaker: a spring breaks when it is stretched past ``eps`` of its rest length."""
 import attrs
 
-from bark.parts import BreakerPart
-from bark.strategies import Breaker
+from bark.contract.parts import BreakerPart
+from bark.contract.strategies import Breaker
 from bark.validators import positive
 
 

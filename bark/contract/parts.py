@@ -1,0 +1,140 @@
+"""Compiled parts: what a strategy declares of its work, so that the engine can run it in its kernel.
+
+A part is a value, not a hook: pure elementwise functions, the strategy's own numbers as a parameter
+array, and the names of the fields the functions read (after OpenMM's custom forces, whose per-bond
+and global parameters are declared, never guessed).  Every backend evaluates the same declaration:
+the numpy backend on whole arrays, the numba backend inlined into its stepping kernel, per spring.
+The engine knows no strategy by name; a third party's part is run exactly as a built-in one.
+
+A breaker's part (:class:`BreakerPart`)
+----------------------------------------
+``rule(*reads, params) -> bool``
+    whether an intact spring breaks now (``decides``), or is a candidate for the breaker's own
+    ``select`` to judge in Python (``decides = False``: the kernel's call ends after the first step
+    in which the rule picks a spring).
+``load(*reads, params) -> float``, or ``None``
+    how far a spring is from breaking, ``1`` at breaking: adaptive stepping halves the step where a
+    spring's load would pass ``1 + overshoot_tol`` and doubles it back once every load is at most 1.
+    ``None``: the breaker does not steer the step (a hazard-rate breaker, whose breaking does not
+    depend on landing a step on a threshold).
+``reads``, ``load_reads``
+    the per-spring fields the rule and the load take, in order, from :data:`SPRING_INPUTS` (the
+    load's the rule's unless given); ``params`` (the breaker's numbers, a float array) always comes
+    last.
+
+Written with numpy operations (``np.sqrt``), one function serves arrays and scalars alike.  The
+functions must be importable by name (module-level functions or static methods) for the numba
+backend to cache their compiled kernel on disk; others are compiled once per process.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import attrs
+import numpy as np
+
+from bark.model import physics
+from bark.errors import BarkError
+
+__all__ = ["BreakerPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
+
+SPRING_INPUTS: tuple[str, ...] = ("tension", "length", "rest", "fmax", "inv_fmax")
+"""What a breaker's part may read of each spring: its tension ``k(|d| − l)`` (force units), its
+length ``|d|`` and rest length ``l`` (length units; 1 = 0.3 m), its breaking threshold ``f_max``
+(force units) and ``1 / f_max`` (kept per spring: a product is cheaper than a division in the hot
+loop)."""
+
+
+def _reads(value) -> tuple[str, ...]:
+    reads = tuple(value)
+    unknown = [r for r in reads if r not in SPRING_INPUTS]
+    if unknown or len(set(reads)) != len(reads):
+        raise BarkError(f"a breaker part reads {', '.join(map(repr, reads))}: each field once, from "
+                        + ", ".join(SPRING_INPUTS))
+    return reads
+
+
+def _params(value) -> np.ndarray:
+    params = np.ascontiguousarray(np.atleast_1d(np.asarray(value, dtype=float)) if np.size(value) else np.empty(0))
+    if params.ndim != 1:
+        raise BarkError(f"a breaker part's params must be a flat list of numbers, not of shape {params.shape}")
+    params.setflags(write=False)
+    return params
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class BreakerPart:
+    """A breaker's compiled work (see the module's docstring)."""
+
+    rule: Callable = attrs.field(validator=attrs.validators.is_callable())
+    """``rule(*reads, params) -> bool``: whether an intact spring breaks (or is a candidate)."""
+    reads: tuple[str, ...] = attrs.field(default=("tension", "fmax"), converter=_reads)
+    """The per-spring fields the functions take, in order (from :data:`SPRING_INPUTS`)."""
+    params: np.ndarray = attrs.field(factory=lambda: np.empty(0), converter=_params)
+    """The breaker's own numbers, passed last to both functions."""
+    load: Callable | None = attrs.field(default=None, validator=attrs.validators.optional(attrs.validators.is_callable()))
+    """``load(*load_reads, params) -> float``, 1 at breaking; ``None``: the breaker does not steer the step."""
+    load_reads: tuple[str, ...] = attrs.field(default=attrs.Factory(lambda self: self.reads, takes_self=True),
+                                              converter=_reads)
+    """The per-spring fields the load takes, in order (default: ``reads``)."""
+    decides: bool = attrs.field(default=True, validator=attrs.validators.instance_of(bool))
+    """``True``: what the rule picks breaks, inside the kernel.  ``False``: the rule names candidates,
+    and the breaker's ``select`` decides in Python after a step in which it names one."""
+
+    @property
+    def key(self) -> tuple:
+        """What makes two parts the same work (their functions, fields and numbers)."""
+        return (self.rule, self.load, self.reads, self.load_reads, self.params.tobytes(), self.decides)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, BreakerPart) and self.key == other.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+
+NO_BREAKING = BreakerPart(rule=physics.no_breaking, reads=("tension",))
+"""The part of a layer without fracture: nothing breaks, nothing steers the step."""
+
+
+def spring_inputs(state, tension: np.ndarray, reads: tuple[str, ...], length: np.ndarray | None = None) -> list:
+    """The per-spring arrays ``reads`` names, for ``state`` with ``tension`` (every spring's); the
+    length is measured from the positions when not given (``bark.model.physics.length``, as the kernels)."""
+    if "length" in reads and length is None:
+        from bark.model.forces import spring_geometry
+
+        _, length = spring_geometry(state.x, state.pairs)
+    fields = {"tension": tension, "length": length, "rest": state.rest, "fmax": state.fmax}
+    return [1.0 / state.fmax if name == "inv_fmax" else fields[name] for name in reads]
+
+
+def picks(part: BreakerPart, state, tension: np.ndarray, live: np.ndarray, length: np.ndarray | None = None) -> np.ndarray:
+    """Ids of the ``live`` springs the part's rule picks, given every spring's ``tension`` (and length)."""
+    return np.flatnonzero(live & part.rule(*spring_inputs(state, tension, part.reads, length), part.params))
+
+
+def largest_load(part: BreakerPart, state, tension: np.ndarray, live: np.ndarray,
+                 length: np.ndarray | None = None) -> float:
+    """The largest load of the ``live`` springs (``-inf`` if none, or if the part has no load; NaN
+    if a load is NaN)."""
+    if part.load is None or not live.any():
+        return -np.inf
+    inputs = spring_inputs(state, tension, part.load_reads, length)
+    return float(np.max(part.load(*(a[live] for a in inputs), part.params)))
+
+
+def how_it_runs(strategy) -> str:
+    """Where a strategy's work runs, in words (``bark strategies``): ``compiled`` inside the stepping
+    kernel, or in Python, and what of it."""
+    kind = getattr(strategy, "kind", "")
+    if kind == "breaker":
+        part = strategy.part_
+        if part is None:
+            return "Python (select after every step)"
+        return "compiled" if part.decides else "compiled candidates; select in Python"
+    if kind == "growth":
+        return "compiled" if strategy.compiled is not None else "Python (radius)"
+    if kind == "integrator":
+        return "compiled" if strategy.update is not None else "Python (step)"
+    return "Python (after the run)"

@@ -1,0 +1,307 @@
+"""The four kinds of strategy a :class:`~bark.engine.simulation.Simulation` is composed of.
+
+Each kind is a small attrs class with **one verb**.  To write your own, subclass the base, decorate
+it with ``@attrs.frozen(kw_only=True)``, declare every parameter as a validated field (no logic in
+``__init__``), implement the verb, and register the class under the kind's entry-point group
+(``bark.growth``, ``bark.integrator``, ``bark.breaker``, ``bark.analyzer``).  The built-in strategies
+in ``bark_plugins`` are registered the same way.
+
+=============  ====================================  =================================================
+kind           verb                                  contract
+=============  ====================================  =================================================
+Growth         ``radius(t, z) -> r``                 trunk radius at time ``t`` for heights ``z`` (an
+                                                     array, or a scalar that broadcasts).  Pure.
+Integrator     ``step(state, dt, forces) -> None``   advance ``state.x`` and ``state.v`` by ``dt`` in
+                                                     place, with ``forces`` (a ``ForceField``).
+                                                     Touches nothing else: the simulation advances
+                                                     ``t``, applies the surface constraint and breaks
+                                                     springs.  Explicit methods also give
+                                                     ``stability_limit(state, forces)``.
+Breaker        ``select(state, tension, rng)``       ids (int array) of *intact* springs to break now.
+               ``-> ids``                            Changes nothing; draws from ``rng`` only.
+Analyzer       ``analyze(points, patches)``          statistics of a pattern, as an :class:`Analysis`.
+               ``-> Analysis``
+=============  ====================================  =================================================
+
+**Compiled forms: capabilities a strategy declares.**  A strategy whose work fits a pure,
+elementwise function may declare it; the engine then runs it inside its stepping kernel (compiled
+and inlined by the numba backend, on whole arrays by the numpy backend) instead of calling the
+strategy in Python once per step.  The function is the definition: the verb is derived from it.
+
+* ``Integrator.update(x, v, f, hm, h) -> (x, v)``: one axis of one base, ``hm = h/m`` (Euler–Cromer:
+  ``v ← v + f·hm; x ← x + v·h``).  ``step`` then follows from it.
+* ``Breaker.part() -> BreakerPart``: its rule, its own load (how far a spring is from breaking,
+  which adaptive stepping holds to its tolerance), the per-spring fields they read and the
+  breaker's numbers (:mod:`bark.contract.parts`).  ``select`` then follows from it.  A subclass that writes
+  ``select`` again and not ``part`` has no part: a compiled rule and a Python ``select`` can never
+  disagree.
+* ``Growth.compiled(t, z, params) -> r`` with ``compiled_params()``, and ``uniform = True`` when
+  the radius does not depend on height; ``radius(t, z)`` then follows from it.  A law whose radius
+  has parts that depend on time alone (a fading bulge's ``exp``) may also give
+  ``compiled_time(t, params) -> q``: computed once a step, and ``compiled`` is then called with ``q``
+  in place of ``params`` (per base, only what depends on height is left).  If its radius is a sum
+  of such parts weighted by functions of height, ``r = q[0] + w_0(z)·q[1] + w_1(z)·q[2] + ...``
+  (evaluated left to right), it may give ``compiled_weights(z, params) -> w`` (an array of heights
+  in, one row of weights per term out): the anchors, whose heights never change, then have their
+  weights taken once and their radii summed each step, not computed by a call each.  And it may give
+  ``compiled_radii(t, z, q, out)``: the radius at every height of the array ``z`` written into
+  ``out``, the same bits as ``compiled(t, z[i], q)`` for each — for a law that can do a block of
+  heights faster than one at a time (in SIMD lanes, or skipping what is out of a bulge's reach).
+
+The functions must be importable by name (module-level functions or static methods) to be cached
+on disk; others are compiled once per process.  Written with numpy ufuncs (``np.sqrt``), one
+function serves arrays and scalars alike.
+"""
+
+from __future__ import annotations
+
+import abc
+import functools
+from typing import Any, Callable, ClassVar
+
+import attrs
+import numpy as np
+
+from bark.contract.parts import BreakerPart, picks
+from bark.model.effects import Effect
+from bark.model.physics import as_given
+
+__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "pattern_of"]
+
+
+_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "compiled_weights": None,
+                                  "compiled_radii": None, "update": None}
+
+
+def _form_owner(strategy, form: str) -> type | None:
+    """The nearest class of ``strategy`` (itself first) that gives the compiled ``form``.  A verb
+    derived from a compiled form uses this, so that ``super().select(...)`` in a subclass that wrote
+    ``select`` again (and so lost the rule as its own) still means the parent's rule."""
+    return next((k for k in type(strategy).__mro__ if k.__dict__.get(form) is not None), None)
+
+
+def _form(strategy, form: str):
+    owner = _form_owner(strategy, form)
+    if owner is None:
+        raise NotImplementedError(f"{type(strategy).__name__} writes neither its verb nor a compiled form ({form})")
+    value = owner.__dict__[form]
+    return value.__get__(strategy, type(strategy)) if hasattr(value, "__get__") else value
+
+
+@attrs.frozen(kw_only=True)
+class Strategy(abc.ABC):
+    """Common base: parameters are attrs fields, so ``attrs.evolve(s, G=0.01)`` makes a variant.
+
+    A compiled form is the definition only for the verb it came with: a subclass that writes the
+    verb again (``select``, ``step``, ``radius``) and not the compiled form loses the inherited one,
+    so the engine never runs a rule its Python verb no longer follows."""
+
+    kind: ClassVar[str] = ""
+    _verb_and_form: ClassVar[tuple[str, ...]] = ()
+    provides: ClassVar[tuple[Effect, ...]] = ()
+    """Effects this strategy simulates beyond the model's own (``bark.model.effects.EFFECTS``): a
+    scene that chooses it gets them unless its ``want`` list leaves them out, and then runs
+    ``without(name)`` in its place (what a scene does not ask for is never built)."""
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        verb, *forms = cls._verb_and_form or ("", )
+        if verb and verb in vars(cls):
+            for form in forms:
+                if form not in vars(cls):
+                    setattr(cls, form, _FORM_DEFAULTS[form])
+
+    def params(self) -> dict[str, Any]:
+        """Constructor keywords of this strategy, as given (for summaries and sweeps)."""
+        return attrs.asdict(self, recurse=False)
+
+    def without(self, effect: str) -> "Strategy":
+        """The strategy that does this one's work less its effect ``effect`` (one of ``provides``)."""
+        raise NotImplementedError(f"{type(self).__name__} provides {effect!r} and must say what runs without it")
+
+
+@attrs.frozen(kw_only=True)
+class Growth(Strategy):
+    """Secondary growth: how the trunk radius changes with time (and, for bulges, with height)."""
+
+    kind: ClassVar[str] = "growth"
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time", "compiled_weights",
+                                                 "compiled_radii")
+    compiled: ClassVar[Callable | None] = None
+    """Compiled form ``compiled(t, z, params) -> r`` (see the module's docstring), or ``None``."""
+    uniform: ClassVar[bool] = False
+    """Whether the radius is the same at every height (evaluated once per step, not per base)."""
+    compiled_time: ClassVar[Callable | None] = None
+    """Optional per-step part of the compiled form, ``compiled_time(t, params) -> q``: what depends
+    on time alone, computed once a step; ``compiled`` then receives ``q`` in place of ``params``."""
+    compiled_weights: ClassVar[Callable | None] = None
+    """Optional, beside ``compiled_time``: ``compiled_weights(z, params) -> w``, shape ``(K, len(z))``,
+    such that ``compiled(t, z, q)`` is ``q[0] + w[0]·q[1] + ... + w[K-1]·q[K]`` to the bit (summed left
+    to right; ``q = compiled_time(t, params)``).  The anchors' radii are then sums of weights taken once
+    per anchor (checked against ``compiled`` then).  A subclass that gives ``compiled`` or
+    ``compiled_time`` of its own and not this loses it."""
+    compiled_radii: ClassVar[Callable | None] = None
+    """Optional, beside ``compiled``: ``compiled_radii(t, z, q, out)`` writes the radius at each height
+    of the array ``z`` into ``out``, to the bit what ``compiled(t, z[i], q)`` gives (``q`` as for
+    ``compiled``).  The numba kernel calls it on a block of bases at a time in place of ``compiled``
+    per base.  A subclass that gives ``compiled`` or ``compiled_time`` of its own and not this loses it."""
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        for form in ("compiled_weights", "compiled_radii"):  # they promise the bits of the law's compiled form
+            if ("compiled" in vars(cls) or "compiled_time" in vars(cls)) and form not in vars(cls):
+                setattr(cls, form, None)
+
+    def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
+        """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""
+        compiled, owner = _form(self, "compiled"), _form_owner(self, "compiled")
+        prepare = getattr(self, "compiled_time", None) or as_given
+        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, prepare(t, self.params_array))
+
+    def compiled_params(self) -> np.ndarray:
+        """The ``params`` array of the compiled form."""
+        return np.empty(0)
+
+    @functools.cached_property
+    def params_array(self) -> np.ndarray:
+        """``compiled_params()``, made once: a strategy's parameters never change, and the engine
+        asks for them at every call of its kernel and every radius it takes in Python.  Not to be
+        written into."""
+        return np.ascontiguousarray(self.compiled_params(), dtype=float)
+
+    def weights_form(self) -> Callable | None:
+        """``compiled_weights`` where radii are summed from it — a compiled radius that depends on
+        height — else ``None``.  (With ``compiled_time``, ``q = compiled_time(t, params)``; without,
+        ``q = params``.)"""
+        return self.compiled_weights if self.compiled is not None and not self.uniform else None
+
+    def mean_radius(self, t: float, z: np.ndarray) -> float:
+        """The mean of ``radius(t, z)`` over the heights ``z`` (derived from ``radius``: a law that
+        gives one radius for all heights counts it once for each)."""
+        z = np.asarray(z, dtype=float)
+        return float(np.mean(np.broadcast_to(self.radius(t, z), z.shape)))
+
+    def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+        """Breaking thresholds of springs whose midpoints are at heights ``z`` (called when springs
+        are made).  The default leaves them as they are; a law with regions of their own material
+        (bulges) overrides it."""
+        return fmax
+
+    def region(self, z: np.ndarray) -> np.ndarray:
+        """The name of the region of the trunk at each height ``z``, for pattern statistics per region
+        (summary.json ``regions``).  One region, ``trunk``, unless a law has regions of its own."""
+        return np.full(np.shape(z), "trunk", dtype=object)
+
+
+@attrs.frozen(kw_only=True)
+class Integrator(Strategy):
+    """Time integration of the equations of motion (eqs. 5–8)."""
+
+    kind: ClassVar[str] = "integrator"
+    _verb_and_form: ClassVar[tuple[str, ...]] = ("step", "update")
+    update: ClassVar[Callable | None] = None
+    """Compiled form ``update(x, v, f, hm, h) -> (x, v)`` (see the module's docstring), or ``None``."""
+    overdamped: ClassVar[bool] = False
+    """Whether it integrates the massless limit ``b·dx/dt = F(x)`` rather than eq. 3 (masses, inertia):
+    no stability limit from the masses; a work-precision study measures it against that model."""
+
+    def step(self, state, dt: float, forces) -> None:
+        """Advance ``state.x`` and ``state.v`` by ``dt`` in place (from the compiled form, when there is one)."""
+        update = _form(self, "update")
+        f = forces.total(state)
+        for axis in range(3):
+            state.x[:, axis], state.v[:, axis] = update(state.x[:, axis], state.v[:, axis], f[:, axis],
+                                                        dt / forces.mechanics.m, dt)
+
+    def stability_limit(self, state, forces) -> float:
+        """Largest ``dt`` for which this method is stable on ``state``; ``inf`` if unconditionally stable.
+
+        The simulation refuses (or, with automatic stepping, sub-steps) a ``dt`` above it."""
+        return float("inf")
+
+
+def _declared_part(breaker) -> BreakerPart | None:
+    """The part of the nearest class of ``breaker`` that declares one: a subclass that wrote
+    ``select`` again has no part of its own, but its ``super().select(...)`` still means the
+    parent's rule."""
+    for klass in type(breaker).__mro__:
+        declared = vars(klass).get("part")
+        if declared is not None and declared is not Breaker.part:
+            return declared(breaker)
+    return None
+
+
+@attrs.frozen(kw_only=True)
+class Breaker(Strategy):
+    """Which intact springs break now.
+
+    A breaker declares its compiled work as a :class:`~bark.contract.parts.BreakerPart` (``part()``): its
+    rule, its own load (what adaptive stepping holds to its tolerance), the fields they read and its
+    numbers.  ``select`` is then derived from the part.  A class that writes ``select`` and not
+    ``part`` has no part (a rule and a Python ``select`` can never disagree): it runs on the Python
+    path, asked after every step, and does not steer the step."""
+
+    kind: ClassVar[str] = "breaker"
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "select" in vars(cls) and "part" not in vars(cls):
+            cls.part = Breaker.part
+
+    def part(self) -> BreakerPart | None:
+        """This breaker's compiled work, or ``None`` (its ``select`` alone, in Python)."""
+        return None
+
+    @functools.cached_property
+    def part_(self) -> BreakerPart | None:
+        """``part()``, made once (a strategy's parameters never change; the engine asks at every call
+        of its kernel)."""
+        return self.part()
+
+    def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Ids of intact springs to break, given every spring's current ``tension`` (from the part:
+        the live springs its rule picks)."""
+        part = _declared_part(self)
+        if part is None:
+            raise NotImplementedError(f"{type(self).__name__} writes neither select nor part")
+        return picks(part, state, tension, state.intact)
+
+
+@attrs.frozen(kw_only=True)
+class Analysis:
+    """What an analyzer returns: a flat summary, its patches if it measures them, named tables."""
+
+    summary: dict[str, Any]
+    """Flat statistics.  With ``patches``: the pattern's, ``n_patches`` and the keys of summary.json's
+    pattern statistics (``mean_orientation_deg``, ``circular_sd_deg``, ...) among them."""
+    patches: list[dict[str, Any]] | None = None
+    """One row per patch measured (``patch``, ``size``, centroid, ``orientation_deg``, ``anisotropy``,
+    ...), or ``None`` from an analyzer that does not measure patches.  A run's patches.csv, its
+    pattern statistics and their regions come from the first analysis that has them."""
+    tables: dict[str, list[dict[str, Any]]] = attrs.field(factory=dict)
+    """Further tables of rows, by name."""
+
+
+def pattern_of(analyses) -> Analysis | None:
+    """The first of ``analyses`` (``Simulation.analyze``'s values) that measured patches."""
+    return next((a for a in analyses if a.patches is not None), None)
+
+
+@attrs.frozen(kw_only=True)
+class Analyzer(Strategy):
+    """Statistics of a bark pattern.
+
+    Works on points and patch labels alone, so the same analyzer serves simulated bark and bark
+    digitised from photographs.  ``points`` are either 3-D positions on the trunk, shape ``(n, 3)``
+    (each patch is then mapped to its tangent plane), or 2-D positions already in a plane
+    ``(horizontal, vertical)``, shape ``(n, 2)``.  ``patches`` holds one integer label per point.
+    """
+
+    kind: ClassVar[str] = "analyzer"
+
+    @abc.abstractmethod
+    def analyze(self, points: np.ndarray, patches: np.ndarray) -> Analysis:
+        """Statistics of the pattern given by ``points`` and their patch labels."""
+
+
+KINDS: tuple[str, ...] = ("growth", "integrator", "breaker", "analyzer")

@@ -1,0 +1,179 @@
+"""Compute backends for the hot loop: one interface, chosen once per simulation (after OpenMM's
+platforms).  The Simulation never knows which runs.
+
+=============================================  ====================================================
+method                                          does
+=============================================  ====================================================
+``spring_forces(state, mech, x) -> f``          the intact springs' forces (eq. 1) on every base at ``x``
+``measure(state, mech, out) -> finite``         every spring's tension ``k(|d| − l)`` into ``out``;
+                                                returns whether all of them are finite
+``constrain(state, r_x, r_anchor)``             eq. 9 on the bases (radial velocity removed) and
+                                                the anchors (radius × fixed direction)
+``steps(state, mech, plan, tension) -> Steps``  up to ``len(plan.times)`` whole steps of an integrator
+                                                with a compiled form (``Integrator.update``): forces,
+                                                update, surface, tensions, and the breakers' part
+                                                (``Breaker.part``: its rule and load); the per-step
+                                                and the many-step paths are this one call
+``patch_labels(state) -> labels``               connected components of the intact springs, numbered
+                                                in order of each component's smallest base
+=============================================  ====================================================
+
+Both backends evaluate the physics of :mod:`bark.model.physics` and the plugins' compiled forms, the
+same functions; they differ only in the order sums are taken (results agree to round-off).
+``numpy`` is always there; ``numba`` (compiled, cached on disk) is used when importable and the run
+is long enough to repay its start (``auto``; the results are the same to the bit).  A backend
+holds its own work buffers (derived data, rebuilt when the topology grows); the state is only data.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import math
+import sys
+from typing import Callable
+
+import attrs
+import numpy as np
+
+from bark.model import physics
+from bark.errors import BarkError, Ref
+from bark.contract.parts import NO_BREAKING, BreakerPart
+
+__all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
+
+BACKENDS = ("auto", "numpy", "numba")
+
+
+@attrs.frozen(kw_only=True)
+class Plan:
+    """What one call of :meth:`Backend.steps` may do."""
+
+    h: float
+    """Length of every step of the call."""
+    times: np.ndarray
+    """Time at the end of each step (from the integer clock: exact, whatever the split into calls)."""
+    update: Callable | None
+    """The integrator's compiled form: ``update(x, v, f, h/m, h) -> (x, v)`` along one axis."""
+    radius: Callable | None
+    """The growth law's compiled form: ``radius(t, z, params) -> r``."""
+    params: np.ndarray
+    """Its parameters."""
+    uniform: bool
+    """The radius does not depend on height: evaluated once per step, not per base."""
+    breaker: BreakerPart = NO_BREAKING
+    """The breakers' part (``bark.contract.parts``): its rule picks springs, its load steers the step."""
+    breaks: str = "kernel"
+    """``kernel``: springs the rule picks break inside the call, which goes on.  ``candidates``:
+    nothing breaks inside; the call ends after the first step in which the rule picks a spring, for
+    the breakers to judge in Python.  ``python``: the breakers judge in Python after every step (the
+    part is ``NO_BREAKING``)."""
+    accept_load: float = math.inf
+    """A step whose load exceeds this is undone and the call ends (adaptive stepping halves it)."""
+    return_on_break: bool = False
+    """End the call after a step in which the rule broke springs (Python must see every break)."""
+    max_batch: float = math.inf
+    """End the call after a step that breaks more springs than this (a degenerate event)."""
+    compiled: bool = True
+    """Whether the integrator and the growth law have compiled forms (else one step in Python)."""
+    prepare: Callable = physics.as_given
+    """The growth law's per-step part, ``prepare(t, params) -> q``: ``radius`` gets ``q`` (default: the
+    parameters as given)."""
+    relax: np.ndarray | None = None
+    """Per step, whether it ends on the grid of the next larger step (adaptive stepping at a halved
+    step): the call ends after such a step whose load is at most 1, so the clock can double the step
+    there, as it would after a call of one step (default: never)."""
+
+    weights: Callable | None = None
+    """The growth law's ``compiled_weights(z, params) -> w`` (``bark.contract.strategies.Growth``), or ``None``:
+    the anchors' radii as weighted sums (their heights never change), in place of a call per anchor."""
+    radii: Callable | None = None
+    """The growth law's ``compiled_radii(t, z, q, out)`` (``bark.contract.strategies.Growth``), or ``None``: the
+    radius at a block of heights at once, in place of ``radius`` called per height (the same bits)."""
+    threads: int = 1
+    """Threads the call may share its work among (``Numerics.threads``: 0 = the backend decides);
+    the result does not depend on it."""
+
+    def relax_flags(self) -> np.ndarray:
+        """``relax`` as one bool per step."""
+        return np.zeros(len(self.times), bool) if self.relax is None else np.ascontiguousarray(self.relax, dtype=bool)
+
+
+@attrs.frozen
+class Steps:
+    """What one call of :meth:`Backend.steps` did."""
+
+    done: int
+    """Steps taken and kept (a step undone for ``accept_load`` or a non-finite state is not counted)."""
+    load: float
+    """Largest load (the breaker part's) over intact springs after the last step tried, ``-inf`` for
+    a part without one; NaN if that step went non-finite (it was undone)."""
+    broken: np.ndarray
+    """Springs the rule broke, in order of step then id (the caller applies them: ``break_springs``)."""
+    step: np.ndarray
+    """The step of the call (from 1) each broke in."""
+    tension: np.ndarray
+    """Each one's tension when it broke."""
+    picked: bool = False
+    """Whether the rule named a candidate in the last step kept (``Plan.breaks == "candidates"``)."""
+
+
+class Backend:
+    """The hot loop's operations (see the module's docstring)."""
+
+    name = ""
+
+    def spring_forces(self, state, mech, x: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def measure(self, state, mech, out: np.ndarray) -> bool:
+        raise NotImplementedError
+
+    def constrain(self, state, r_x, r_anchor) -> None:
+        raise NotImplementedError
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        raise NotImplementedError
+
+    def patch_labels(self, state) -> np.ndarray:
+        raise NotImplementedError
+
+
+AUTO_WORK = 3e6
+"""Base-steps below which ``auto`` takes numpy: numba's start in a fresh process (importing it,
+loading its compiled code: about 0.55 s measured) costs more than it saves (about 0.18 µs a
+base-step at 3000 bases, measured with adaptive stepping)."""
+
+
+def _numba_available() -> bool:
+    return importlib.util.find_spec("numba") is not None  # without importing it (0.2 s, 40 MB)
+
+
+def available(name: str) -> bool:
+    """Whether the concrete backend ``name`` can run here."""
+    return name == "numpy" or (name == "numba" and _numba_available())
+
+
+def resolve(name: str, work: float | None = None) -> str:
+    """The concrete backend ``name`` stands for.  ``auto``: numba if installed, unless the run is
+    expected to be short (``work`` base-steps under ``AUTO_WORK``) and numba is not loaded in this
+    process yet: then numpy.  The two give the same results to the bit, so the choice is one of speed
+    alone."""
+    if name not in BACKENDS:
+        raise BarkError("{0}: must be one of " + ", ".join(BACKENDS), Ref("run", "backend", name))
+    if name == "auto":
+        if not _numba_available():
+            return "numpy"
+        started = "numba" in sys.modules  # its start is paid already (a sweep, a benchmark)
+        return "numba" if started or work is None or work >= AUTO_WORK else "numpy"
+    if name == "numba" and not _numba_available():
+        raise BarkError("{0} but numba is not installed: pip install numba, or use the numpy backend",
+                        Ref("run", "backend", name))
+    return name
+
+
+def load(name: str, work: float | None = None) -> Backend:
+    """A new instance of the backend ``name`` stands for (``resolve``; its module imported only when
+    asked for; its compiled code is shared, its work buffers are this instance's: one per simulation)."""
+    module = importlib.import_module(f"bark.engine.kernels.{resolve(name, work)}_backend")
+    return module.BACKEND_CLASS()

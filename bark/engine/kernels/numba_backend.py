@@ -1,0 +1,1205 @@
+"""The numba backend: the physics of :mod:`bark.model.physics` and the plugins' compiled forms, compiled.
+
+**One stepping kernel.**  ``_steps_kernel`` is written once, with the integrator's update, the
+breaking rule and the growth law's radius as parameters.  Each combination gets a tiny wrapper,
+generated into a file of its own (``specialized``), that passes those functions in: numba inlines
+them into the loop (as fast as writing them out, measured) and caches the wrapper on disk like any
+other function, so a plugin's compiled form costs a compilation once, not per run.  The per-step and
+the many-step paths are calls of this one kernel, so their bits agree by construction.
+
+Each piece of physics is :mod:`bark.model.physics`'s function, inlined (``inline="always"``).  No
+fastmath: every expression is evaluated as written, so a run does not depend on where its compiled
+calls begin and end (what makes a resumed run end bit-identical).  The one exception is a maximum
+(``_largest_load``), exact in any order: it may use SIMD lanes, and it is taken every step only when
+adaptive stepping needs it, else once at the end of a call.
+
+**Blocks, and threads.**  The loops over bases and over a run's springs go a block of ``BLOCK`` at a
+time, and a spring's force reaches its bases by a *gather* over blocks of bases (each base takes its
+springs' forces in the order of the serial sum), so no two blocks write the same entry.  Every
+kernel is compiled twice from the same source: serial, and with the blocks shared among threads
+(``prange``, ``Numerics.threads``); per base and per spring the arithmetic, and its order, are the
+same, so the two give the same bits (tested).  Threads pay on large lattices only (a parallel loop
+costs a few microseconds to start: ``PARALLEL_BASES``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import inspect
+import math
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import attrs
+import numba
+import numba.extending
+import numpy as np
+from numba import prange
+
+from bark.model import physics
+from bark.model.forces import SpringOrder, order_keys
+from bark.engine.kernels import Backend, Plan, Steps
+from bark.errors import BarkError
+from bark.model.state import grown
+from bark.model.physics import weighted_radius
+
+NAME = "numba"
+
+jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+inline = numba.njit(inline="always", error_model="numpy")
+
+_length = inline(physics.length)
+_tension = inline(physics.tension)
+_force_scale = inline(physics.spring_force_scale)
+_base_force = inline(physics.base_force)
+_surface_scale = inline(physics.surface_scale)
+_radial_speed = inline(physics.radial_speed)
+
+
+@inline
+def _never(tension, length, rest, fmax, inv_fmax, params):
+    """The kernel's rule where none is asked (a pass for forces alone)."""
+    return False
+
+
+@inline
+def _no_load(tension, length, rest, fmax, inv_fmax, params):
+    """The kernel's load where none is asked."""
+    return -np.inf
+
+BLOCK = 2048
+"""Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
+block's loops in SIMD lanes); in a parallel kernel the blocks are shared among threads.  Every base's
+arithmetic is the same whatever the blocks and threads, so the bits are too.  2,048 measured fastest
+on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,192)."""
+
+
+@inline
+def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp):
+    """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
+    with ``loads``, also the breaker part's load into ``wl`` and whether its ``rule`` picks each live
+    spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, bp)``:
+    the generated adapters pass on what the part reads), and return whether every live tension is
+    finite and every live load a number (not NaN) and whether the rule picked a live spring."""
+    finite = True
+    hit = False
+    for q in range(rest.shape[0]):
+        d0 = b0[q] - a0[q]
+        d1 = b1[q] - a1[q]
+        d2 = b2[q] - a2[q]
+        length = _length(d0, d1, d2)
+        t = _tension(length, rest[q], k)
+        g = _force_scale(t, length)
+        on = live[q]
+        g = g if (length > 0.0) & on else 0.0  # a spring of zero length has no direction
+        wt[q] = t
+        w0[q] = g * d0
+        w1[q] = g * d1
+        w2[q] = g * d2
+        if loads:
+            lq = load(t, length, rest[q], fmax[q], inv[q], bp)
+            pq = on & rule(t, length, rest[q], fmax[q], inv[q], bp)
+            wl[q] = lq
+            wp[q] = pq
+            finite = finite & (((abs(t) < np.inf) & (lq == lq)) | (not on))
+            hit = hit | pq
+    return finite, hit
+
+
+@inline
+def _blocks(n, block):
+    """How many blocks of ``block`` items ``n`` items make (a parallel loop's iterations)."""
+    return (n + block - 1) // block
+
+
+@inline
+def _gather_forces(u, w, i0, o, n, lo, hi):
+    """A run's forces along one axis added into the bases ``lo .. hi`` (a block of the bases the run
+    reaches: its first ends ``i0 .. i0 + n`` and second ends ``i0 + o .. i0 + o + n``): subtracted at
+    those that are its springs' second ends, then added at those that are their first ends — per
+    base, the order in which a pass over the run's springs adds them (all second ends, then all first
+    ends), so the same bits whatever the blocks."""
+    s_lo, s_hi = max(lo, i0 + o), min(hi, i0 + o + n)
+    if s_hi > s_lo:
+        second, ws = u[s_lo:s_hi], w[s_lo - i0 - o:s_hi - i0 - o]
+        for q in range(second.shape[0]):
+            second[q] -= ws[q]
+    f_lo, f_hi = max(lo, i0), min(hi, i0 + n)
+    if f_hi > f_lo:
+        first, wf = u[f_lo:f_hi], w[f_lo - i0:f_hi - i0]
+        for q in range(first.shape[0]):
+            first[q] += wf[q]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"nnan", "nsz"})
+def _largest_load(wl, live):
+    """The largest load ``wl`` of the live springs of a run (``-inf`` if none).  A maximum is exact in
+    any order, so it may be taken in SIMD lanes (what these flags allow; the call that gets a NaN
+    here reports NaN from its finiteness check instead)."""
+    top = -np.inf
+    for q in range(live.shape[0]):
+        load = wl[q] if live[q] else -np.inf
+        top = max(top, load)
+    return top
+
+
+@inline
+def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, breaking, rule, load, bp,
+                 log_id, log_step, log_t, n_log, step, block):
+    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
+    finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
+    ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
+    the bit) and logged; without, it is only noted.  With ``tops`` too: find the largest of the part's
+    loads (else ``-inf``).  Returns ``(largest load, all tensions finite, log length, whether the rule
+    picked a spring)``.
+
+    Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
+    ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes, a block of
+    springs at a time: the springs' tensions, force vectors, finiteness and the rule in one loop;
+    their largest load in a second; a spring by itself only where the rule picks one (after all
+    blocks); then the forces, gathered a block of bases at a time, each base taking its force as a
+    second end before its force as a first end (``_gather_forces``), so that every base receives its
+    springs' forces in the order of the runs (:class:`bark.model.forces.SpringOrder`, in which the springs
+    come here) — the order, and the bits, of a pass one spring at a time, and of the numpy
+    backend's sum."""
+    x0, x1, x2 = x
+    f0, f1, f2 = f
+    w0, w1, w2, wt, wl, wp = work
+    r_start, r_len, r_i, r_o = runs
+    top = -np.inf
+    finite = True
+    picked = False
+    for r in range(r_start.shape[0]):
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
+        fm, inv = fmax[s0:s0 + n], inv_fmax[s0:s0 + n]
+        nb = _blocks(n, block)
+        block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
+        for blk in prange(nb):  # the springs' forces, a block at a time
+            lo, hi = blk * block, min(n, (blk + 1) * block)
+            a, e = i0 + lo, i0 + hi
+            block_finite[blk], block_hit[blk] = _run_forces(
+                x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
+                fm[lo:hi], inv[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi], loads,
+                rule, load, bp)
+            if loads and tops:
+                block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
+        hit = False
+        for blk in range(nb):
+            finite = finite & block_finite[blk]
+            hit = hit | block_hit[blk]
+            top = max(top, block_top[blk])
+        if loads and hit:
+            for blk in range(nb):  # only the blocks the rule picked springs in, in order
+                if not block_hit[blk]:
+                    continue
+                for q in range(blk * block, min(n, (blk + 1) * block)):
+                    if wp[q]:
+                        if breaking:
+                            lv[q] = False
+                            log_id[n_log] = s0 + q
+                            log_step[n_log] = step
+                            log_t[n_log] = wt[q]
+                            n_log += 1
+                            w0[q] = 0.0
+                            w1[q] = 0.0
+                            w2[q] = 0.0
+                        else:
+                            picked = True
+        low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
+        span = n + abs(o)
+        for blk in prange(_blocks(span, block)):  # then added to the bases they reach, a block of bases at a time
+            lo, hi = low + blk * block, low + min(span, (blk + 1) * block)
+            _gather_forces(f0, w0, i0, o, n, lo, hi)
+            _gather_forces(f1, w1, i0, o, n, lo, hi)
+            _gather_forces(f2, w2, i0, o, n, lo, hi)
+    return top, finite, n_log, picked
+
+
+@inline
+def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update):
+    """Base ``q`` moved by its total force (eq. 4: its springs' forces in f, used up and zeroed, its
+    anchor at ``(anchor_x, anchor_y)`` and its own height, damping) through the integrator's update:
+    its new position and velocity, not yet on the surface."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    g0 = _base_force(f0[q], x0[q], anchor_x, v0[q], c, b)
+    g1 = _base_force(f1[q], x1[q], anchor_y, v1[q], c, b)
+    g2 = _base_force(f2[q], x2[q], az[q], v2[q], c, b)
+    f0[q] = 0.0
+    f1[q] = 0.0
+    f2[q] = 0.0
+    px, u0 = update(x0[q], v0[q], g0, hm, h)
+    py, u1 = update(x1[q], v1[q], g1, hm, h)
+    pz, u2 = update(x2[q], v2[q], g2, hm, h)
+    return px, py, pz, u0, u1, u2
+
+
+@inline
+def _base_pass(bases, c, b, hm, h, t, update, radii, params, uniform, r_now, r_before, from_radius, heights, block):
+    """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
+    (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
+    velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
+    step the anchors are ``r_before · direction`` (the last step's radius; written back once, at the end
+    of the call — the very products, so the bits do not depend on where calls end); else each is placed
+    at its own radius, every step (``_per_base_radius``, with the anchors' ``heights``).  Returns
+    whether every coordinate stayed finite.
+
+    A block of bases at a time (shared among threads in a parallel kernel), each block on slices of
+    the vectors, one coordinate per vector, so its loops run in SIMD lanes."""
+    n = bases[0].shape[0]
+    weights, stride = heights
+    block_bad = np.zeros(_blocks(n, block), np.int64)
+    for blk in prange(_blocks(n, block)):
+        lo, hi = blk * block, min(n, (blk + 1) * block)
+        part = _slices(bases, lo, hi)
+        if uniform:
+            block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, r_now, r_before, from_radius)
+        else:
+            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, radii, params, weights, stride, lo)
+    return block_bad.sum() == 0
+
+
+@inline
+def _slices(bases, lo, hi):
+    """The bases ``lo .. hi`` of the 14 base vectors."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    return (x0[lo:hi], x1[lo:hi], x2[lo:hi], v0[lo:hi], v1[lo:hi], v2[lo:hi], f0[lo:hi], f1[lo:hi], f2[lo:hi],
+            ax[lo:hi], ay[lo:hi], az[lo:hi], dx[lo:hi], dy[lo:hi])
+
+
+@inline
+def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
+    """``_base_pass`` on a block, for a radius that does not depend on height; returns how many bases
+    went non-finite."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    bad = 0
+    for q in range(x0.shape[0]):
+        anchor_x = r_before * dx[q] if from_radius else ax[q]
+        anchor_y = r_before * dy[q] if from_radius else ay[q]
+        px, py, pz, u0, u1, u2 = _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update)
+        r = r_now
+        scale = _surface_scale(px, py, r)
+        px *= scale
+        py *= scale
+        x0[q] = px
+        x1[q] = py
+        x2[q] = pz
+        bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
+        vr = _radial_speed(u0, u1, px, py, 1.0 / (r * r))
+        v0[q] = u0 - vr * px
+        v1[q] = u1 - vr * py
+        v2[q] = u2
+    return bad
+
+
+@inline
+def _per_base_radius(bases, c, b, hm, h, t, update, radii, params, weights, stride, first):
+    """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
+    the forces and the update (no calls: SIMD lanes), the radius at each base's height (the growth
+    law's block form, ``radii``: ``Growth.compiled_radii``, or its ``compiled`` called per height), the
+    surface at those radii (SIMD lanes again), then the anchors at their sites' radii.  The anchors'
+    heights never change, so a law that gives ``compiled_weights`` has each anchor's radius as
+    ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once (``weights``: weight k of
+    base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
+    (stride 0), the block form at the anchors' heights.  Per base the same operations in the same
+    order as one loop: the same bits.  Returns how many bases went non-finite."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    n = x0.shape[0]
+    for q in range(n):
+        x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update)
+    by_weights = stride > 0
+    r_at = np.empty(n)  # each base's radius at its height
+    radii(t, x2, params, r_at)
+    bad = 0
+    for q in range(n):
+        px, py, pz = x0[q], x1[q], x2[q]
+        r = r_at[q]
+        scale = _surface_scale(px, py, r)
+        px *= scale
+        py *= scale
+        x0[q] = px
+        x1[q] = py
+        bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
+        vr = _radial_speed(v0[q], v1[q], px, py, 1.0 / (r * r))
+        v0[q] = v0[q] - vr * px
+        v1[q] = v1[q] - vr * py
+    if by_weights:  # ax holds each anchor's radius while it is summed
+        for q in range(n):
+            ax[q] = params[0]
+        for term in range(weights.shape[0] // stride):
+            w, coefficient = weights[term * stride + first:term * stride + first + n], params[1 + term]
+            for q in range(n):
+                ax[q] = ax[q] + w[q] * coefficient
+    else:
+        radii(t, az, params, ax)
+    for q in range(n):
+        ra = ax[q]
+        ax[q] = ra * dx[q]
+        ay[q] = ra * dy[q]
+    return bad
+
+
+@inline
+def _refresh(x, runs, rest, k, live, f, work, first):
+    """The spring forces of the bases from ``first`` on, made again (the others' left as they are):
+    for each run, the springs with an end there, computed as the full pass computes them and added
+    in its order — so each of those bases gets the bits of a full pass."""
+    x0, x1, x2 = x
+    w0, w1, w2, wt, wl, wp = work
+    r_start, r_len, r_i, r_o = runs
+    f0, f1, f2 = f
+    for q in range(first, f0.shape[0]):  # written out: a loop over the tuple, inlined here, left them as they were
+        f0[q] = 0.0
+        f1[q] = 0.0
+        f2[q] = 0.0
+    for r in range(r_start.shape[0]):
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        lo = max(0, first - i0 - o)  # the first spring whose second end is a base from `first` on
+        if lo >= n:
+            continue
+        a, m = i0 + lo, n - lo
+        _run_forces(x0[a:a + m], x1[a:a + m], x2[a:a + m], x0[a + o:a + o + m], x1[a + o:a + o + m],
+                    x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n],
+                    rest[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest)
+        ours = max(0, first - a)  # of these, the first whose first end is a base from `first` on
+        for u, w in ((f0, w0), (f1, w1), (f2, w2)):
+            second = u[a + o:a + o + m]
+            for q in range(m):
+                second[q] -= w[q]
+            head = u[a + ours:a + m]
+            for q in range(m - ours):
+                head[q] += w[ours + q]
+
+
+@inline
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+                  heights, start, update, rule, load, radius, prepare, radii):
+    """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
+    load of the last step, length of the break log, whether the rule named a candidate in the last
+    step)``, the load NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
+    part's (its numbers ``bp``).
+
+    The spring pass that finds a step's loads also accumulates the next step's spring forces into
+    ``f`` (first same as last), through the same function as the fresh pass at the start of the
+    call, so the result does not depend on where calls begin and end.  That pass makes the forces of
+    the bases from ``fresh`` on (0: all); the others' are taken from ``f`` as the last call left them
+    — when ``kept >= 0`` and the positions of the first ``kept`` bases are still those the last call
+    ended with (kept in ``start``: compared here, to the bit), which the backend knows to be all that
+    can have changed (``NumbaBackend.steps``); else all are made again.
+
+    ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
+    step is replayed from them), and, when the last step is accepted, receives the positions it ends
+    with (for the next call's comparison)."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    f = (f0, f1, f2)
+    k, c, b, m, h, accept_load, max_batch = constants
+    uniform, breaking, return_on_break, fresh, block, kept = flags
+    log_id, log_step, log_t = log
+    hm = h / m
+    if not _kept_and_started(bases, start, kept, block):
+        fresh = 0
+    if fresh == 0:
+        f0[:] = 0.0
+        f1[:] = 0.0
+        f2[:] = 0.0
+        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule, load,
+                     bp, log_id, log_step, log_t, 0, 0, block)
+    elif fresh < x0.shape[0]:
+        _refresh((x0, x1, x2), runs, rest, k, live, f, work, fresh)
+    may_relax = False
+    for step in range(relax.shape[0]):
+        may_relax = may_relax or relax[step]
+    tops = accept_load < np.inf or may_relax  # every step's load is needed; else only the last one's (below)
+    top = -np.inf
+    finite = True
+    done = 0
+    n_log = 0
+    before = 0
+    r_before = 0.0
+    picked = False
+    for step in range(times.shape[0]):
+        t = times[step]
+        q = prepare(t, params)  # the growth law's time-only part, once a step
+        r_now = radius(t, 0.0, q) if uniform else 0.0
+        finite = _base_pass(bases, c, b, hm, h, t, update, radii, q, uniform, r_now, r_before,
+                            uniform and step > 0, heights, block)
+        r_before = r_now
+        before = n_log
+        top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work,
+                                                          True, tops, breaking, rule, load, bp, log_id, log_step,
+                                                          log_t, n_log, step + 1, block)
+        finite = finite and springs_finite
+        done = step + 1
+        if not finite or top > accept_load or picked:
+            break
+        if n_log > before and (return_on_break or n_log - before > max_batch):
+            break
+        if relax[step] and top <= 1.0:  # quiet again on the coarser grid: the clock doubles the step
+            break
+    if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
+        for q in range(ax.shape[0]):
+            ax[q] = r_before * dx[q]
+            ay[q] = r_before * dy[q]
+    if finite and not tops and done > 0:
+        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, work, log_id[before:n_log], load, bp)
+    if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
+        _copy_blocks((x0, x1, x2), start[:3], 0, block)
+    return done, (top if finite else np.nan), n_log, picked and finite
+
+
+@inline
+def _kept_and_started(bases, start, kept, block):
+    """Whether the first ``kept`` bases' positions are those in ``start`` (``kept < 0``: not known),
+    to the bit; and ``start`` made the state this call begins from: its velocities and anchors copied
+    in the same pass over blocks of bases as the comparison, then the positions not already there."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    n = x0.shape[0]
+    block_same = np.ones(_blocks(n, block), np.bool_)
+    for blk in prange(_blocks(n, block)):
+        lo, hi = blk * block, min(n, (blk + 1) * block)
+        same = True
+        top = min(hi, max(kept, lo))
+        s0, s1, s2 = start[0][lo:top], start[1][lo:top], start[2][lo:top]
+        p0, p1, p2 = x0[lo:top], x1[lo:top], x2[lo:top]
+        for q in range(top - lo):
+            same = same & (s0[q] == p0[q]) & (s1[q] == p1[q]) & (s2[q] == p2[q])
+        block_same[blk] = same
+        _copy_block((v0, v1, v2, ax, ay, az), start[3:], lo, hi)
+    same = kept >= 0
+    for blk in range(block_same.shape[0]):
+        same = same & block_same[blk]
+    _copy_blocks((x0, x1, x2), start[:3], kept if same else 0, block)
+    return same
+
+
+@inline
+def _copy_block(source, target, lo, hi):
+    """Entries ``lo .. hi`` of the vectors ``source`` into ``target``."""
+    if hi > lo:
+        for v in range(len(source)):
+            target[v][lo:hi] = source[v][lo:hi]
+
+
+@inline
+def _copy_blocks(source, target, first, block):
+    """The vectors ``source`` into ``target`` from entry ``first`` on, a block at a time."""
+    n = source[0].shape[0]
+    for blk in prange(_blocks(n, block)):
+        _copy_block(source, target, max(first, blk * block), min(n, (blk + 1) * block))
+
+
+@inline
+def _last_load(x, runs, rest, k, live, fmax, inv_fmax, work, broke, load, bp):
+    """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
+    those it broke): what that step's own pass finds when it looks (the same loads, and a maximum
+    is exact), taken once per call instead of every step."""
+    x0, x1, x2 = x
+    w0, w1, w2, wt, wl, wp = work
+    r_start, r_len, r_i, r_o = runs
+    for s in broke:
+        live[s] = True
+    top = -np.inf
+    for r in range(r_start.shape[0]):
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
+        _run_forces(x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n], x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n],
+                    x2[i0 + o:i0 + o + n], rr, lv, fmax[s0:s0 + n], inv_fmax[s0:s0 + n], k, w0, w1, w2, wt, wl, wp,
+                    True, _never, load, bp)
+        top = max(top, _largest_load(wl, lv))
+    for s in broke:
+        live[s] = False
+    return top
+
+
+# -- one wrapper per combination of compiled forms, generated and cached ---------------------------
+
+_WRAPPER = '''"""Generated by bark: its stepping kernel specialised for {names}.  Safe to delete."""
+import numba
+from bark.engine.kernels.numba_backend import _no_load, _steps_kernel, each_height, inline
+{imports}
+_update = inline({update})
+_rule_part = inline({rule})
+_load_part = {load}
+_radius = inline({radius})
+_prepare = inline({prepare})
+_radii = {radii}
+{adapters}
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log, heights, start):
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+                         heights, start, _update, _rule, _load, _radius, _prepare, _radii)
+'''
+
+_ADAPTERS = '''
+
+@inline
+def _rule(tension, length, rest, fmax, inv_fmax, params):
+    return _rule_part({rule_args})
+{load}'''
+_LOAD_ADAPTER = '''
+
+@inline
+def _load(tension, length, rest, fmax, inv_fmax, params):
+    return _load_part({load_args})
+'''
+
+
+def _adapters(part) -> str:
+    """The source of ``_rule`` and ``_load``: the kernel's per-spring signature ``(tension, length,
+    rest, fmax, inv_fmax, params)`` passed on as the breaker part reads it (``_rule_part`` and
+    ``_load_part`` its functions); ``_load = _no_load`` for a part without one."""
+    load = "\n_load = _no_load\n" if part.load is None else \
+        _LOAD_ADAPTER.format(load_args=", ".join((*part.load_reads, "params")))
+    return _ADAPTERS.format(rule_args=", ".join((*part.reads, "params")), load=load)
+
+
+_SPECIALIZED: dict[tuple, object] = {}
+
+
+def _importable(fn) -> tuple[str, str] | None:
+    """``(module, qualname)`` by which ``fn`` can be imported, or ``None`` (a lambda, a local function)."""
+    module, qualname = getattr(fn, "__module__", None), getattr(fn, "__qualname__", "")
+    if not module or "<" in qualname or module == "__main__":
+        return None
+    return module, qualname
+
+
+def _source(fn) -> str:
+    try:
+        return inspect.getsource(fn)
+    except (OSError, TypeError):
+        return repr(fn)
+
+
+def cache_dir() -> Path:
+    """Where generated kernels live: ``$BARK_CACHE_DIR``, else ``$XDG_CACHE_HOME/bark``, else
+    ``~/.cache/bark`` (numba caches their compiled code beside them)."""
+    base = os.environ.get("BARK_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "bark")
+    return Path(base) / "kernels"
+
+
+_JITABLE: set = set()
+
+
+def _helpers(fn, seen=None) -> list:
+    """``fn`` and the plain Python functions it calls through its module's globals, transitively:
+    what numba must be able to compile inside it."""
+    seen = [] if seen is None else seen
+    if fn in seen:
+        return seen
+    seen.append(fn)
+    code, scope = getattr(fn, "__code__", None), getattr(fn, "__globals__", {})
+    for name in code.co_names if code is not None else ():
+        obj = scope.get(name)
+        if inspect.isfunction(obj) and not isinstance(obj, numba.core.dispatcher.Dispatcher):
+            _helpers(obj, seen)
+    return seen
+
+
+def _make_jitable(functions) -> None:
+    """Let compiled code call these plain functions (``register_jitable``): a plugin's compiled form
+    may call its own helpers without importing numba.  They are inlined where called, as the compiled
+    forms themselves are: a call per base and step otherwise costs more than the helper (a bulge's
+    profile: 3.5x slower measured)."""
+    for fn in functions:
+        if fn not in _JITABLE:
+            numba.extending.register_jitable(inline="always")(fn)
+            _JITABLE.add(fn)
+
+
+def each_height(radius):
+    """The block form (``Growth.compiled_radii``) of a growth law that gives none: its compiled
+    ``radius`` called for each height."""
+    def radii(t, z, q, out):
+        for i in range(z.shape[0]):
+            out[i] = radius(t, z[i], q)
+    return inline(radii)
+
+
+def adapted(part):
+    """The breaker part's rule and load as the kernel calls them, ``(tension, length, rest, fmax,
+    inv_fmax, params)`` (inlined where called), compiled in this process."""
+    _make_jitable([h for fn in (part.rule, part.load) if fn is not None for h in _helpers(fn)[1:]])
+    scope = {"inline": inline, "_no_load": _no_load, "_rule_part": inline(part.rule),
+             "_load_part": None if part.load is None else inline(part.load)}
+    exec(_adapters(part), scope)
+    return scope["_rule"], scope["_load"]
+
+
+def part_on_springs(part):
+    """``evaluate(tension, length, rest, fmax, inv_fmax) -> (picked, load)``: the part's rule and
+    load at each spring of the arrays, compiled as the stepping kernel compiles them (the contract
+    kit holds them against the part's functions on whole arrays, ``bark.testing``)."""
+    rule, load = adapted(part)
+    params = part.params
+
+    @numba.njit(error_model="numpy")
+    def each(tension, length, rest, fmax, inv_fmax, params, picked, loads):
+        for q in range(tension.shape[0]):
+            picked[q] = rule(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], params)
+            loads[q] = load(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], params)
+
+    def evaluate(tension, length, rest, fmax, inv_fmax):
+        picked, loads = np.zeros(len(tension), np.bool_), np.empty(len(tension))
+        each(*(np.ascontiguousarray(a, dtype=float) for a in (tension, length, rest, fmax, inv_fmax)), params,
+             picked, loads)
+        return picked, loads
+
+    return evaluate
+
+
+def radius_at_heights(radius, prepare=physics.as_given):
+    """``evaluate(t, z, params) -> r``: a growth law's compiled radius at each height of ``z``, its
+    per-step part taken once, compiled as the stepping kernel compiles them (for the contract kit)."""
+    g, p = inline(radius), inline(prepare)
+    _make_jitable([h for fn in (radius, prepare) for h in _helpers(fn)[1:]])
+
+    @numba.njit(error_model="numpy")
+    def each(t, z, params, out):
+        q = p(t, params)
+        for i in range(z.shape[0]):
+            out[i] = g(t, z[i], q)
+
+    def evaluate(t, z, params):
+        z = np.ascontiguousarray(z, dtype=float)
+        out = np.empty(z.shape[0])
+        each(float(t), z, np.ascontiguousarray(params, dtype=float), out)
+        return out
+
+    return evaluate
+
+
+def update_on_axis(update):
+    """``evaluate(x, v, f, hm, h) -> (x, v)``: an integrator's compiled update at each entry, compiled
+    as the stepping kernel compiles it (for the contract kit)."""
+    u = inline(update)
+    _make_jitable(_helpers(update)[1:])
+
+    @numba.njit(error_model="numpy")
+    def each(x, v, f, hm, h, x_out, v_out):
+        for i in range(x.shape[0]):
+            x_out[i], v_out[i] = u(x[i], v[i], f[i], hm, h)
+
+    def evaluate(x, v, f, hm, h):
+        x, v, f = (np.ascontiguousarray(a, dtype=float) for a in (x, v, f))
+        x_out, v_out = np.empty_like(x), np.empty_like(v)
+        each(x, v, f, float(hm), float(h), x_out, v_out)
+        return x_out, v_out
+
+    return evaluate
+
+
+def specialized(update, breaker, radius, prepare=physics.as_given, radii=None, parallel=False):
+    """The stepping kernel with ``update``, the breaker part's rule and load (``breaker``, a
+    :class:`~bark.contract.parts.BreakerPart`), ``radius``, ``prepare`` and ``radii`` (the growth law's block
+    form; ``None``: ``radius`` per height) inlined (compiled once per combination and kept on disk;
+    see the module's docstring), its block loops shared among threads if ``parallel``.  Functions
+    that cannot be imported by name (lambdas, local functions) get a wrapper compiled in this process
+    only."""
+    key = (update, breaker.rule, breaker.reads, breaker.load, breaker.load_reads, radius, prepare, radii,
+           bool(parallel))
+    if key in _SPECIALIZED:
+        return _SPECIALIZED[key]
+    forms = (update, breaker.rule, radius, prepare)
+    parts = forms + tuple(fn for fn in (breaker.load, radii) if fn is not None)
+    helpers = [h for fn in parts for h in _helpers(fn)[1:]]
+    _make_jitable(helpers)
+    names = [_importable(fn) for fn in parts]
+    if None in names:
+        u, g, p = (inline(fn) for fn in (update, radius, prepare))
+        block = each_height(g) if radii is None else inline(radii)
+        rule, load = adapted(breaker)
+
+        @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+                  heights, start):
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
+                                 flags, log, heights, start, u, rule, load, g, p, block)
+
+        _SPECIALIZED[key] = steps
+        return steps
+    adapters = _adapters(breaker)
+    digest = hashlib.sha256()
+    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in parts),
+                  *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names), adapters,
+                  f"parallel={bool(parallel)}"):
+        digest.update(piece.encode())
+    imports, refs = [], []
+    for i, (module, qualname) in enumerate(names):
+        head, _, rest = qualname.partition(".")
+        imports.append(f"from {module} import {head} as _f{i}")
+        refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
+    extra = iter(refs[4:])
+    load = f"inline({next(extra)})" if breaker.load is not None else "None"
+    text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
+                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3], load=load,
+                           radii="each_height(_radius)" if radii is None else f"inline({next(extra)})",
+                           adapters=adapters, parallel=bool(parallel))
+    name = f"bark_steps_{digest.hexdigest()[:20]}"
+    path = _write_once(name, text)
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    _SPECIALIZED[key] = module.steps
+    return module.steps
+
+
+def _write_once(name: str, text: str) -> Path:
+    """The generated file ``name``.py, written (atomically) if it is not there yet; in a temporary
+    folder when the cache folder cannot be written (then compiled once per process)."""
+    for folder in (cache_dir(), Path(tempfile.gettempdir()) / f"bark-kernels-{os.getuid() if hasattr(os, 'getuid') else 0}"):
+        path = folder / f"{name}.py"
+        if path.exists():
+            return path
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+            with os.fdopen(fd, "w") as fh:
+                fh.write(text)
+            os.replace(tmp, path)
+            return path
+        except OSError:
+            continue
+    raise OSError("no folder to write bark's generated kernels to: set BARK_CACHE_DIR")
+
+
+# -- per-step operations (integrators without a compiled form, growth laws without one) ---------
+
+
+@jit
+def _spring_forces(x, runs, work, rest, k, intact, f):
+    for axis in range(3):
+        f[:, axis] = 0.0  # a column at a time: a vector fill (the whole 2-D array is filled elementwise)
+    no = np.empty(0)
+    no_i = np.empty(0, dtype=np.int64)
+    _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, (f[:, 0], f[:, 1], f[:, 2]), work,
+                 False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK)
+
+
+@jit
+def _measure(x, pi, pj, rest, k, out):
+    x0, x1, x2 = x[:, 0], x[:, 1], x[:, 2]
+    finite = True
+    for s in range(pi.shape[0]):
+        d0 = x0[pj[s]] - x0[pi[s]]
+        d1 = x1[pj[s]] - x1[pi[s]]
+        d2 = x2[pj[s]] - x2[pi[s]]
+        t = _tension(_length(d0, d1, d2), rest[s], k)
+        out[s] = t
+        finite = finite & (abs(t) < np.inf)
+    return finite
+
+
+@jit
+def _constrain(x, v, anchor, anchor_dir, r_x, r_anchor):
+    uniform_x, uniform_a = r_x.shape[0] == 1, r_anchor.shape[0] == 1
+    for q in range(x.shape[0]):
+        r = r_x[0] if uniform_x else r_x[q]
+        px, py = x[q, 0], x[q, 1]
+        scale = _surface_scale(px, py, r)
+        px *= scale
+        py *= scale
+        x[q, 0] = px
+        x[q, 1] = py
+        vr = _radial_speed(v[q, 0], v[q, 1], px, py, 1.0 / (r * r))
+        v[q, 0] -= vr * px
+        v[q, 1] -= vr * py
+        ra = r_anchor[0] if uniform_a else r_anchor[q]
+        anchor[q, 0] = ra * anchor_dir[q, 0]
+        anchor[q, 1] = ra * anchor_dir[q, 1]
+
+
+@jit
+def _components(n, pi, pj, intact, labels):
+    """Connected components of the intact springs by union-find; labels numbered in order of each
+    component's smallest base, as scipy.sparse.csgraph.connected_components numbers them."""
+    parent = np.arange(n)
+    for s in range(pi.shape[0]):
+        if not intact[s]:
+            continue
+        a, b = np.int64(pi[s]), np.int64(pj[s])
+        while parent[a] != a:  # find, halving the path as we go
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            if a < b:
+                parent[b] = a
+            else:
+                parent[a] = b
+    count = 0
+    for q in range(n):  # roots are each component's smallest base, met in increasing order
+        r = q
+        while parent[r] != r:
+            r = parent[r]
+        if r == q:
+            labels[q] = count
+            count += 1
+        else:
+            labels[q] = labels[r]
+    return count
+
+
+def _radii(r) -> np.ndarray:
+    """A uniform radius travels as one value; a per-base one as its array."""
+    r = np.asarray(r, dtype=float)
+    if r.ndim == 0 or r.strides == (0,):  # a scalar, or np.broadcast_to of one
+        return np.array([r.flat[0]])
+    return np.ascontiguousarray(r)
+
+
+PARALLEL_BASES = 16_000
+"""Automatic threads (``Numerics.threads = 0``) share a kernel call's blocks among all the cores for
+a lattice of at least this many bases (``bark bench speed --threads 1 --threads 2`` measures where
+that begins to pay); below, one thread, and the serial kernel."""
+
+SLACK_RUN = 64
+"""A run of at least this many springs gets as many free positions again after it, where springs
+that extend it later (the next base of the same offset, as bases join) go without moving any other."""
+
+
+@attrs.define(eq=False)
+class _Frame:
+    """What a kernel call is given besides the state: the state's columns as vectors, its springs in
+    the kernel's order, and work space kept between calls (derived data of one state, extended as its
+    bases and springs are appended: a join costs its new springs, not a copy of all).
+
+    The springs are laid out by run (``SpringOrder.runs``), each run at its own *position* in the
+    per-spring arrays and followed by free positions (``SLACK_RUN``), so that a joining base's springs,
+    which continue the runs of their offsets, are written in place; springs that continue no run
+    with room make the frame again.  Positions are the kernel's spring indices (it logs them);
+    ``ids`` maps them back to spring ids."""
+
+    state: object
+    """The state it was made for (compared by identity)."""
+    sizes: tuple
+    """``(n_bases, n_springs)`` it covers, and the stored arrays whose columns ``bases`` are."""
+    bases: tuple
+    """The 14 base vectors the kernel takes: x, v, f, anchor (3 each), anchor direction (2)."""
+    runs: tuple
+    """``(position, length, first i, offset o)`` of each run, in summation order (lengths grow in place)."""
+    room: np.ndarray
+    """Positions each run may fill (its length plus its free positions)."""
+    first_keys: np.ndarray
+    """Each run's first spring's sort key (``bark.model.forces.order_keys``), to place appended springs."""
+    springs: tuple
+    """Rest lengths, thresholds and ``1 / fmax`` by position (a spring's rest length and threshold are
+    set when it is made and never change; see ``bark.model.state``)."""
+    ids: np.ndarray
+    """Spring id at each position (``-1``: a free one)."""
+    live: np.ndarray
+    """The intact mask by position (free positions ``False``): the kernel's working copy, kept in step
+    with the state's ``intact`` (see ``NumbaBackend._live``)."""
+    n_live: int
+    """How many are ``True``."""
+    pending: np.ndarray
+    """Springs the last call broke (ids): the state has them broken once the simulation has taken them."""
+    version: int
+    """The state's ``intact_version`` when ``live`` was last in step with it."""
+    work: tuple
+    start: tuple
+    """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
+    from them; after an accepted call, x is the positions it ended with."""
+    log: tuple
+    forces: float | None = None
+    """The stiffness ``k`` of the spring forces the last call left in f, of the positions it ended
+    with (kept in ``start[0]``, ``kept`` bases of them); ``None`` when they are of nothing now."""
+    kept: int = 0
+    refresh_from: int = 0
+    """Bases from this id on have springs (or are bases) that came after those forces: theirs are
+    made again at the next call, the others' kept (``NumbaBackend.steps``)."""
+    weights: "_Weights | None" = None
+    """The anchors' growth-law weights (``NumbaBackend._heights``)."""
+
+
+@attrs.define(eq=False)
+class _Weights:
+    """The anchors' weights (``Growth.compiled_weights``) for one growth law."""
+
+    key: tuple
+    table: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 0)))
+    """Weight k of base i at ``[k, i]``; capacity for more bases in its columns."""
+    count: int = 0
+    """Bases done."""
+    checked: int = 0
+    """Bases whose weights have been checked against the law's radius (``_check_weights``)."""
+
+
+_NO_WEIGHTS = (np.empty(0), 0)
+_NO_IDS = np.empty(0, np.int64)
+CHECK_BATCH = 1024
+"""The anchors' weights are checked against the growth law's radius when first taken, then in
+batches of this many bases as bases join (a check per join cost 3 % of the whole tree's run)."""
+
+
+def _check_weights(plan: Plan, t: float, z: np.ndarray, weights: np.ndarray) -> None:
+    """The promise of ``compiled_weights``: at heights ``z``, ``q[0] + w_0 q[1] + w_1 q[2] + ...``
+    is the compiled radius, to the bit (the kernel sums them in place of calling it)."""
+    q = np.asarray(plan.prepare(t, plan.params), dtype=float)
+    summed = weighted_radius(q, weights)
+    radius = np.broadcast_to(plan.radius(t, z, q), z.shape)
+    if weights.shape[1:] != z.shape or not np.array_equal(summed, radius):
+        raise BarkError(f"the growth law's compiled_weights ({getattr(plan.weights, '__qualname__', plan.weights)}) "
+                        f"do not reproduce its compiled radius ({getattr(plan.radius, '__qualname__', plan.radius)}) "
+                        "at its anchors' heights: they must give q[0] + w[0]·q[1] + w[1]·q[2] + ... exactly")
+
+
+def _place(springs: tuple, live: np.ndarray, at: np.ndarray, ids: np.ndarray, state) -> None:
+    """The state's springs ``ids`` at positions ``at`` of a frame: rest lengths, thresholds, their
+    inverses and intact flags."""
+    rest, fmax, inv_fmax = springs
+    rest[at], fmax[at] = state.rest[ids], state.fmax[ids]
+    inv_fmax[at] = 1.0 / state.fmax[ids]
+    live[at] = state.intact[ids]
+
+
+def _store_of(state) -> tuple:
+    return tuple(state._store.values())
+
+
+def _same(a: tuple, b: tuple) -> bool:
+    return len(a) == len(b) and all(p is q for p, q in zip(a, b))
+
+
+class NumbaBackend(Backend):
+    name = NAME
+
+    def __init__(self) -> None:
+        self._frame: _Frame | None = None
+        self._order = SpringOrder()
+        self._buffers: dict[str, np.ndarray] = {}
+        self.threads = 1
+        """Threads the last kernel call shared its blocks among."""
+        self.block = BLOCK
+        """Bases or springs a block of the kernel's loops (the results do not depend on it)."""
+
+    @staticmethod
+    def _threads(requested: int, n_bases: int) -> int:
+        """Threads for a call: ``requested`` (``Numerics.threads``), at most numba's pool
+        (``NUMBA_NUM_THREADS``: the cores this process may use, unless set); automatic (0) takes them
+        all for a lattice of ``PARALLEL_BASES`` or more, else one."""
+        most = numba.config.NUMBA_NUM_THREADS
+        if requested == 0:
+            return most if n_bases >= PARALLEL_BASES else 1
+        return min(requested, most)
+
+    def frame(self, state) -> _Frame:
+        """The call frame for ``state``: reused while the state keeps its arrays and sizes, extended
+        when it has grown (bases and springs appended), else made again."""
+        fr = self._frame
+        sizes = (state.n_bases, state.n_springs, *_store_of(state))
+        if fr is not None and fr.state is state and _same(fr.sizes, sizes):
+            return fr
+        if fr is None or fr.state is not state or not (fr.sizes[0] <= state.n_bases and fr.sizes[1] <= state.n_springs) \
+                or not self._extend(fr, state):
+            fr = self._frame = self._make(state)
+        fr.sizes = sizes
+        self._views(fr, state)
+        return fr
+
+    def _make(self, state) -> _Frame:
+        """A frame made from scratch: the springs in summation order, laid out run by run with room."""
+        ids = self._order.of(state.pairs, state)
+        ids = np.arange(state.n_springs) if ids is None else ids
+        starts, lengths, first_i, offsets = self._order.runs()
+        room = lengths + np.where(lengths >= SLACK_RUN, lengths, 0)
+        position = np.cumsum(room) - room
+        where = np.arange(len(ids)) + np.repeat(position - starts, lengths)  # sorted place -> position
+        size = int(room.sum())
+        by_position = np.full(size, -1, np.int64)
+        by_position[where] = ids
+        springs, live = tuple(np.zeros(size) for _ in range(3)), np.zeros(size, bool)
+        _place(springs, live, where, ids, state)
+        return _Frame(state=state, sizes=(), bases=(), runs=(position, lengths.copy(), first_i, offsets), room=room,
+                      first_keys=self._order.keys[starts] if len(starts) else np.empty(0, np.uint64),
+                      springs=springs, ids=by_position, live=live, n_live=int(np.count_nonzero(live)),
+                      pending=_NO_IDS, version=state.intact_version, work=(),
+                      start=(), log=())
+
+    def _extend(self, fr: _Frame, state) -> bool:
+        """Place the springs appended since ``fr`` was made at the ends of the runs they continue;
+        ``False`` (nothing changed) when one continues no run with room."""
+        seen = fr.sizes[1]
+        fr.refresh_from = min(fr.refresh_from, fr.sizes[0])  # new bases
+        if seen == state.n_springs:
+            return True
+        new = np.arange(seen, state.n_springs)
+        keys = order_keys(state.pairs[seen:])
+        by_key = np.argsort(keys, kind="stable")
+        keys, new = keys[by_key], new[by_key]
+        run = np.searchsorted(fr.first_keys, keys, side="right") - 1
+        if run.size and run.min() < 0:
+            return False
+        position, lengths, _, offsets = fr.runs
+        start = np.searchsorted(run, run, side="left")  # each new spring's rank among those of its run
+        rank = np.arange(len(run)) - start
+        fits = (keys == fr.first_keys[run] + (lengths[run] + rank).astype(np.uint64)) & (offsets[run] > 0) \
+            & (lengths[run] + rank < fr.room[run])
+        if not fits.all():
+            return False
+        at = position[run] + lengths[run] + rank
+        fr.ids[at] = new
+        _place(fr.springs, fr.live, at, new, state)
+        fr.n_live += int(np.count_nonzero(state.intact[new]))
+        np.add.at(lengths, run, 1)
+        fr.refresh_from = min(fr.refresh_from, int(state.pairs[seen:].min()))  # and the bases they join
+        return True
+
+    def _views(self, fr: _Frame, state) -> None:
+        """The frame's base vectors and work space for the state's present sizes."""
+        x, v, a, d = state.x, state.v, state.anchor, state.anchor_dir
+        n, m = state.n_bases, state.n_springs
+        f = self._space("f", (n, 3))
+        fr.bases = (*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
+                    *(a[:, i] for i in range(3)), d[:, 0], d[:, 1])
+        longest = int(fr.runs[1].max(initial=1))
+        fr.work = (*(self._space(f"work{i}", (longest,)) for i in range(5)), self._space("picks", (longest,), np.bool_))
+        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(3))
+        fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
+
+    def _space(self, name: str, shape: tuple, dtype=float) -> np.ndarray:
+        """Work space ``name`` of ``shape`` (columns contiguous): the leading rows of a buffer kept
+        between frames and doubled when outgrown (its rows carried over), so a join does not allocate
+        (and fault in) it anew, and what a call left in it stays."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape[0] < shape[0]:
+            rows = grown(0 if buf is None else buf.shape[0], shape[0])
+            bigger = np.empty((rows, *shape[1:]), dtype=dtype, order="F")
+            if buf is not None:
+                bigger[:buf.shape[0]] = buf
+            buf = self._buffers[name] = bigger
+        return buf[:shape[0]]
+
+    def _live(self, state, fr: _Frame | None = None) -> np.ndarray:
+        """The kernel's intact mask, in step with the state's: copied again unless the flags are as
+        the kernel knows them — not edited since it last looked (``State.intact_version``), or edited
+        once, by the breaking of exactly the springs of its last call (what ``Simulation.advance``
+        does next: those are broken, and as many are intact as the kernel counts).  ``fr``: the
+        state's frame, when the caller has it."""
+        fr = fr or self.frame(state)
+        edits = state.intact_version - fr.version
+        took_breaks = edits == 1 and fr.pending.size > 0 and fr.n_live == np.count_nonzero(state.intact) \
+            and not state.intact[fr.pending].any()
+        if not (edits == 0 and fr.pending.size == 0 or took_breaks):
+            fr.forces = None  # of other springs
+            valid = fr.ids >= 0
+            fr.live[valid] = state.intact[fr.ids[valid]]
+            fr.n_live = int(np.count_nonzero(fr.live))
+        fr.version, fr.pending = state.intact_version, _NO_IDS
+        return fr.live
+
+    def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
+        """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
+        the growth law's ``compiled_weights`` of each anchor's height, taken when its base is first
+        seen (an anchor's height never changes) and checked against the law's own radius then, or
+        with the next ``CHECK_BATCH`` bases that join; ``(empty, 0)`` for a law without them."""
+        if plan.weights is None:  # the plan gives them only for a radius that depends on height
+            return _NO_WEIGHTS
+        key = (plan.weights, plan.params.tobytes())
+        fr = fr or self.frame(state)
+        w = fr.weights
+        if w is None or w.key != key:
+            w = fr.weights = _Weights(key=key)
+        n = state.n_bases
+        if w.count < n:
+            z = np.ascontiguousarray(state.anchor[w.count:n, 2])
+            new = np.atleast_2d(np.asarray(plan.weights(z, plan.params), dtype=float))
+            if new.shape[1:] != z.shape:
+                _check_weights(plan, state.t, z, new)  # refuses them
+            if w.table.shape[1] < n or w.table.shape[0] != len(new):
+                table = np.zeros((len(new), grown(w.table.shape[1], n)))
+                table[:len(w.table), :w.count] = w.table[:, :w.count]
+                w.table = table
+            w.table[:, w.count:n] = new
+            w.count = n
+            if w.checked == 0 or n - w.checked >= CHECK_BATCH:
+                _check_weights(plan, state.t, np.ascontiguousarray(state.anchor[w.checked:n, 2]), w.table[:, w.checked:n])
+                w.checked = n
+        return w.table.ravel(), w.table.shape[1]
+
+    def spring_forces(self, state, mech, x) -> np.ndarray:
+        fr = self.frame(state)
+        f = np.empty_like(x, order="F")
+        _spring_forces(x, fr.runs, fr.work, fr.springs[0], mech.k, self._live(state, fr), f)
+        return f
+
+    def measure(self, state, mech, out: np.ndarray) -> bool:
+        return bool(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, out))
+
+    def constrain(self, state, r_x, r_anchor) -> None:
+        _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        """Up to ``len(plan.times)`` steps in one kernel call.  The spring forces the last call left
+        in f are kept where they are of the positions, springs and stiffness now (``k`` the same, no
+        break outside the kernel, and the positions those the call ended with, compared in full by
+        the kernel as it copies the state it starts from): only the bases that joined since, and
+        those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
+        fresh pass over all)."""
+        self.threads = self._threads(plan.threads, state.n_bases)
+        kernel = specialized(plan.update, plan.breaker, plan.radius, plan.prepare, plan.radii, parallel=self.threads > 1)
+        if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
+            numba.set_num_threads(self.threads)
+        fr = self.frame(state)
+        live = self._live(state, fr)
+        k = float(mech.k)
+        n = state.n_bases
+        kept = fr.kept if fr.forces == k and fr.kept <= n else -1  # the kernel compares their positions
+        fresh = min(fr.refresh_from, n)  # forces made again from this base on (all, if those moved)
+        start = tuple(a[:, i] for a in fr.start for i in range(3))
+        fr.forces = None
+        params = np.ascontiguousarray(plan.params, dtype=float)
+        constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
+                     float(plan.accept_load), float(plan.max_batch))
+        rest, fmax, inv_fmax = fr.springs
+        heights = self._heights(state, plan, fr)
+
+        bp = plan.breaker.params
+
+        def call(times, relax, fresh, kept):
+            flags = (bool(plan.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(fresh), self.block,
+                     int(kept))
+            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
+                          flags, fr.log, heights, start)
+
+        times = np.ascontiguousarray(plan.times, dtype=float)
+        relax = plan.relax_flags()
+        done, load, n_log, picked = call(times, relax, fresh, kept)
+        valid = True  # the forces in f are of the positions the last call ended with
+        if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
+            for keep, arr in zip(fr.start, (state.x, state.v, state.anchor)):
+                np.copyto(arr, keep)
+            live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
+            n_log, valid, picked = 0, done > 1, False
+            if done > 1:
+                n_log, picked = call(times[: done - 1], relax[: done - 1], 0, -1)[2:]
+            done -= 1
+        if valid:  # for the next call (the kernel has put the positions it ended with in start)
+            fr.forces, fr.kept, fr.refresh_from = k, n, n
+        if plan.breaks != "kernel":  # the breakers judge in Python: they see every tension of the state left
+            self.measure(state, mech, tension)
+        positions, step, t = (a[:n_log] for a in fr.log)
+        ids = fr.ids[positions]
+        if n_log:  # positions -> spring ids, by step then id
+            by = np.lexsort((ids, step))
+            ids, step, t = ids[by], step[by], t[by]
+        fr.n_live -= n_log  # the simulation breaks these in the state next (Simulation.break_springs)
+        fr.pending = ids
+        return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy(),
+                     picked=bool(picked))
+
+    def patch_labels(self, state) -> np.ndarray:
+        labels = np.empty(state.n_bases, dtype=np.int32)
+        _components(state.n_bases, state.pairs[:, 0], state.pairs[:, 1], state.intact, labels)
+        return labels
+
+
+BACKEND_CLASS = NumbaBackend

@@ -1,0 +1,123 @@
+"""The numpy backend: the physics of :mod:`bark.model.physics` and the plugins' compiled forms on whole
+arrays at once; no compiled code.  The reference, and the baseline every speed-up is quoted against
+(``bark bench speed`` also measures it against a plain vectorised numpy step)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+
+from bark.model import physics
+from bark.model.forces import SpringOrder, incidence, spring_geometry
+from bark.engine.kernels import Backend, Plan, Steps
+from bark.contract.parts import largest_load, picks
+
+NAME = "numpy"
+
+
+class NumpyBackend(Backend):
+    name = NAME
+
+    def __init__(self) -> None:
+        self._inc_key = None
+        self._inc = None
+        self._order = SpringOrder()
+
+    def incidence(self, state) -> sp.csr_matrix:
+        """Spring-to-base incidence of the state's springs (derived; rebuilt when the topology grows).
+        A sparse product sums spring forces onto bases 2.5× faster than ``bincount`` at 70 000 bases."""
+        key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
+        if key != self._inc_key:  # each base's sum runs over its springs in the order the compiled pass adds them
+            self._inc = incidence(state.pairs, state.n_bases, self._order.of(state.pairs, state))
+            self._inc_key = key
+        return self._inc
+
+    def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
+        d, length = spring_geometry(x, state.pairs)
+        t = physics.tension(length, state.rest, mech.k)
+        g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
+        return np.asarray(self.incidence(state) @ (d * g[:, None]))
+
+    def spring_forces(self, state, mech, x) -> np.ndarray:
+        return self._spring_forces(state, mech, x, state.intact)
+
+    def measure(self, state, mech, out: np.ndarray) -> bool:
+        _, length = spring_geometry(state.x, state.pairs)
+        out[:] = physics.tension(length, state.rest, mech.k)
+        return bool(np.isfinite(out).all())
+
+    def constrain(self, state, r_x, r_anchor) -> None:
+        x, v = state.x, state.v
+        r = np.asarray(r_x, dtype=float)
+        scale = physics.surface_scale(x[:, 0], x[:, 1], r)
+        x[:, 0] *= scale
+        x[:, 1] *= scale
+        vr = physics.radial_speed(v[:, 0], v[:, 1], x[:, 0], x[:, 1], 1.0 / (r * r))
+        v[:, 0] -= vr * x[:, 0]
+        v[:, 1] -= vr * x[:, 1]
+        state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+        done, load, live, log, candidate = self._run(state, mech, plan, plan.times, tension)
+        if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
+            for keep, arr in zip(start, (state.x, state.v, state.anchor)):
+                arr[...] = keep
+            _, _, live, log, candidate = self._run(state, mech, plan, plan.times[:done], tension)
+        broke = [b for b, _, _ in log]
+        return Steps(done=done, load=load, picked=candidate,
+                     broken=np.concatenate(broke) if log else np.empty(0, np.int64),
+                     step=np.concatenate([np.full(b.size, s, np.int64) for b, s, _ in log]) if log else np.empty(0, np.int64),
+                     tension=np.concatenate([t for _, _, t in log]) if log else np.empty(0))
+
+    def _run(self, state, mech, plan: Plan, times: np.ndarray, tension: np.ndarray):
+        """Steps at ``times``; stops after a step that ends the call (see ``Plan``).  Returns the steps
+        kept (a failed last step is not counted, but the state holds it: the caller replays), the
+        last load, the working intact mask, the breaks and whether the rule named a candidate in the
+        last step."""
+        part, breaking = plan.breaker, plan.breaks == "kernel"
+        live = state.intact.copy()
+        log: list[tuple[np.ndarray, int, np.ndarray]] = []
+        fs = self._spring_forces(state, mech, state.x, live)
+        hm = plan.h / mech.m
+        z0 = state.anchor[:, 2]
+        done, load = 0, -math.inf
+        relax = plan.relax_flags()
+        for step, t in enumerate(times.tolist(), start=1):
+            x, v, a = state.x, state.v, state.anchor
+            for axis in range(3):
+                g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
+                x[:, axis], v[:, axis] = plan.update(x[:, axis], v[:, axis], g, hm, plan.h)
+            q = plan.prepare(t, plan.params)
+            r_x = plan.radius(t, 0.0, q) if plan.uniform else plan.radius(t, x[:, 2], q)
+            self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, q))
+            _, length = spring_geometry(x, state.pairs)
+            t_all = physics.tension(length, state.rest, mech.k)
+            load = largest_load(part, state, t_all, live, length)
+            if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()) or math.isnan(load):
+                return done, math.nan, live, log, False
+            if load > plan.accept_load:
+                return done, load, live, log, False
+            tension[:] = t_all
+            done = step
+            picked = picks(part, state, t_all, live, length)
+            if breaking and picked.size:
+                live[picked] = False
+                log.append((picked, step, t_all[picked]))
+            fs = self._spring_forces(state, mech, x, live)
+            if picked.size and (not breaking or plan.return_on_break or picked.size > plan.max_batch):
+                return done, load, live, log, not breaking
+            if relax[step - 1] and load <= 1.0:  # quiet again on the coarser grid: the clock doubles the step
+                break
+        return done, load, live, log, False
+
+    def patch_labels(self, state) -> np.ndarray:
+        """Connected components of the intact springs (scipy.sparse.csgraph)."""
+        from bark.model.graph import components
+
+        return components(state.n_bases, state.pairs, state.intact)
+
+
+BACKEND_CLASS = NumpyBackend

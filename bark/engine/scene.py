@@ -1,0 +1,410 @@
+"""Scenes: every setting of a run in one validated, TOML-shaped dictionary.
+
+A scene file has these tables (all optional; anything left out takes its default, which is the
+vertical regime of Table 2)::
+
+    [scene]       name, description                      (free text, recorded in summary.json)
+    [lattice]     bark.model.lattice.Lattice fields            (n_bases, divergence_deg, rise, offsets, jitter)
+    [mechanics]   bark.model.forces.Mechanics fields           (k, c, b, m, f_max, fmax_spread)
+    [growth]      name = "sqrt" + that strategy's fields (r0, G)
+    [integrator]  name = "euler-cromer" + its fields
+    [breaker]     name = "threshold" + its fields
+    [analyzer]    name = "patches" + its fields          (min_size)
+    [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
+    [effects]     want = [...] (bark.model.effects), frame_every, series_every, window  (what is simulated and written)
+    [dome]        bark.model.tree.Dome fields                  (shape, height, exponent, points: the apical dome)
+
+Unknown tables or keys, bad values and unknown strategy names raise :class:`~bark.errors.BarkError`
+with one line naming the key and what is allowed.  Nothing here writes files or imports plotting.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import attrs
+import numpy as np
+
+from bark.model import effects
+from bark.contract import registry
+from bark.validators import construct, positive
+from bark.errors import BarkError, Ref
+from bark.model.forces import Mechanics
+from bark.model.lattice import Lattice
+from bark.model.tree import Dome
+from bark.engine.simulation import Simulation, Stop
+from bark.engine.stepping import Numerics
+
+__all__ = ["RunSettings", "Scene", "STRATEGY_SECTIONS", "DEFAULT_STRATEGIES"]
+
+
+DEFAULT_STOP = {"until_time": 1000.0, "until_patches": 110}
+"""A scene's stop conditions when it gives none (the paper's Fig. 7A stops at 110 patches)."""
+RUN_FIELDS: dict[str, tuple[type, attrs.Attribute]] = {
+    a.name: (cls, a)
+    for cls, names in ((Numerics, None), (Stop, None), (Simulation, ("seed", "degenerate_fraction", "on_degenerate")))
+    for a in attrs.fields(cls) if a.init and (names is None or a.name in names)
+}
+"""The keys of a scene's ``[run]`` table: each the field of the class that declares it (its
+validator, default and docstring are that class's; only the stop conditions' defaults are the
+scene's, ``DEFAULT_STOP``)."""
+
+
+class RunSettings(attrs.make_class(
+        "RunFields", {name: attrs.field(default=DEFAULT_STOP.get(name, a.default), validator=a.validator, kw_only=True)
+                      for name, (_, a) in RUN_FIELDS.items()}, frozen=True)):
+    """A scene's ``[run]`` table: how a run is stepped (:class:`~bark.engine.stepping.Numerics`), when it stops
+    (:class:`~bark.engine.simulation.Stop`), its seed and degenerate-event handling (:class:`Simulation`)."""
+
+    __slots__ = ()
+
+    def _part(self, cls) -> dict[str, Any]:
+        return {name: getattr(self, name) for name, (owner, _) in RUN_FIELDS.items() if owner is cls}
+
+    def numerics(self) -> Numerics:
+        return Numerics(**self._part(Numerics))
+
+    def stop(self) -> Stop:
+        return Stop(**self._part(Stop))
+
+
+STOP_KEYS = ("until_time", "until_radius", "until_patches")
+STRATEGY_SECTIONS: dict[str, str] = {"growth": "growth", "integrator": "integrator", "breaker": "breaker", "analyzer": "analyzer"}
+DEFAULT_STRATEGIES: dict[str, str] = {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
+PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings, "dome": Dome}
+SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS, "effects")
+
+
+def _place(section: str, build):
+    """``build()``, with the refs of any BarkError it raises placed in ``section``."""
+    try:
+        return build()
+    except BarkError as err:
+        raise err.within(section) from None
+
+
+def _build(section: str, cls, params: dict[str, Any]):
+    return _place(section, lambda: construct(cls, params, f"[{section}]"))
+
+
+@attrs.frozen(kw_only=True)
+class SceneInfo:
+    """The ``[scene]`` table: free text, recorded in summary.json."""
+
+    name: str = attrs.field(default="", converter=str)
+    description: str = attrs.field(default="", converter=str)
+
+
+def _want(value):
+    if value is None:
+        return None
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+        raise BarkError("{0}: must be a list of effect names, e.g. ['fracture', 'pattern-image']", Ref(None, "want", value))
+    return tuple(value)  # the names are checked against the scene's strategies (Scene.from_dict)
+
+
+@attrs.frozen(kw_only=True)
+class EffectSettings:
+    """The ``[effects]`` table."""
+
+    want: tuple[str, ...] | None = attrs.field(default=None, converter=_want)
+    """The effects asked for (``bark.model.effects``); ``None``: the usual outputs of the configured model."""
+    frame_every: float = attrs.field(default=10.0, validator=positive)
+    """With the ``animation`` effect: simulated time between frames."""
+    series_every: float = attrs.field(default=10.0, validator=positive)
+    """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    history_every: float = attrs.field(default=0.5, validator=positive)
+    """With the ``fracture-history`` effect: simulated time between two samples of fracture.csv (the
+    dissipation rate is a mean over these samples: keep them several to the initial fracture phase)."""
+    window: float = attrs.field(default=0.5, validator=positive)
+    """On a trunk with regions (bulges): side of the windows of summary.json's ``windows``, length
+    units (0.5 = 15 cm, a photograph's field of view)."""
+
+
+MEMORY = {"fixed": 300 * 2**20, "per_base": 800, "per_spring": 400, "per_base_image": 4000}
+"""Coefficients of ``Scene.memory_estimate`` (bytes), measured as peak resident memory of whole
+``bark simulate`` processes at 10 000 to 160 000 bases (interpreter, numpy, scipy and numba's
+runtime; state, graph and work arrays; the image's points and spring segments)."""
+
+
+def available_memory() -> int | None:
+    """Memory this machine can give a new process now (Linux's MemAvailable), or ``None`` if unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+FAR_FUTURE = 1e12
+"""Time at which a radius stop with no time bound must have been reached, or it never will."""
+
+
+def _check_feasible(lattice: Lattice, run: RunSettings, growth, resolved: dict) -> None:
+    """Refuse a run that has nothing to simulate or whose stop conditions can never hold."""
+    if min(lattice.offsets) >= lattice.n_bases:
+        raise BarkError("{0} with {1}: no spring fits (each offset must be below the number of bases); nothing to simulate",
+                        Ref("lattice", "n_bases", lattice.n_bases), Ref("lattice", "offsets", list(lattice.offsets)))
+    if run.until_patches is not None and run.until_patches * run.min_patch_size > lattice.n_bases:
+        raise BarkError("{0} patches of {1} or more bases need more bases than {2}: this stop can never hold "
+                        "(ask for fewer patches, or smaller ones)",
+                        Ref("run", "until_patches", run.until_patches), Ref("run", "min_patch_size", run.min_patch_size),
+                        Ref("lattice", "n_bases", lattice.n_bases))
+    if run.until_radius is not None:
+        z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
+        mean_radius = lambda t: growth.mean_radius(t, z)  # noqa: E731
+        start = mean_radius(0.0)
+        if run.until_radius <= start:
+            raise BarkError(f"{{0}} is not above the trunk's initial mean radius {start:.6g}: the run would stop before it starts",
+                            Ref("run", "until_radius", run.until_radius))
+        if run.until_time is None and not mean_radius(FAR_FUTURE) >= run.until_radius:
+            raise BarkError(f"{{0}} is never reached (at t = {FAR_FUTURE:g} the mean radius is {mean_radius(FAR_FUTURE):.6g}) "
+                            "and no time bound is given: this stop can never hold", Ref("run", "until_radius", run.until_radius))
+
+
+def merge(base: dict, overrides: dict) -> dict:
+    """``base`` updated table by table with ``overrides`` (a new dict; neither input changes).
+
+    Changing a strategy's ``name`` drops the old strategy's parameters that the override does not
+    restate, since they belong to the old strategy.  Giving any ``until_*`` key in ``[run]`` replaces
+    all stop conditions of ``base``.
+    """
+    out = copy.deepcopy(base)
+    for section, table in [*base.items(), *overrides.items()]:
+        if not isinstance(table, dict):
+            raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
+    for section, table in overrides.items():
+        target = out.setdefault(section, {})
+        current = target.get("name", DEFAULT_STRATEGIES.get(section))
+        if section in STRATEGY_SECTIONS and "name" in table and table["name"] != current:
+            target.clear()
+        if section == "run" and any(k in table for k in STOP_KEYS):
+            for k in STOP_KEYS:
+                target[k] = None
+        target.update(table)
+    return out
+
+
+@attrs.frozen(kw_only=True)
+class Scene:
+    """A validated scene: the parts a :class:`~bark.engine.simulation.Simulation` is composed of."""
+
+    name: str
+    description: str
+    lattice: Lattice
+    mechanics: Mechanics
+    run: RunSettings
+    strategies: dict[str, Any]
+    """The strategy instances, by section: growth, integrator, breaker, analyzer."""
+    wanted: tuple[str, ...] = effects.DEFAULT
+    """The effects the scene asked for (``[effects] want``)."""
+    frame_every: float = 10.0
+    """With the ``animation`` effect: simulated time between frames."""
+    series_every: float = 10.0
+    """With the ``statistics-series`` effect: simulated time between two rows of statistics."""
+    history_every: float = 0.5
+    """With the ``fracture-history`` effect: simulated time between two samples of fracture.csv."""
+    window: float = 0.5
+    """Side of the windows of summary.json's ``windows`` (length units; ``EffectSettings.window``)."""
+    dome: Dome = attrs.field(factory=Dome)
+    """The apical dome's profile (``bark.model.tree.Dome``): drawn in tree.png."""
+
+    @property
+    def names(self) -> dict[str, str]:
+        """How each strategy is recorded, by section: its entry-point name, or the import path
+        ``module:Class`` of one not registered (``bark.contract.registry.name_of``) — of the instances the scene
+        holds, so a scene whose strategies were replaced (``attrs.evolve``) records what it runs."""
+        return {section: registry.name_of(strategy) for section, strategy in self.strategies.items()}
+
+    @property
+    def known_effects(self) -> dict[str, effects.Effect]:
+        """The effects this scene can ask for: the model's own and those its strategies provide."""
+        return _known(self.strategies)
+
+    @property
+    def effects(self) -> dict[str, str]:
+        """Every effect the run has, with why (``bark.model.effects.resolve``)."""
+        return effects.resolve(self.wanted, self.known_effects)
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "Scene":
+        """Validate a scene dictionary (as read from TOML); missing tables take their defaults.
+
+        Beyond each value's own domain, settings that meet are checked together, so that a run that
+        could never do what it is asked is refused before it starts: a lattice with no springs, a
+        patch count more patches than the bases can make, a radius the trunk starts above or never
+        reaches."""
+        for section, table in data.items():
+            if not isinstance(table, dict):
+                raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
+        unknown = sorted(set(data) - set(SECTIONS), key=str)
+        if unknown:
+            raise BarkError(f"unknown table [{unknown[0]}] in scene: allowed are {', '.join(f'[{s}]' for s in SECTIONS)}")
+        meta = construct(SceneInfo, dict(data.get("scene", {})), "[scene]")
+        tables = {s: dict(data.get(s, {})) for s in PARAM_SECTIONS}
+        if any(k in tables["run"] for k in STOP_KEYS):  # stop conditions given replace the default ones
+            for k in STOP_KEYS:
+                tables["run"].setdefault(k, None)
+        parts = {s: _build(s, c, tables[s]) for s, c in PARAM_SECTIONS.items()}
+        run = parts["run"]
+        _place("run", run.stop)  # at least one stop condition (Stop says so)
+        eff = _build("effects", EffectSettings, dict(data.get("effects", {})))
+        strategies = {}
+        for section, kind in STRATEGY_SECTIONS.items():
+            params = dict(data.get(section, {}))
+            name = params.pop("name", DEFAULT_STRATEGIES[section])
+            if not isinstance(name, str):
+                raise BarkError("{0}: must be a string naming a " + kind + " strategy", Ref(section, "name", name))
+            strategies[section] = _place(section, lambda: registry.create(kind, name, **params))
+        known = _known(strategies)
+        wanted = eff.want
+        if wanted is None:  # no list: the default outputs, and the model the scene configures
+            wanted = effects.DEFAULT + tuple(e for e in known if e not in effects.EFFECTS)
+        _check_wanted(wanted, known)
+        resolved = effects.resolve(wanted, known)
+        if run.until_patches is not None and "fracture" not in resolved:
+            raise BarkError("{0} needs the effect 'fracture' (no fracture, no patches)", Ref("run", "until_patches", run.until_patches))
+        if "fracture-history" in resolved and len(parts["lattice"].offsets) != 2:
+            raise BarkError("{0}: the effect 'fracture-history' counts cracks in the lattice's cells, which takes two "
+                            "spring offsets",
+                            Ref("lattice", "offsets", list(parts["lattice"].offsets)))
+        _check_feasible(parts["lattice"], run, strategies["growth"], resolved)
+        _place("dome", lambda: parts["dome"].table)  # a curve through points that leaves the trunk's width
+        return cls(
+            name=meta.name,
+            description=meta.description,
+            strategies=strategies,
+            wanted=tuple(wanted),
+            frame_every=eff.frame_every,
+            series_every=eff.series_every,
+            history_every=eff.history_every,
+            window=eff.window,
+            **parts,
+        )
+
+    @classmethod
+    def from_toml(cls, path: str | Path, overrides: dict | None = None) -> "Scene":
+        """Read a TOML scene file, apply ``overrides`` (same shape), validate."""
+        return cls.from_dict(merge(read_toml(path), overrides or {}))
+
+    def components(self) -> dict[str, Any]:
+        """The parts a simulation of this scene is composed of — exactly the scene's effects: what is
+        not asked for is not built (no strategy's own effect, ``Strategy.without``; no breaker, no analyzer, no anchor or damping
+        terms, no break log).  Cheap: nothing is allocated (``bark plan`` shows these)."""
+        has = self.effects
+        chosen = {section: _without(strategy, has) for section, strategy in self.strategies.items()}
+        mechanics = self.mechanics
+        if "anchors" not in has or "damping" not in has:
+            mechanics = attrs.evolve(mechanics, c=mechanics.c if "anchors" in has else 0.0,
+                                     b=mechanics.b if "damping" in has else 0.0)
+        return dict(
+            lattice=self.lattice,
+            mechanics=mechanics,
+            growth=chosen["growth"],
+            integrator=chosen["integrator"],
+            breakers=[chosen["breaker"]] if "fracture" in has else [],
+            analyzers=[chosen["analyzer"]] if "patch-statistics" in has else [],
+            record_breaks="break-log" in has,
+            numerics=self.run.numerics(),
+            **self.run._part(Simulation),
+        )
+
+    def memory_estimate(self) -> int:
+        """Peak memory of a run of this scene, in bytes, from measured coefficients (``MEMORY``):
+        the interpreter and libraries, then per base and per spring, more with an image."""
+        n = self.lattice.n_bases
+        m = sum(max(n - o, 0) for o in self.lattice.offsets)
+        per_base, per_spring = MEMORY["per_base"], MEMORY["per_spring"]
+        if self.has("pattern-image") or self.has("animation"):
+            per_base += MEMORY["per_base_image"]
+        return int(MEMORY["fixed"] + per_base * n + per_spring * m)
+
+    def simulation(self) -> Simulation:
+        """A fresh simulation composed of exactly this scene's effects (:meth:`components`).  A run
+        whose estimated peak memory exceeds what this machine has available is refused first."""
+        need, have = self.memory_estimate(), available_memory()
+        if have is not None and need > have:
+            raise BarkError(f"{{0}}: a run this size needs about {need / 2**30:.3g} GiB of memory, and this machine "
+                            f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", self.lattice.n_bases))
+        return Simulation(**self.components())
+
+    def stop(self) -> Stop:
+        return self.run.stop()
+
+    def to_dict(self) -> dict[str, Any]:
+        """Every setting, resolved (defaults filled in): the same shape as a scene file."""
+        out: dict[str, Any] = {"scene": {"name": self.name, "description": self.description}}
+        for section in PARAM_SECTIONS:
+            out[section] = {k: v for k, v in attrs.asdict(getattr(self, section)).items()}
+        for section, strategy in self.strategies.items():
+            out[section] = {"name": self.names[section], **_plain(strategy.params())}
+        out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
+                          "history_every": self.history_every, "window": self.window}
+        return out
+
+
+def _known(strategies: dict[str, Any]) -> dict[str, effects.Effect]:
+    """The model's effects, then those the strategies provide (``Strategy.provides``)."""
+    return {**effects.EFFECTS, **{e.name: e for s in strategies.values() for e in type(s).provides}}
+
+
+def _check_wanted(wanted, known: dict[str, effects.Effect]) -> None:
+    """Each effect of ``wanted`` is one the scene can have; one that another strategy would provide
+    names it (in the user's terms), any other lists what is allowed."""
+    for name in wanted:
+        if name not in known:
+            offer = registry.providers(name)
+            if offer:
+                kind, strategy = offer[0]
+                section = next(s for s, k in STRATEGY_SECTIONS.items() if k == kind)
+                raise BarkError(f"the effect {name!r} needs {{0}}", Ref(section, "name", strategy))
+            raise BarkError("{0}: " + f"unknown effect {name!r}; allowed are {', '.join(known)}", Ref("effects", "want", list(wanted)))
+
+
+def _without(strategy, has: dict[str, str]):
+    """``strategy`` less each of its own effects that the run does not have (``Strategy.without``)."""
+    for effect in type(strategy).provides:
+        if effect.name not in has:
+            strategy = strategy.without(effect.name)
+    return strategy
+
+
+def _plain(value):
+    """Strategy parameters as TOML/JSON-shaped data (nested attrs objects become tables)."""
+    if attrs.has(type(value)):
+        params = {a.name: _plain(getattr(value, a.name)) for a in attrs.fields(type(value)) if a.init}
+        from bark.contract.strategies import Strategy
+
+        if isinstance(value, Strategy):  # a nested strategy (a bulge law's base) is named as in a scene
+            params = {"name": registry.name_of(value), **params}
+        return params
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a scene file; a missing or malformed file gives one line naming it."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise BarkError(f"scene file {str(path)!r} does not exist") from None
+    except IsADirectoryError:
+        raise BarkError(f"scene file {str(path)!r} is a directory") from None
+    except tomllib.TOMLDecodeError as err:
+        raise BarkError(f"scene file {str(path)!r} is not valid TOML: {err}") from None
+    except UnicodeDecodeError:
+        raise BarkError(f"scene file {str(path)!r} is not UTF-8 text") from None

@@ -1,0 +1,457 @@
+"""The :class:`Simulation`: a growth law, an integrator, breakers and analyzers, composed.
+
+The leaf-base graph (networkx) is the topology of record: nodes are leaf bases, edges are *intact*
+springs.  :class:`~bark.model.state.State` mirrors it as arrays for the hot loop; :meth:`Simulation.join`
+(bases joining the mechanics), :meth:`Simulation.break_springs` and :meth:`Simulation.mend_springs`
+are the only places topology changes — in both at once.  Step control and the fast-path policy are
+:mod:`bark.engine.stepping`'s; the compute backend is :mod:`bark.engine.kernels`'; the state is data.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Callable, Iterator
+
+import attrs
+import numpy as np
+
+from bark.engine import kernels, stepping
+from bark.validators import MISSING, in_range, int_in, one_of, optional, positive, positive_int
+from bark.model.graph import count_patches
+from bark.errors import BarkError, NonFiniteStateError, Ref
+from bark.model.forces import ForceField, Mechanics, spring_geometry
+from bark.model.lattice import Lattice
+from bark.model.state import State, cylinder_points, grown
+from bark.engine.stepping import Clock, Numerics
+from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
+
+if TYPE_CHECKING:
+    from bark.model.graph import LeafBaseGraph
+
+__all__ = ["Simulation", "Stop", "BreakLog"]
+
+
+@attrs.frozen(kw_only=True)
+class Stop:
+    """When a run ends: the first of these conditions to hold.  At least one is needed.  (The model
+    has no natural end: after the first burst springs keep breaking as fragments move outward, so
+    when to stop is part of a result, and summary.json records which condition ended the run.)"""
+
+    until_time: float | None = attrs.field(default=None, validator=optional(positive))
+    """Stop at this simulated time (time units; 1 = 88.5 days)."""
+    until_radius: float | None = attrs.field(default=None, validator=optional(positive))
+    """Stop when the mean trunk radius reaches this (length units; 1 = 0.3 m)."""
+    until_patches: int | None = attrs.field(default=None, validator=optional(positive_int))
+    """Stop when this many patches of ≥ min_patch_size bases exist (paper, Fig. 7A: 110)."""
+    min_patch_size: int = attrs.field(default=7, validator=positive_int)
+    """Smallest patch that counts, for the stop condition (the paper drops patches under 7 bases)."""
+
+    def __attrs_post_init__(self) -> None:
+        if self.until_time is None and self.until_radius is None and self.until_patches is None:
+            raise BarkError("no stop condition: give {0}, {1} or {2}",
+                            *(Ref("run", k, MISSING) for k in ("until_time", "until_radius", "until_patches")))
+
+    def reason(self, sim: "Simulation") -> str | None:
+        """Which condition holds now (``'time'``, ``'radius'``, ``'patches'``), or ``None``."""
+        if self.until_time is not None and sim.state.t >= self.until_time - 1e-9 * sim.clock.h:
+            return "time"
+        if self.until_radius is not None and sim.radius >= self.until_radius:
+            return "radius"
+        if self.until_patches is not None and sim.patch_count(self.min_patch_size) >= self.until_patches:
+            return "patches"
+        return None
+
+
+@attrs.define(eq=False)
+class BreakLog:
+    """Every break: spring id, its end bases, the step and time it broke, and its tension then."""
+
+    _chunks: list[tuple[np.ndarray, ...]] = attrs.field(factory=list)
+
+    def record(self, ids: np.ndarray, pairs: np.ndarray, step, t, tension: np.ndarray) -> None:
+        """Log springs ``ids``, broken at ``step`` and time ``t`` (each one value, or one per id)."""
+        n = ids.size
+        steps = np.broadcast_to(np.asarray(step, dtype=np.int64), n).copy()
+        times = np.broadcast_to(np.asarray(t, dtype=float), n).copy()
+        ends = pairs[ids].astype(np.int64)
+        self._chunks.append((ids.astype(np.int64), ends[:, 0], ends[:, 1], steps, times, np.asarray(tension, float)))
+
+    def __len__(self) -> int:
+        return sum(c[0].size for c in self._chunks)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Columns ``spring, i, j, step, t, tension`` in the order the breaks happened."""
+        names = ("spring", "i", "j", "step", "t", "tension")
+        if not self._chunks:
+            return {n: np.empty(0, dtype=float if n in ("t", "tension") else np.int64) for n in names}
+        return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(names)}
+
+
+@attrs.define(eq=False, kw_only=True)
+class Simulation:
+    """A trunk whose leaf-base layer grows and cracks.
+
+    Build it from parts (every part is an attrs object; ``attrs.evolve`` makes variants for sweeps)::
+
+        sim = Simulation(lattice=Lattice(), mechanics=Mechanics(), growth=SqrtGrowth(),
+                         integrator=EulerCromer(), breakers=[ThresholdBreaker()],
+                         numerics=Numerics(dt=0.01, stepping="fixed"), seed=1)
+        sim.run(Stop(until_patches=110))
+
+    Constructing does no work; the lattice is laid out by :meth:`build` (first use of ``state``).
+    """
+
+    lattice: Lattice = attrs.field(factory=Lattice)
+    mechanics: Mechanics = attrs.field(factory=Mechanics)
+    growth: Growth
+    integrator: Integrator
+    breakers: tuple[Breaker, ...] = attrs.field(converter=tuple)
+    analyzers: tuple[Analyzer, ...] = attrs.field(default=(), converter=tuple)
+    numerics: Numerics = attrs.field(factory=Numerics)
+    seed: int = attrs.field(default=0, validator=int_in(0, 2**63 - 1))
+    """Seed of the simulation's one random generator (jitter, thresholds, stochastic breakers)."""
+    degenerate_fraction: float = attrs.field(default=0.1, validator=in_range(0.0, 1.0, lo_open=True))
+    """A step breaking more than this share of all springs is reported as degenerate: the lattice is too
+    regular (on the exact lattice every spring of one offset reaches its threshold in the same step)."""
+    on_degenerate: str = attrs.field(default="warn", validator=one_of("warn", "stop"))
+    """warn: record the event and go on; stop: end the run there."""
+    record_breaks: bool = True
+    """Keep the break log; off when a scene does not ask for the ``break-log`` effect."""
+    horizon: float | None = None
+    """How long the run is expected to last (time units), if known: lets ``auto`` take the faster
+    backend for it (``run`` sets it from the stop condition when it builds)."""
+
+    rng: np.random.Generator = attrs.field(init=False, default=None)
+    state: State = attrs.field(init=False)
+    """The mechanical state (arrays and time).  This and the next four are made by :meth:`build`, on
+    first use."""
+    graph: LeafBaseGraph = attrs.field(init=False)
+    clock: Clock = attrs.field(init=False)
+    backend: kernels.Backend = attrs.field(init=False)
+    forces: ForceField = attrs.field(init=False)
+    breaks: BreakLog = attrs.field(init=False, factory=BreakLog)
+    actions: list = attrs.field(init=False, factory=list)
+    """``(trigger, action)`` pairs: after each advance every action whose trigger fires is called."""
+    events: list[dict] = attrs.field(init=False, factory=list)
+    """Degenerate events, accepted overshoots: dicts with at least ``kind``, ``t``, ``step``."""
+    stability_limit: float = attrs.field(init=False)
+    step_count: int = attrs.field(init=False, default=0)
+    stop_reason: str | None = attrs.field(init=False, default=None)
+    _built: bool = attrs.field(init=False, default=False)
+    _labels: np.ndarray | None = attrs.field(init=False, default=None)
+    _tension: np.ndarray = attrs.field(init=False, factory=lambda: np.empty(0))
+
+    # -- building ---------------------------------------------------------------------------------
+
+    def __getattr__(self, name: str):
+        """The parts :meth:`build` makes (``state``, ``graph``, ``clock``, ``backend``, ``forces``), on first use."""
+        if name in _MADE_BY_BUILD and not object.__getattribute__(self, "_built"):
+            self.build()
+            return object.__getattribute__(self, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def build(self, state: State | None = None, clock: Clock | None = None) -> "Simulation":
+        """Lay out the lattice (or take ``state`` and ``clock``, e.g. from a checkpoint), make the graph
+        from it, set the clock below the integrator's stability limit.  Does nothing once built."""
+        if self._built:
+            return self
+        if self.rng is None:
+            self.rng = np.random.default_rng(self.seed)
+        self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
+        self.forces = ForceField(self.mechanics, self.backend)
+        from bark.model.graph import LeafBaseGraph
+
+        self.graph = LeafBaseGraph()
+        if state is None:
+            self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases)
+            self._built = True
+            self.join(*self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng))
+        else:
+            self.state, self._built = state, True
+            self.graph.add_bases(state.n_bases)
+            self.graph.add_springs(state.pairs[state.intact])
+            self._tension = np.zeros(state.n_springs)
+        self.stability_limit, h = stepping.stable_step(self)
+        self.clock = clock or Clock(h=h, levels=self.numerics.max_halvings if self.numerics.stepping == "adaptive" else 0)
+        return self
+
+    # -- the loop ---------------------------------------------------------------------------------
+
+    def run(self, stop: Stop, observe: Callable[["Simulation"], None] | None = None) -> str:
+        """Run until ``stop`` holds; return why it stopped (``'time'``, ``'radius'``, ``'patches'``,
+        ``'degenerate'``, or what ``observe`` set ``stop_reason`` to).  ``observe(sim)`` is called after
+        every advance.  A step that makes the state NaN or infinite raises
+        :class:`~bark.errors.NonFiniteStateError`, the simulation left at the last finite state.
+
+        The loop, literally (``advance`` is one pass; a pass takes n steps in one call of the
+        backend's kernel, n = 1 unless the fast path applies, see ``bark.engine.stepping.plan``)::
+
+            while stop.reason(sim) is None:
+                plan = stepping.plan(sim, stop)     # n steps of h, and what may happen inside them
+                result = backend.steps(plan)        # each step: forces (eq. 4) -> velocities (eq. 7)
+                                                    #   -> positions (eq. 8) -> surface r(t, z) (eq. 9,
+                                                    #   radial velocity removed) -> tensions k(|d| - l)
+                                                    #   -> the breakers' part: its rule, its load
+                clock.advance(result.done); t = clock.t     # integer ticks: exact time
+                break_springs(what the rule broke)  # graph and arrays together; logged
+                if the last step went NaN or a load overshot (adaptive): it was undone;
+                    halve h and go on, or (at the smallest step) raise NonFiniteStateError
+                if the breakers act in Python (no one part, or its rule named candidates):
+                    break_springs(union of breaker.select(state, tension, rng))
+                if a step broke more than degenerate_fraction of the springs: record a degenerate event
+                if quiet again (adaptive): double h, staying on its grid
+                join(the bases due by now)          # new bases and springs at rest; graph and arrays
+                call the actions whose triggers fire; observe(sim)
+
+        Every spring its rule picks at the end of a step breaks in that step, all at once;
+        compression never breaks a spring; a broken spring never comes back.
+        """
+        for _ in self.irun(stop):
+            if observe is not None:
+                observe(self)
+        return self.stop_reason
+
+    def prepare(self, stop: Stop) -> "Simulation":
+        """Build for a run to ``stop`` (its time, if any, guides ``auto``'s backend) and refuse a stop
+        time the clock cannot count."""
+        if not self._built and self.horizon is None:
+            self.horizon = stop.until_time
+        stepping.check_countable(self.build(), stop)
+        return self
+
+    def irun(self, stop: Stop) -> Iterator["Simulation"]:
+        """The loop of :meth:`run` as a generator that yields after every :meth:`advance` (and its actions)."""
+        self.prepare(stop)
+        self.stop_reason = None
+        if self.numerics.stepping != "fixed" and not self.clock.ticks and stop.until_time is not None:
+            self.clock.fit(stop.until_time)
+        while (reason := stop.reason(self)) is None and self.stop_reason is None:
+            self.advance(stop)
+            for trigger, action in self.actions:
+                if trigger.fires(self):
+                    action(self)
+            yield self
+        self.stop_reason = self.stop_reason or reason
+
+    def add_action(self, trigger, action: Callable[["Simulation"], None]) -> None:
+        """Call ``action(sim)`` after every advance at which ``trigger`` fires (``bark.engine.triggers``); a
+        call of the kernel ends where a trigger is next due, so actions see the exact step."""
+        self.actions.append((trigger, action))
+
+    def advance(self, stop: Stop | None = None, most: int | None = None) -> int:
+        """One pass of the loop in :meth:`run` (of at most ``most`` steps); returns the steps taken."""
+        self.build()
+        plan = stepping.plan(self, stop, most)
+        take = self.backend.steps if plan.compiled else (lambda *a: stepping.python_step(self, *a))
+        result = take(self.state, self.mechanics, plan, self._tension)
+        first_step, first_tick, size = self.step_count, self.clock.ticks, self.clock.size
+        self.clock.advance(result.done)
+        self.step_count += result.done
+        self.state.t, self.state.h = self.clock.t, plan.h
+        if result.broken.size:
+            self.break_springs(result.broken, result.tension, step=first_step + result.step,
+                               t=(first_tick + result.step * size) * self.clock.h_min, tension_of_ids=True)
+            self._check_degenerate(np.count_nonzero(result.step == result.step[-1]))
+        if math.isnan(result.load) or result.load > plan.accept_load:
+            if self.clock.can_halve():
+                self.clock.halve()  # the step was undone: take it again, smaller
+                return result.done
+            raise NonFiniteStateError(
+                f"the state (or a breaker's load) became NaN or infinite at t = {self.clock.t + self.clock.step:.6g} "
+                f"(step {self.step_count + 1}); the simulation holds the last finite state, t = {self.state.t:.6g}")
+        if stepping.steers_step(self) and result.load > 1.0 + self.numerics.overshoot_tol:  # at the smallest step
+            self.events.append({"kind": "overshoot", "t": self.state.t, "step": self.step_count, "load": result.load})
+        if plan.breaks == "python" or plan.breaks == "candidates" and result.picked:
+            self._break_selected()
+        self.clock.relax(result.load)
+        due = self.lattice.bases_at(self.state.t) - self.state.n_bases
+        if due > 0:  # primary growth has made room at the top: the next bases of the lattice join
+            top = float(np.broadcast_to(self.growth.radius(self.state.t, self.state.n_bases * self.lattice.rise), 1)[0])
+            self.join(*self.lattice.sites(top, self.rng, self.state.n_bases, due))
+        return result.done
+
+    def step(self) -> None:
+        """One accepted step (adaptive stepping may first undo and halve it); for tests and tools."""
+        while self.advance(None, most=1) == 0:
+            pass
+
+    def _break_selected(self) -> None:
+        picks = [np.asarray(b.select(self.state, self._tension, self.rng), dtype=np.int64) for b in self.breakers]
+        if picks:
+            ids = np.unique(np.concatenate(picks))
+            ids = self.break_springs(ids[self.state.intact[ids]], self._tension)
+            self._check_degenerate(ids.size)
+
+    def _check_degenerate(self, n: int) -> None:
+        """Record a degenerate event (and stop, if asked) when one step broke ``n`` springs, too many."""
+        if n <= self.degenerate_fraction * self.state.n_springs:
+            return
+        self.events.append({"kind": "degenerate", "t": self.state.t, "step": self.step_count, "n_springs": int(n),
+                            "fraction": n / self.state.n_springs})
+        if self.on_degenerate == "stop":
+            self.stop_reason = "degenerate"
+
+    # -- the two places topology changes --------------------------------------------------------
+
+    def join(self, theta: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """New bases join the mechanics now, at angles ``theta`` and heights ``z`` on the trunk surface,
+        each anchored at its site.  Their ids continue the lattice's order; each is joined to the
+        lattice neighbours (index offsets) already present — asked of the graph — by springs whose
+        rest lengths are the distances now (a new spring is at rest) and whose thresholds come from the
+        material and the growth law's regions.  Graph and arrays change together.  Returns the ids."""
+        s, t = self.state, self.state.t
+        ids = s.add_bases(**self._new_bases(theta, z, t))
+        self.graph.add_bases(len(ids))
+        pairs = self.lattice.new_pairs(ids, self.graph)
+        if len(pairs):  # their ends' positions gathered first (np.take of a few rows copies all of x)
+            ends = s.x[pairs.ravel()]
+            _, rest = spring_geometry(ends, np.arange(ends.shape[0]).reshape(-1, 2))
+            fmax = self.growth.adjust_thresholds(0.5 * (ends[0::2, 2] + ends[1::2, 2]),
+                                                 self.mechanics.thresholds(len(pairs), self.rng))
+            s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
+            self.graph.add_springs(pairs)
+        self._tension = _rows(self._tension, s.n_springs)
+        self._labels = None
+        return ids
+
+    def _new_bases(self, theta, z, t: float) -> dict[str, np.ndarray]:
+        """The fields of bases joining at time ``t`` at angles ``theta`` and heights ``z``: on the trunk
+        surface there, at rest, each anchored at its site."""
+        theta, z = np.atleast_1d(theta).astype(float), np.atleast_1d(z).astype(float)
+        x = cylinder_points(theta, z, np.broadcast_to(self.growth.radius(t, z), z.shape))
+        return {"x": x, "v": np.zeros_like(x), "anchor": x, "anchor_dir": np.column_stack([np.cos(theta), np.sin(theta)]),
+                "born": np.full(len(z), t)}
+
+    def whole_lattice(self) -> State:
+        """The state of the whole lattice, every base laid out at t = 0 as :meth:`build` lays out the
+        first ones (its own generator from the seed: the simulation's is not drawn), with its springs
+        at rest: what a bound on a lattice that is still to grow is taken on.  Arrays only — no graph,
+        and every threshold ``f_max`` (a bound needs neither)."""
+        lattice = attrs.evolve(self.lattice, n_start=None, join_rate=0.0)
+        radius = float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1)))
+        state = State.empty(lattice.n_bases, lattice.n_springs)
+        state.add_bases(**self._new_bases(*lattice.sites(radius, np.random.default_rng(self.seed)), 0.0))
+        pairs = lattice.pairs()
+        _, rest = spring_geometry(state.x, pairs)
+        state.add_springs(pairs=pairs, rest=rest, fmax=np.full(len(pairs), self.mechanics.f_max),
+                          intact=np.ones(len(pairs), bool))
+        return state
+
+    def break_springs(self, ids, tension: np.ndarray | None = None, *, step=None, t=None,
+                      tension_of_ids: bool = False) -> np.ndarray:
+        """Break springs ``ids`` for good, in the graph and in the arrays, and log them.
+
+        ``tension`` is every spring's tension (default: the current one), or with ``tension_of_ids``
+        each given spring's; ``step`` and ``t`` say when they broke, one value or one per id (default:
+        now).  Already-broken ids are ignored (an id given twice breaks at its first step).  Returns the
+        ids actually broken, in the order logged: by step, then id."""
+        s = self.state
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if ids.size and (ids.min() < 0 or ids.max() >= s.n_springs):
+            raise IndexError(f"spring ids must be in [0, {s.n_springs}): got {ids.min() if ids.min() < 0 else ids.max()}")
+        steps = np.broadcast_to(np.asarray(self.step_count if step is None else step, dtype=np.int64), ids.shape)
+        times = np.broadcast_to(np.asarray(s.t if t is None else t, dtype=float), ids.shape)
+        if ids.size > 1 and not _by_step_then_id(ids, steps):
+            order = np.lexsort((ids, steps))
+            order = order[np.sort(np.unique(ids[order], return_index=True)[1])]  # each id once, at its first step
+        else:  # already in that order, each id once (what the kernel returns): nothing to sort
+            order = np.arange(ids.size)
+        order = order[s.intact[ids[order]]]
+        if tension is None:
+            tension = self.forces.tension(s)
+        values = np.asarray(tension)[order] if tension_of_ids else np.asarray(tension)[ids[order]]
+        ids = ids[order]
+        if ids.size:
+            s.set_intact(ids, False)
+            self.graph.remove_springs(s.pairs[ids])
+            if self.record_breaks:
+                self.breaks.record(ids, s.pairs, steps[order], times[order], values)
+            self._labels = None
+        return ids
+
+    def mend_springs(self, ids) -> np.ndarray:
+        """Make the broken springs ``ids`` intact again, in the graph and in the arrays (the model
+        never does: a broken spring stays broken; this is for tools, and for models of their own that
+        heal).  Intact ids are ignored; returns the ids mended.  Their breaks stay in the break log."""
+        s = self.state
+        ids = np.unique(np.asarray(ids, dtype=np.int64).reshape(-1))
+        if ids.size and (ids[0] < 0 or ids[-1] >= s.n_springs):
+            raise IndexError(f"spring ids must be in [0, {s.n_springs}): got {ids[0] if ids[0] < 0 else ids[-1]}")
+        ids = ids[~s.intact[ids]]
+        if ids.size:
+            s.set_intact(ids, True)
+            self.graph.add_springs(s.pairs[ids])
+            self._labels = None
+        return ids
+
+    # -- observables ----------------------------------------------------------------------------
+
+    @property
+    def radius(self) -> float:
+        """Mean trunk radius now (at the anchors' heights)."""
+        return self.growth.mean_radius(self.state.t, self.state.anchor[:, 2])
+
+    @property
+    def n_broken(self) -> int:
+        return int(self.state.n_springs - np.count_nonzero(self.state.intact))
+
+    def tension(self) -> np.ndarray:
+        """Every spring's tension now (broken ones included; mask with ``state.intact``)."""
+        return self.forces.tension(self.state)
+
+    def patch_labels(self) -> np.ndarray:
+        """Patch id of every base: connected components of the intact springs (cached until a change)."""
+        if self._labels is None:
+            self._labels = self.backend.patch_labels(self.state)
+        return self._labels
+
+    def patch_count(self, min_size: int = 7) -> int:
+        """Number of patches of at least ``min_size`` bases."""
+        return count_patches(self.patch_labels(), min_size)
+
+    def analyze(self) -> dict[str, Analysis]:
+        """Run every analyzer on the current pattern; results by analyzer class name."""
+        labels = self.patch_labels()
+        return {type(a).__name__: a.analyze(self.state.x, labels) for a in self.analyzers}
+
+    # -- pickling -------------------------------------------------------------------------------
+
+    def __getstate__(self) -> dict:
+        """A simulation pickles as its parts, its state and its records; the backend (work buffers)
+        and the graph (made again from the state) are not data."""
+        skip = {"graph", "backend", "forces", "_labels", *(() if self._built else _MADE_BY_BUILD)}
+        return {a.name: getattr(self, a.name) for a in attrs.fields(type(self)) if a.name not in skip}
+
+    def __setstate__(self, data: dict) -> None:
+        for a in attrs.fields(type(self)):
+            if a.name in data:
+                object.__setattr__(self, a.name, data[a.name])
+        object.__setattr__(self, "_labels", None)
+        if data.get("_built"):
+            object.__setattr__(self, "_built", False)
+            self.build(data["state"], data["clock"])
+
+
+def _by_step_then_id(ids: np.ndarray, steps: np.ndarray) -> bool:
+    """Whether ``ids`` are ordered by step, then id, each id once (strictly increasing within a step;
+    an id in two steps is told by the sort, not here)."""
+    later = steps[1:] > steps[:-1]
+    if not (later | (steps[1:] == steps[:-1])).all() or not (later | (ids[1:] > ids[:-1])).all():
+        return False
+    if not later.any():
+        return True  # one step: ids strictly increasing are each there once
+    return np.unique(ids).size == ids.size
+
+
+def _rows(a: np.ndarray, n: int) -> np.ndarray:
+    """The first ``n`` entries of ``a``'s buffer, grown (doubled, the new ones zero) when too short:
+    an array that follows the number of springs without a copy at every join."""
+    own = a.base is not None and a.base.ndim == 1 and a.base.ctypes.data == a.ctypes.data
+    buffer = a.base if own else a
+    if len(buffer) < n:
+        buffer = np.zeros(grown(len(buffer), n))
+        buffer[:len(a)] = a
+    return buffer[:n]
+
+
+_MADE_BY_BUILD = ("state", "graph", "clock", "backend", "forces", "stability_limit")

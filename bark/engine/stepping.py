@@ -1,0 +1,293 @@
+"""How a run steps: the numerical settings, the clock, and the plan of each call of the kernel.
+
+* :class:`Numerics` — the settings (dt, stepping mode, overshoot tolerance, halvings, backend),
+  declared once: a scene's ``[run]`` table and the command line take them from here.
+* :class:`Clock` — step control.  Time is an integer count of the smallest step
+  (``t = ticks × h / 2**levels``), never a running sum, so variable steps stay exact and stop times
+  are hit exactly.  Adaptive stepping halves the step around breaks and doubles it back on its grid.
+* :func:`plan` — the fast-path policy: how many steps the next call takes and what may happen inside
+  it, from what the parts declare (compiled forms, breaker parts) and what must be seen from Python
+  (stop conditions, triggers, adaptive halving).
+* :func:`python_step` — one step for parts without a compiled form (an integrator that solves a
+  linear system, a growth law given only as ``radius``), with the same result as a kernel call.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import attrs
+import numpy as np
+
+from bark.contract import parts, registry
+from bark.model import physics
+from bark.contract.parts import NO_BREAKING, BreakerPart
+from bark.validators import int_in, one_of, positive
+from bark.errors import BarkError, Ref
+from bark.model.forces import ForceField
+from bark.engine.kernels import BACKENDS, Plan, Steps
+
+__all__ = ["Numerics", "Clock", "plan", "steers_step", "breaking_part", "python_step", "stable_step", "check_countable",
+           "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
+
+DEFAULT_DT = 0.3
+"""Default (largest) time step.  With adaptive stepping and ``DEFAULT_OVERSHOOT_TOL`` this setting
+was measured by ``bark bench accuracy`` to give pattern statistics within the seed-to-seed spread of
+a fine dt = 0.005 reference, in the vertical and the diamond regime, faster than the paper's fixed
+dt = 0.01 (which ``dt = 0.01, stepping = "fixed"`` reproduces): about 6× in the vertical regime as
+last measured (``bark bench accuracy`` prints the current figure)."""
+DEFAULT_STEPPING = "adaptive"
+DEFAULT_OVERSHOOT_TOL = 0.002
+SAFETY = 0.9
+"""Automatic stepping keeps sub-steps at or below this fraction of the stability limit."""
+CHUNK = 128
+"""Most steps in one kernel call (progress, signals and periodic checkpoints are seen between calls)."""
+CHUNK_WORK = 20_000_000
+"""Most base-steps in one call (about 0.2 s), so that a very large scene still answers promptly."""
+
+
+@attrs.frozen(kw_only=True)
+class Numerics:
+    """How a run is stepped."""
+
+    dt: float = attrs.field(default=DEFAULT_DT, validator=positive)
+    """Time step, time units (1 = 88.5 days); with adaptive stepping the largest one.  The paper
+    used a fixed 0.01 (21 h): dt 0.01 with fixed stepping reproduces it."""
+    stepping: str = attrs.field(default=DEFAULT_STEPPING, validator=one_of("fixed", "auto", "adaptive"))
+    """fixed: refuse a dt above the integrator's stability limit; auto: split it into sub-steps;
+    adaptive: also halve steps around breaks to keep overshoot below overshoot_tol."""
+    overshoot_tol: float = attrs.field(default=DEFAULT_OVERSHOOT_TOL, validator=positive)
+    """Adaptive stepping: largest overshoot of a breaker's load past 1 allowed at a break (the load is
+    the breaker's own measure of how far a spring is from breaking: tension/f_max for the threshold
+    breaker)."""
+    max_halvings: int = attrs.field(default=10, validator=int_in(1, 40))
+    """Adaptive stepping: the smallest step is the full step / 2**max_halvings (at most 40)."""
+    backend: str = attrs.field(default="auto", validator=one_of(*BACKENDS))
+    """Compute backend: numpy, numba, or auto (numba if installed, else numpy)."""
+    threads: int = attrs.field(default=0, validator=int_in(0, 65536))
+    """Threads the numba backend's kernel shares each step among: 0 = automatic (as many as the cores
+    this process may use, for a lattice of at least 16,000 bases; else 1), at most that many.  Results
+    are the same to the bit whatever the count; the numpy backend runs on one."""
+
+
+def cores() -> int:
+    """The cores this process may use (its CPU affinity, where the system tells it): what automatic
+    threads, a sweep's local workers and the picture processes share."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+@attrs.define
+class Clock:
+    """Step control: the full step ``h``, the current halving, and time as integer ticks."""
+
+    h: float
+    """The full step: dt, or dt split into sub-steps below the stability limit."""
+    levels: int = 0
+    """Halvings allowed (adaptive stepping), so the smallest step is ``h / 2**levels``."""
+    ticks: int = 0
+    halvings: int = 0
+    """The current step is ``h / 2**halvings``."""
+
+    @property
+    def h_min(self) -> float:
+        return self.h / (1 << self.levels)
+
+    @property
+    def t(self) -> float:
+        return self.ticks * self.h_min
+
+    @property
+    def size(self) -> int:
+        """The current step, in ticks."""
+        return 1 << (self.levels - self.halvings)
+
+    @property
+    def step(self) -> float:
+        return self.size * self.h_min
+
+    def times(self, n: int) -> np.ndarray:
+        """Time at the end of each of the next ``n`` steps of the current size."""
+        return (self.ticks + (np.arange(n) + 1.0) * self.size) * self.h_min
+
+    def advance(self, steps: int) -> None:
+        self.ticks += steps * self.size
+
+    def can_halve(self) -> bool:
+        return self.halvings < self.levels
+
+    def halve(self) -> None:
+        self.halvings += 1
+
+    def relax(self, load: float) -> None:
+        """Quiet again (no spring over its threshold): double the step, staying on the coarser grid."""
+        if self.halvings and load <= 1.0 and self.ticks % (self.size << 1) == 0:
+            self.halvings -= 1
+
+    def fit(self, until_time: float) -> None:
+        """Shrink ``h`` a little so that ``until_time`` is a whole number of steps (a fresh run with
+        automatic or adaptive stepping then ends exactly there)."""
+        steps = max(1, math.ceil(until_time / self.h - 1e-9))
+        self.h = until_time / steps
+
+
+def stable_step(sim) -> tuple[float, float]:
+    """``(stability limit, full step)``: the integrator's limit — of the lattice as it will be, when
+    bases are still to join — and the step, ``dt`` or ``dt`` split into equal sub-steps below the
+    limit (``auto``, ``adaptive``).  A ``dt`` above the limit with ``fixed`` stepping is refused."""
+    limit = float(sim.integrator.stability_limit(sim.state, sim.forces))
+    if sim.lattice.initial < sim.lattice.n_bases:  # its own forces: their caches are of the simulation's state
+        limit = min(limit, float(sim.integrator.stability_limit(sim.whole_lattice(), ForceField(sim.mechanics, sim.backend))))
+    h = sim.numerics.dt
+    if h <= limit:
+        return limit, h
+    if sim.numerics.stepping == "fixed":
+        massless = [name for kind, name in registry.find(lambda cls: cls.kind == "integrator" and cls.overdamped)]
+        refs = [Ref("run", "dt", h), Ref("run", "stepping", "auto"), *(Ref("integrator", "name", n) for n in massless[:1])]
+        raise BarkError(
+            f"{{0}} is above {type(sim.integrator).__name__}'s stability limit h_max = {limit:.4g} for this scene: "
+            f"use a step of at most {_round_down(limit)}, or {{1}} for sub-steps"
+            + (", or {2}, which has no such limit" if massless else "") + " (docs/numerics.md)", *refs)
+    return limit, h / math.ceil(h / (SAFETY * limit))
+
+
+def expected_work(sim) -> float | None:
+    """Base-steps the run is expected to take (for ``auto``'s choice of backend): its bases times its
+    horizon over the step — the step bounded by the Gershgorin stability limit of the lattice (cheap,
+    before anything is built), and adaptive halving counted (1.5 times the steps in the vertical
+    regime, measured); ``None`` with no time bound."""
+    if sim.horizon is None:
+        return None
+    mech = sim.mechanics
+    from bark.model.stability import explicit_h_max
+
+    lam = mech.c + 4.0 * mech.k * len(sim.lattice.offsets)
+    h = min(sim.numerics.dt, SAFETY * explicit_h_max(mech.b / mech.m, lam / mech.m))
+    halving = 1.5 if sim.numerics.stepping == "adaptive" else 1.0  # steps halved around breaks (measured)
+    return halving * sim.lattice.n_bases * sim.horizon / h
+
+
+def check_countable(sim, stop) -> None:
+    """Refuse, before a run starts, a stop time the clock cannot count: time is kept as an integer
+    number of the smallest step, exact only below 2**53 of them."""
+    clock = sim.clock
+    ticks = stop.until_time / clock.h_min if stop.until_time is not None else 0.0
+    if not ticks < 2.0**53:
+        raise BarkError(
+            f"{{0}} is {ticks:.3g} of the smallest step (the step {clock.h:.3g} / 2^{clock.levels}), more than the "
+            "2^53 that time can be counted in exactly: lower {1} or {2}, or stop earlier",
+            Ref("run", "until_time", stop.until_time), Ref("run", "dt", sim.numerics.dt),
+            Ref("run", "max_halvings", sim.numerics.max_halvings))
+
+
+def _round_down(x: float) -> str:
+    """``x`` rounded down to two significant digits, as text (for suggestions)."""
+    if not x > 0:
+        return f"{x:g}"
+    exp = math.floor(math.log10(x)) - 1
+    return f"{math.floor(x / 10**exp) * 10**exp:.{max(0, -exp)}f}"
+
+
+def _first(flags: np.ndarray) -> int:
+    """Index of the first True in ``flags``, or ``len(flags)`` if none."""
+    return int(np.argmax(flags)) if flags.any() else len(flags)
+
+
+def plan(sim, stop, most: int | None = None) -> Plan:
+    """The next call: how many steps of what size, and what may happen inside it.
+
+    Many steps go in one call when the integrator and the growth law have compiled forms and the
+    breakers share one part (``Breaker.part``); the call then ends where a stop condition can next
+    hold, a trigger is next due or bases next join, and — at a halved step — after a quiet step that
+    ends on the grid of the next larger step, where the clock doubles the step (``Plan.relax``).
+    Springs the part's rule picks break inside the call when the part decides (a step that adaptive
+    stepping undoes is replayed from the call's start, its breaks with it); when it names candidates,
+    the call ends after the first step in which it names one, and the breakers select in Python.
+    Breakers with no part, or with different parts, are asked in Python after every step (one step
+    a call), and the step is held to their loads in Python (``python_step``) if any of them has one."""
+    clock = sim.clock
+    part = breaking_part(sim.breakers)
+    steers = steers_step(sim)
+    compiled = sim.integrator.update is not None and sim.growth.compiled is not None \
+        and (part is not None or not steers)
+    breaks = "python" if part is None or not compiled else "kernel" if part.decides else "candidates"
+    n = 1
+    if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
+        n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases, 1), most or CHUNK))
+    times = clock.times(n)
+    n = _bounded(sim, stop, times, n) if n > 1 else n
+    ends = clock.ticks + (np.arange(n) + 1) * clock.size  # ticks at the end of each step
+    relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
+    must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
+    return Plan(
+        h=clock.step, times=times[:n], update=sim.integrator.update, radius=sim.growth.compiled,
+        params=sim.growth.params_array if compiled else np.empty(0), uniform=sim.growth.uniform,
+        breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
+        accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
+        return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
+        prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
+        weights=sim.growth.weights_form() if compiled else None, radii=sim.growth.compiled_radii if compiled else None,
+        threads=sim.numerics.threads,
+    )
+
+
+def steers_step(sim) -> bool:
+    """Whether steps are held to the overshoot tolerance: adaptive stepping, and a breaker whose part
+    has a load (how far a spring is from breaking, by the breaker's own measure).  A breaker without
+    one does not steer: for it a load over 1 is no overshoot, and halving the step would not change
+    what it breaks."""
+    return sim.clock.levels > 0 and any(b.part_ is not None and b.part_.load is not None for b in sim.breakers)
+
+
+def breaking_part(breakers) -> BreakerPart | None:
+    """The one part the kernel evaluates for ``breakers`` (``NO_BREAKING`` for none), or ``None``
+    where no one part says what they do: a breaker without a part, or breakers with different parts
+    (each is then asked in Python)."""
+    if not breakers:
+        return NO_BREAKING
+    parts = {b.part_ for b in breakers}
+    return parts.pop() if len(parts) == 1 else None
+
+
+def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
+    """``n`` cut to end where bases next join, a trigger is next due, or a time or radius stop can
+    next hold."""
+    join = sim.lattice.next_join(sim.state.t, sim.state.n_bases)
+    if join is not None:
+        n = min(n, _first(times >= join - 1e-9 * sim.clock.h) + 1)
+    for trigger, _ in sim.actions:
+        step, due = trigger.next_step(sim), trigger.next_time(sim)
+        if step is not None:
+            n = min(n, max(1, step - sim.step_count))
+        if due is not None:
+            n = min(n, _first(times >= due - 1e-9 * sim.clock.h) + 1)
+    if stop is not None and stop.until_time is not None:
+        n = min(n, _first(times >= stop.until_time - 1e-9 * sim.clock.h) + 1)
+    if stop is not None and stop.until_radius is not None:
+        z = sim.state.anchor[:, 2]
+        radii = np.array([sim.growth.mean_radius(t, z) for t in times[:n].tolist()])
+        n = min(n, _first(radii >= stop.until_radius) + 1)
+    return max(n, 1)
+
+
+def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+    """One step with the integrator's ``step`` and the growth law's ``radius`` in Python, then the
+    backend's surface constraint and tensions, and the largest of the breakers' loads (their parts',
+    evaluated on whole arrays: the kernel's bits): a kernel call's result, for parts without compiled
+    forms.  A step that goes non-finite or over ``plan.accept_load`` is undone."""
+    keep = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+    sim.integrator.step(state, plan.h, sim.forces)
+    t = float(plan.times[0])
+    r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))
+    r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
+    sim.backend.constrain(state, r_x, r_a)
+    finite = sim.backend.measure(state, mech, tension) and state.is_finite()
+    loads = [parts.largest_load(p, state, tension, state.intact) for p in {b.part_ for b in sim.breakers} if p is not None]
+    load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
+    done = 1
+    if math.isnan(load) or load > plan.accept_load:
+        for saved, arr in zip(keep, (state.x, state.v, state.anchor)):
+            arr[...] = saved
+        done = 0
+    empty = np.empty(0, np.int64)
+    return Steps(done=done, load=load, broken=empty, step=empty, tension=np.empty(0))

@@ -1,0 +1,305 @@
+"""Checkpoints: a run written down so that it can go on later, bit for bit as if never stopped.
+
+A checkpoint is one ``checkpoint.npz`` (numpy arrays, stored uncompressed so that writing one is
+fast; ``np.load(..., allow_pickle=False)`` reads it) holding:
+
+* the state, every field of it (``bark.model.state.BASE_FIELDS`` and ``SPRING_FIELDS``): positions,
+  velocities, anchors and their directions (the sites), birth times; the springs' ends, rest
+  lengths, thresholds and ``intact`` mask — the topology, so that a run whose bases joined along
+  the way is restored as it was, not rebuilt from the scene;
+* the break log so far (``breaks_*`` columns);
+* what was recorded along the way (``rec_series_*``: the statistics series; ``rec_frames_*``: the
+  animation's frames), so that a resumed run's files are the whole run's;
+* ``meta``, a JSON text: checkpoint format, bark's version, the whole scene (every setting, as in
+  summary.json), the stop conditions, the clock (full step, tick count, adaptive stepping's current
+  level), the step count, the random generator's state, the events so far, why it was written
+  (``periodic``, ``interrupted`` or ``end``), and a checksum of every array.
+
+**Trust.**  Nothing in a checkpoint is used before all of it is verified: every array against its
+checksum, the types and shapes of the parts against one another (the break log's columns, the
+springs against the bases), positions finite, the random generator's state valid, and the format
+and bark version it was written by.  A damaged file is one line naming what is wrong.
+
+**Never the only copy.**  A new checkpoint is written to a temporary file, read back and verified,
+and only then moved into place; the one it replaces is kept as ``checkpoint.prev.npz``.  If the
+newest is damaged (a disk fault, a crash in the middle of the move), resuming falls back to the
+previous one, and says so.
+
+The leaf-base graph is not stored: it is the state's bases and intact springs, made again from them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import zipfile
+import zlib
+from pathlib import Path
+from typing import Any, Callable
+
+import attrs
+import numpy as np
+
+from bark.engine import kernels
+from bark.errors import BarkError
+from bark.io.files import write_npz
+from bark.model.state import BASE_FIELDS, SPRING_FIELDS
+
+__all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "load", "read", "read_meta", "Damaged"]
+
+FORMAT = 3
+CHECKPOINT_NAME = "checkpoint.npz"
+PREVIOUS_NAME = "checkpoint.prev.npz"
+REASONS = ("periodic", "interrupted", "end")
+"""Why a checkpoint was written: along the way, on a signal, or at the run's end."""
+
+STATE = {name: (dtype, 1 + len(shape)) for name, (shape, dtype) in {**BASE_FIELDS, **SPRING_FIELDS}.items()}
+BREAKS = {"spring": "int64", "i": "int64", "j": "int64", "step": "int64", "t": "float64", "tension": "float64"}
+META_KEYS = ("format", "bark_version", "reason", "scene", "stop", "t", "h_last", "clock", "step_count", "events", "rng",
+             "checksums")
+
+
+class Damaged(BarkError):
+    """A checkpoint that cannot be trusted; the message names the file and what is wrong."""
+
+
+def digest(a: np.ndarray) -> str:
+    """Checksum of an array's type, shape and bytes (BLAKE2b, 128 bits)."""
+    a = np.ascontiguousarray(a)
+    h = hashlib.blake2b(digest_size=16)
+    h.update(f"{a.dtype.str}{a.shape}".encode())
+    h.update(memoryview(a).cast("B") if a.size else b"")
+    return h.hexdigest()
+
+
+def snapshot(sim) -> tuple[dict[str, np.ndarray], dict]:
+    """Everything needed to go on from here exactly: the state's arrays (every field: the topology
+    too, so nothing is rebuilt from the scene), the break log, and (JSON-able) the clock, the step
+    count, the random generator's state, the events."""
+    arrays = {**sim.state.arrays(), **{f"breaks_{k}": v for k, v in sim.breaks.arrays().items()}}
+    meta = {"t": sim.state.t, "h_last": sim.state.h, "clock": attrs.asdict(sim.clock), "step_count": sim.step_count,
+            "events": sim.events, "rng": sim.rng.bit_generator.state, "backend": sim.backend.name}
+    return arrays, meta
+
+
+def restore_into(sim, arrays: dict[str, np.ndarray], meta: dict):
+    """``sim`` (unbuilt, of the checkpoint's scene), put in the state ``snapshot`` recorded."""
+    from bark.engine.simulation import BreakLog
+    from bark.model.state import State
+    from bark.engine.stepping import Clock
+
+    sim.rng = np.random.default_rng(sim.seed)
+    sim.rng.bit_generator.state = meta["rng"]
+    if sim.numerics.backend == "auto" and meta.get("backend") in ("numpy", "numba") and kernels.available(meta["backend"]):
+        # go on with the backend the run had: auto's choice depends on the process and on the time left,
+        # and the backends' transcendental functions (numpy's own, the C library's) may differ in the last bit
+        sim.numerics = attrs.evolve(sim.numerics, backend=meta["backend"])
+    sim.build(State.from_arrays(arrays, meta["t"], meta["h_last"]), Clock(**meta["clock"]))
+    log = tuple(np.asarray(arrays[f"breaks_{k}"]) for k in BREAKS)
+    sim.breaks = BreakLog([log] if log[0].size else [])
+    sim.step_count = int(meta["step_count"])
+    sim.events = list(meta["events"])
+    return sim
+
+
+def save(folder: str | Path, sim, scene, stop, reason: str, extra: dict[str, Any] | None = None,
+         recorders=()) -> Path:
+    """Write ``sim``'s checkpoint into ``folder``: verified before it replaces the last one, which
+    is kept as ``checkpoint.prev.npz``.  ``recorders`` (objects with ``name`` and ``arrays()``)
+    are saved with it."""
+    from bark.version import __version__
+
+    arrays, meta = snapshot(sim)
+    for rec in recorders:
+        arrays.update({f"rec_{rec.name}_{k}": v for k, v in rec.arrays().items()})
+    meta = {
+        "format": FORMAT, "bark_version": __version__, "reason": reason, "scene": scene.to_dict(),
+        "stop": attrs.asdict(stop), **meta, **(extra or {}),
+        "checksums": {name: digest(a) for name, a in arrays.items()},
+    }
+    folder = Path(folder)
+    return write_npz(folder / CHECKPOINT_NAME, compress=False, verify=read, keep=folder / PREVIOUS_NAME,
+                     meta=np.array(json.dumps(meta)), **arrays)
+
+
+def read_meta(path: str | Path) -> dict:
+    """Only the meta record of a checkpoint (cheap: the arrays are not read); :class:`Damaged` if unreadable."""
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as zf, zf.open("meta.npy") as fh:
+            meta = json.loads(str(np.lib.format.read_array(fh, allow_pickle=False)))
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its meta record cannot be read ({_why(err)})") from None
+    if not isinstance(meta, dict):
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its meta record is not a table")
+    return meta
+
+
+def _why(err: Exception) -> str:
+    text = str(err).splitlines()[0] if str(err) else type(err).__name__
+    return text[:200]
+
+
+def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
+    """``(arrays, meta)`` of a checkpoint, every part verified (see the module's docstring);
+    :class:`Damaged` naming the file and the first problem found."""
+    from bark.version import __version__
+
+    path = Path(path)
+    where = f"checkpoint {str(path)!r}"
+
+    def bad(problem: str) -> Damaged:
+        return Damaged(f"{where} is damaged: {problem}")
+
+    try:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:  # our handle: numpy's own
+            arrays = {k: data[k] for k in data.files}                           # is left open on a bad zip
+    except FileNotFoundError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise bad(f"it cannot be read ({_why(err)})") from None
+    if "meta" not in arrays:
+        raise bad("its meta record is missing")
+    try:
+        meta = json.loads(str(arrays.pop("meta")))
+    except ValueError as err:
+        raise bad(f"its meta record is not JSON ({_why(err)})") from None
+    if not isinstance(meta, dict):
+        raise bad("its meta record is not a table")
+    missing = [k for k in META_KEYS if k not in meta]
+    if missing:
+        raise bad(f"its meta record lacks {missing[0]!r}")
+    if meta["format"] != FORMAT:
+        raise Damaged(f"{where} has format {meta['format']!r}; this bark reads format {FORMAT}")
+    if meta["bark_version"] != __version__:
+        raise Damaged(f"{where} was written by bark {meta['bark_version']}, this is bark {__version__}: "
+                      f"a resumed run is bit-identical only on the version that began it")
+    if meta["reason"] not in REASONS:
+        raise bad(f"it was written for an unknown reason {meta['reason']!r}")
+    sums = meta["checksums"]
+    if not isinstance(sums, dict) or set(sums) != set(arrays):
+        lost = sorted(set(sums) - set(arrays)) if isinstance(sums, dict) else []
+        raise bad(f"member {lost[0]!r} is missing" if lost else "its members do not match its list of checksums")
+    for name, a in arrays.items():
+        if digest(a) != sums[name]:
+            raise bad(f"array {name!r} does not match its checksum")
+    _check_parts(arrays, meta, bad)
+    return arrays, meta
+
+
+def _check_parts(arrays: dict[str, np.ndarray], meta: dict, bad: Callable[[str], Damaged]) -> None:
+    """The parts of a checkpoint agree with one another (its checksums cannot see a writer's bug)."""
+    for name, (dtype, ndim) in {**STATE, **{f"breaks_{k}": (v, 1) for k, v in BREAKS.items()}}.items():
+        if name not in arrays:
+            raise bad(f"array {name!r} is missing")
+        a = arrays[name]
+        if a.dtype != np.dtype(dtype) or a.ndim != ndim:
+            raise bad(f"array {name!r} is {a.dtype}{list(a.shape)}, expected {dtype} with {ndim} dimension(s)")
+    n, m = arrays["x"].shape[0], arrays["pairs"].shape[0]
+    for name, (shape, _) in {**BASE_FIELDS, **SPRING_FIELDS}.items():
+        want = ((n if name in BASE_FIELDS else m), *shape)
+        if arrays[name].shape != want:
+            raise bad(f"array {name!r} has shape {list(arrays[name].shape)}, expected {list(want)}")
+    for name in ("x", "v", "anchor", "anchor_dir", "born", "rest", "fmax"):
+        if not np.isfinite(arrays[name]).all():
+            raise bad(f"array {name!r} holds NaN or infinite values")
+    if m and arrays["pairs"].max() >= n:
+        raise bad("a spring joins a base that does not exist")
+    lengths = {k: arrays[f"breaks_{k}"].shape[0] for k in BREAKS}
+    if len(set(lengths.values())) != 1:
+        raise bad("the break log's columns have different lengths (" + ", ".join(f"{k} {v}" for k, v in lengths.items()) + ")")
+    ids = arrays["breaks_spring"]
+    if ids.size and (ids.min() < 0 or ids.max() >= m or np.unique(ids).size != ids.size or arrays["intact"][ids].any()):
+        raise bad("the break log names springs that are not broken, or one spring twice")
+    if ids.size and ids.size != m - int(np.count_nonzero(arrays["intact"])):
+        raise bad(f"the break log holds {ids.size} breaks but {m - int(np.count_nonzero(arrays['intact']))} springs are broken")
+    clock = meta["clock"]
+    if not isinstance(clock, dict) or set(clock) != {"h", "levels", "ticks", "halvings"}:
+        raise bad("its clock record has the wrong shape")
+    counts = {"step_count": meta["step_count"], **{k: clock[k] for k in ("levels", "ticks", "halvings")}}
+    for key, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise bad(f"its {key} is {value!r}, not a count")
+    if clock["halvings"] > clock["levels"] or clock["levels"] > 40:
+        raise bad(f"its clock's halvings ({clock['halvings']}) and levels ({clock['levels']}) disagree")
+    for key, value in {"t": meta["t"], "h_last": meta["h_last"], "h": clock["h"]}.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+            raise bad(f"its {key} is {value!r}, not a time")
+    if not clock["h"] > 0 or meta["t"] != clock["ticks"] * (clock["h"] / (1 << clock["levels"])):
+        raise bad("its time and its clock disagree")
+    try:
+        gen = np.random.Generator(np.random.PCG64())
+        if not isinstance(meta["rng"], dict) or meta["rng"].get("bit_generator") != "PCG64":
+            raise ValueError("not a PCG64 state")
+        gen.bit_generator.state = meta["rng"]
+    except (TypeError, ValueError, KeyError, OverflowError) as err:
+        raise bad(f"its random generator state is invalid ({_why(err)})") from None
+    if not isinstance(meta["events"], list) or not isinstance(meta["scene"], dict) or not isinstance(meta["stop"], dict):
+        raise bad("its events, scene or stop record has the wrong shape")
+
+
+def load(folder: str | Path, warn: Callable[[str], None] | None = None):
+    """``(scene, simulation, stop, meta, recorded)`` restored from the checkpoint in ``folder``,
+    where ``recorded`` maps a recorder's name to its arrays.  Falls back to the previous checkpoint
+    (and says so through ``warn``) when the newest is missing or damaged."""
+    folder = Path(folder)
+    newest, previous = folder / CHECKPOINT_NAME, folder / PREVIOUS_NAME
+    try:
+        arrays, meta = read(newest)
+        used = newest
+    except (FileNotFoundError, Damaged) as first:
+        if not previous.exists():
+            if isinstance(first, FileNotFoundError):
+                raise BarkError(f"no checkpoint in {str(folder)!r}: nothing to resume there") from None
+            raise first from None
+        try:
+            arrays, meta = read(previous)
+        except Damaged as second:
+            raise (second if isinstance(first, FileNotFoundError) else first) from None
+        used = previous
+        if warn is not None:
+            why = "is missing" if isinstance(first, FileNotFoundError) else f"cannot be used ({first})"
+            warn(f"{CHECKPOINT_NAME} {why}; going on from the previous checkpoint, t = {meta['t']:.6g}")
+    return (*restore(arrays, meta, used), used)
+
+
+def _check_strategies(scene: dict, path: Path) -> None:
+    """Refuse, in one line, to resume with a strategy that cannot be had here (a plugin not
+    installed, a class whose module is not importable): never another in its place, and not a
+    damaged checkpoint (the previous one records the same)."""
+    from bark.contract import registry
+    from bark.engine.scene import STRATEGY_SECTIONS
+
+    for section, kind in STRATEGY_SECTIONS.items():
+        name = scene.get(section, {}).get("name") if isinstance(scene.get(section), dict) else None
+        if isinstance(name, str):
+            try:
+                registry.load(kind, name)
+            except BarkError as err:
+                where = repr(str(path.parent)).replace("{", "{{").replace("}", "}}")
+                raise BarkError(f"cannot resume the run in {where}: " + err.template, *err.refs) from None
+
+
+def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
+    """Rebuild ``(scene, simulation, stop, meta, recorded)`` from verified checkpoint parts."""
+    from bark.engine.scene import Scene
+    from bark.engine.simulation import Stop
+
+    _check_strategies(meta["scene"], path)
+    try:
+        scene = Scene.from_dict(meta["scene"])
+        stop = Stop(**meta["stop"])
+    except (BarkError, TypeError) as err:
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its scene is not valid ({err})") from None
+    lattice, pairs = scene.lattice, arrays["pairs"].astype(np.int64)
+    if arrays["x"].shape[0] > lattice.n_bases or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: its bases and springs do not fit its scene's lattice")
+    sim = restore_into(scene.simulation(), arrays, meta)  # built from the checkpoint's state, not the scene's lattice
+    recorded: dict[str, dict[str, np.ndarray]] = {}
+    for key, a in arrays.items():
+        if key.startswith("rec_"):
+            name, _, column = key[4:].partition("_")
+            recorded.setdefault(name, {})[column] = a
+    return scene, sim, stop, meta, recorded

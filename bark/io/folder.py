@@ -1,0 +1,209 @@
+"""The output folder of a run: checked before anything runs, held by one run at a time, never mixed.
+
+Opening a folder for a run, before the simulation takes its first step:
+
+1. **Checked**: a name the file system can hold (no NUL, no part over ``NAME_MAX`` bytes), created
+   with its parents if missing, a folder (not a file), and writable (a probe file is written, synced
+   and removed) — so a run can never end in a folder it cannot write.
+2. **Locked**: an exclusive ``flock`` on the folder itself, held until the run's last file is
+   written.  A second run into the same folder is refused in one line.  The lock is the kernel's, so
+   a run killed by SIGKILL leaves no stale lock behind, and no lock file in the folder.
+3. **Cleaned of stale temporary files**: every file is written to a temporary name and moved into
+   place; a run killed in the middle of a write leaves its temporary behind, and the next run into
+   the folder removes it (safe: the lock says no other run is writing).
+4. **Never mixed**: a fresh run into a folder holding another run's files replaces them, all at
+   once, before it starts — unless that run is *unfinished* (its checkpoint was written along the
+   way or on a signal), which is refused: go on with it (``--resume``) or discard it
+   (``--overwrite``).  Only bark's own file names are removed; anything else in the folder stays.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+from bark.io.checkpoint import CHECKPOINT_NAME, PREVIOUS_NAME, Damaged, read_meta
+from bark.errors import BarkError, Ref
+from bark.io.files import TMP_SUFFIX, temp_name_prefix
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: no locking
+    fcntl = None
+
+__all__ = ["RUN_FILES", "OutputFolder", "writable_folder"]
+
+RUN_FILES = ("summary.json", "patches.csv", "breaks.csv", "state.npz", "graph.graphml", "statistics.csv",
+             "pattern.png", "development.gif", "tree.vtu", "tree.ply", "tree.png", CHECKPOINT_NAME, PREVIOUS_NAME)
+"""Every file a run may write.  A fresh run removes these (and only these) from its folder."""
+PROBE = "bark-probe"
+
+
+def _short(text: str, limit: int = 60) -> str:
+    return text if len(text) <= limit else text[: limit - 1] + "…"
+
+
+class OutputFolder:
+    """A folder opened for one run: checked, created, locked and cleaned (see the module's docstring).
+    Use as a context manager; closing releases the lock."""
+
+    def __init__(self, path: Path, fd: int | None) -> None:
+        self.path = path
+        self._fd = fd
+
+    @classmethod
+    def open(cls, path: str | Path, *, fresh: bool, overwrite: bool = False, key: str = "out",
+             notice: Callable[[str], None] | None = None) -> "OutputFolder":
+        """Open ``path`` for a fresh run (``fresh=True``: created if missing, other runs' files
+        replaced) or for resuming the run in it.  ``key`` names the setting in messages (``out``,
+        ``resume``).  Raises a one-line :class:`BarkError`."""
+        path = Path(path)
+        ref = Ref(None, key, str(path))
+
+        def fail(problem: str, *more: Ref) -> BarkError:
+            return BarkError("{0}: " + problem, ref, *more)
+
+        _check_name(path, fail)
+        created = []
+        if fresh:
+            missing = [p for p in (path, *path.parents) if not p.exists()]
+            try:
+                path.mkdir(parents=True, exist_ok=True)
+            except OSError as err:
+                raise fail(f"cannot create it ({err.strerror or err})") from None
+            created = missing
+        if not path.exists():
+            raise fail("no such folder")
+        if not path.is_dir():
+            raise fail("exists and is not a folder")
+        fd = None
+        try:
+            fd = _lock(path, fail)
+            _probe(path, fail)
+            _remove_stale_temporaries(path)
+            if fresh:
+                _clear_for_fresh_run(path, overwrite, fail, notice)
+        except BaseException:
+            if fd is not None:
+                os.close(fd)
+            for p in created:  # leave nothing behind for a run that never started
+                try:
+                    p.rmdir()
+                except OSError:
+                    break
+            raise
+        return cls(path, fd)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)  # releases the flock
+            self._fd = None
+
+    def __enter__(self) -> "OutputFolder":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def writable_folder(path: str | Path, key: str = "out") -> Path:
+    """``path`` checked, created if missing and probed for writing, for outputs that are not a run's
+    (benchmarks): no lock, nothing removed.  One-line :class:`BarkError` naming ``key`` if unusable."""
+    path = Path(path)
+    ref = Ref(None, key, str(path))
+
+    def fail(problem: str) -> BarkError:
+        return BarkError("{0}: " + problem, ref)
+
+    _check_name(path, fail)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise fail(f"cannot create it ({err.strerror or err})") from None
+    if not path.is_dir():
+        raise fail("exists and is not a folder")
+    _probe(path, fail)
+    return path
+
+
+def _check_name(path: Path, fail) -> None:
+    text = str(path)
+    if "\0" in text:
+        raise fail("a folder name cannot contain a NUL character")
+    try:
+        raw = os.fsencode(text)
+    except UnicodeError:
+        raise fail("the name cannot be encoded for this file system") from None
+    name_max = 255
+    try:
+        anchor = next(p for p in (path, *path.parents) if p.exists())
+        name_max = os.pathconf(anchor, "PC_NAME_MAX")
+    except (StopIteration, OSError, ValueError):
+        pass
+    for part in path.parts:
+        if len(os.fsencode(part)) > name_max:
+            raise fail(f"the name {_short(part)!r} is longer than the {name_max} bytes a folder name may have here")
+    if len(raw) > 4000:
+        raise fail(f"the path is {len(raw)} bytes long; this file system takes at most 4096")
+
+
+def _lock(path: Path, fail) -> int | None:
+    if fcntl is None:  # pragma: no cover
+        return None
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise fail("another bark run is writing there; wait for it to end, or choose another folder") from None
+    except OSError:  # a file system without flock: go on unlocked
+        pass
+    return fd
+
+
+def _probe(path: Path, fail) -> None:
+    try:
+        fd, name = tempfile.mkstemp(prefix=temp_name_prefix(PROBE), suffix=TMP_SUFFIX, dir=path)
+        try:
+            os.write(fd, b"bark")
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+            os.unlink(name)
+    except OSError as err:
+        raise fail(f"cannot write there ({err.strerror or err})") from None
+
+
+def _remove_stale_temporaries(path: Path) -> None:
+    """Temporary files of earlier runs killed in the middle of a write (we hold the lock: none is ours)."""
+    prefixes = tuple(temp_name_prefix(name) for name in (*RUN_FILES, PROBE))
+    for entry in path.iterdir():
+        if entry.name.startswith(prefixes) and entry.name.endswith(TMP_SUFFIX) and entry.is_file():
+            entry.unlink(missing_ok=True)
+
+
+def _clear_for_fresh_run(path: Path, overwrite: bool, fail, notice) -> None:
+    present = [name for name in RUN_FILES if (path / name).is_file()]
+    if not present:
+        return
+    if not overwrite:
+        for name in (CHECKPOINT_NAME, PREVIOUS_NAME):
+            if not (path / name).is_file():
+                continue
+            try:
+                meta = read_meta(path / name)
+            except Damaged as err:
+                raise fail(f"holds a checkpoint that cannot be read ({err}); discard it with {{1}}",
+                           Ref(None, "overwrite", True)) from None
+            if meta.get("reason") != "end":
+                t = meta.get("t")
+                when = f"t = {t:.6g}" if isinstance(t, (int, float)) else "a run"
+                raise fail(f"holds an unfinished run (stopped at {when}): go on with it ({{1}}), or discard it with {{2}}",
+                           Ref(None, "resume", str(path)), Ref(None, "overwrite", True))
+            break
+    for name in present:
+        (path / name).unlink(missing_ok=True)
+    if notice is not None:
+        notice(f"replaced the earlier run's files in {str(path)!r}")

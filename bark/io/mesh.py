@@ -1,0 +1,77 @@
+"""The trunk as a 3-D mesh: each leaf base a rhomboid, coloured by its patch (``mesh`` effect).
+
+Written with meshio (imported here only, when a scene asks for the mesh): ``tree.vtu`` for ParaView
+(cell data ``patch``, ``patch_size``, ``base``, ``born``; point colours) and ``tree.ply`` for Blender
+(vertex colours ``red``, ``green``, ``blue``).  The VTU file is binary and uncompressed: meshio's zlib
+compression took 15 times as long as the writing itself (0.35 s of every whole-tree run) to make the
+file 45 % smaller.  Each leaf base is a quad of its own — four corners, not shared with its
+neighbours — so bases that have moved apart show the crack between them.
+
+A base's rhomboid is fixed when it joins the trunk (:func:`bark.model.tree.leaf_corners`, at the radius it
+joined at) and carried with it: its corners keep their arc length and height offsets from the base's
+centre, and lie on the trunk's surface at their own heights.  Patches of fewer than ``min_size``
+bases (fragments) are grey; no two neighbouring patches share a colour (``bark.analysis.pattern.patch_colours``,
+the colouring of every picture bark draws).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bark.io.files import atomic_write
+from bark.analysis.pattern import simulation_colours
+from bark.model.tree import join_radii, leaf_corners
+
+__all__ = ["leaf_quads", "write_mesh", "MESH_FILES"]
+
+MESH_FILES = ("tree.vtu", "tree.ply")
+
+
+def leaf_quads(sim) -> np.ndarray:
+    """The corners of every base's rhomboid now, shape ``(n, 4, 3)``, on the trunk's surface."""
+    s = sim.state
+    corners = leaf_corners(sim.lattice, join_radii(sim))
+    x = s.x
+    theta = np.arctan2(x[:, 1], x[:, 0])
+    r_now = np.hypot(x[:, 0], x[:, 1])
+    angle = theta[:, None] + corners[:, :, 0] / r_now[:, None]  # arc length kept on today's trunk
+    z = x[:, 2, None] + corners[:, :, 1]
+    r = np.broadcast_to(sim.growth.radius(s.t, z.ravel()), z.size).reshape(z.shape)
+    return np.stack([r * np.cos(angle), r * np.sin(angle), z], axis=-1)
+
+
+def write_mesh(sim, out: str | Path, min_size: int = 7) -> list[Path]:
+    """Write ``tree.vtu`` and ``tree.ply`` into ``out``; returns their paths."""
+    import meshio
+
+    quads = leaf_quads(sim)
+    n = len(quads)
+    labels = sim.patch_labels()
+    colours = np.repeat(simulation_colours(sim, min_size), 4, axis=0)
+    points = quads.reshape(-1, 3)
+    cells = [("quad", np.arange(4 * n, dtype=np.int32).reshape(n, 4))]
+    colour_data = {name: colours[:, k] for k, name in enumerate(("red", "green", "blue"))}
+    sizes = np.bincount(labels)[labels]
+    cell_data = {"patch": [labels.astype(np.int32)], "patch_size": [sizes.astype(np.int32)],
+                 "base": [np.arange(n, dtype=np.int32)], "born": [sim.state.born.astype(float)]}
+    out = Path(out)
+    vtu = meshio.Mesh(points, cells, point_data=colour_data, cell_data=cell_data)
+    ply = meshio.Mesh(points, cells, point_data=colour_data)  # PLY keeps no cell data
+    return [atomic_write(out / "tree.vtu", lambda tmp: meshio.write(tmp, vtu, file_format="vtu", compression=None),
+                         by_name=True),
+            atomic_write(out / "tree.ply", lambda fh: fh.write(_ply_bytes(meshio, ply)))]
+
+
+def _ply_bytes(meshio, mesh) -> bytes:
+    """The binary PLY meshio writes, less the time of writing it puts in its header comment: the same
+    trunk gives the same file (two runs compare with ``cmp``, as the other outputs do)."""
+    import io
+    import re
+
+    buf = io.BytesIO()
+    meshio.write(buf, mesh, file_format="ply", binary=True)
+    data = buf.getvalue()
+    head, mark, body = data.partition(b"end_header\n")
+    return re.sub(rb"(comment Created by meshio v[^,\n]*),[^\n]*", rb"\1", head, count=1) + mark + body

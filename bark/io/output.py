@@ -1,0 +1,190 @@
+"""Writing a run's results: atomically, without plotting, readable without pickle.
+
+Every file is written to a temporary name in the same folder and moved into place with
+``os.replace``, so a reader (or a crash) never sees half a file.  Files of one run:
+
+* ``patches.csv`` — one row per patch of ≥ min_size bases (from the patch analyzer).
+* ``breaks.csv`` — the break log: spring, i, j, step, t, tension, in the order of breaking.
+* ``summary.json`` — every setting, the seed, bark's version, the stop condition and why the run
+  stopped, t and radius at the end, counts and pattern statistics, degenerate events.
+* ``state.npz`` — the mechanical state at the end (x, v, anchor, pairs, rest, fmax, intact, patch
+  labels, t); ``np.load(path)`` reads it with ``allow_pickle=False``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bark.contract.strategies import pattern_of
+from bark.io.files import atomic_write, write_columns, write_csv, write_json, write_npz
+from bark.units import metres
+
+__all__ = ["run_summary", "write_run", "write_graphml"]
+
+
+PATCH_COLUMNS = ["patch", "size", "theta_deg", "z", "orientation_deg", "anisotropy", "lambda1", "lambda2"]
+"""patches.csv's columns for a pattern on the trunk; a pattern in a plane has ``x, y`` in place of
+``theta_deg, z`` (``patch_columns``)."""
+
+
+def patch_columns(rows: list[dict]) -> list[str]:
+    """patches.csv's columns for ``rows``: the centroid as the rows give it (``theta_deg, z`` on the
+    trunk, ``x, y`` in a plane), then any further columns a custom analyzer added, none dropped."""
+    if not rows:
+        return PATCH_COLUMNS
+    first = rows[0]
+    where = ["theta_deg", "z"] if "theta_deg" in first else ["x", "y"] if "x" in first else []
+    known = ["patch", "size", *where, "orientation_deg", "anisotropy", "lambda1", "lambda2"]
+    return [c for c in known if c in first] + [c for c in first if c not in known]
+
+
+PATTERN_KEYS = ("mean_orientation_deg", "circular_sd_deg", "orientation_se_deg", "mean_anisotropy", "anisotropy_sd",
+                "anisotropy_se", "fraction_within_45_deg")
+"""The pattern statistics summary.json takes from the analyzer's summary (``bark.analysis.patches.pattern_summary``)."""
+
+
+def trunk_regions(sim) -> np.ndarray | None:
+    """The names of the trunk's regions (``Growth.region`` of every base's site), or ``None`` when it
+    has one region."""
+    every = np.unique(sim.growth.region(sim.state.anchor[:, 2]))
+    return every if len(every) >= 2 else None
+
+
+def region_summaries(sim, rows: list[dict], every: np.ndarray) -> dict[str, dict]:
+    """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk: each patch counted
+    in the region of its centroid's height (near bulges and away from them)."""
+    from bark.analysis.patches import pattern_summary
+
+    names = sim.growth.region(np.array([r["z"] for r in rows], dtype=float))
+    return {str(name): pattern_summary([r for r, n in zip(rows, names) if n == name]) for name in every}
+
+
+def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> dict[str, Any]:
+    """Pattern statistics per region as photographs of the trunk would give them: patches cut at the
+    borders of ``window``-sized windows (``bark.analysis.patches.window_labels``), each counted in the region
+    of its centroid; and (``initial_trunk``, when bases joined during the run) the same over the
+    patches of bases that were there from the start, the trunk whose growth the whole run stretched."""
+    from bark.analysis.patches import patch_statistics, window_labels
+
+    s = sim.state
+    labels = window_labels(s.x, s.pairs, s.intact, window)
+    rows = patch_statistics(s.x, labels, min_size)
+    joined = s.born > s.born.min()  # grew on the trunk the run began with
+    initial = np.bincount(labels, weights=joined) == 0  # per window patch: none of its bases joined later
+    old = [r for r in rows if initial[r["patch"]]] if joined.any() else None
+    return {"window": window, "window_m": metres(window), "regions": region_summaries(sim, rows, every),
+            "initial_trunk": None if old is None else region_summaries(sim, old, every)}
+
+
+def _phyllotaxis(sim) -> dict | None:
+    """The paper's checks of the leaf-base pattern now (``bark.model.tree.phyllotaxis``), or ``None`` for a
+    lattice without two spring offsets."""
+    from bark.analysis.phyllotaxis import phyllotaxis
+    from bark.model.tree import join_radii
+
+    if len(sim.lattice.offsets) != 2 or sim.state.n_bases <= max(sim.lattice.offsets) + sum(sim.lattice.partition_offsets()):
+        return None
+    return phyllotaxis(sim.lattice, sim.state.anchor, join_radii(sim))
+
+
+def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s: float | None = None,
+                extra: dict | None = None) -> dict[str, Any]:
+    """Everything summary.json holds about a finished (or stopped) run; ``analyses`` from ``sim.analyze()``."""
+    from bark.version import __version__
+
+    measured = pattern_of(analyses.values())
+    stats, rows = (measured.summary, measured.patches) if measured is not None else ({}, None)
+    every = trunk_regions(sim) if rows is not None else None  # asked first: one region costs nothing more
+    effects = scene.effects
+    return {
+        "bark_version": __version__,
+        "seed": sim.seed,
+        "settings": scene.to_dict(),
+        "effects": effects,
+        "stop": {k: getattr(scene.run, k) for k in ("until_time", "until_radius", "until_patches", "min_patch_size")},
+        "stop_reason": stop_reason,
+        "final_state": (
+            "last finite state: the step after it made the state NaN or infinite"
+            if stop_reason == "non-finite" else "the state at the stop"
+        ),
+        "backend": sim.backend.name,
+        "threads": getattr(sim.backend, "threads", 1),
+        "dt": sim.numerics.dt,
+        "h": sim.clock.h,
+        "stability_limit": sim.stability_limit,
+        "t": sim.state.t,
+        "steps": sim.step_count,
+        "radius": sim.radius,
+        "n_bases": sim.state.n_bases,
+        "n_springs": sim.state.n_springs,
+        "n_broken": sim.n_broken,
+        "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size) if "fracture" in effects else None),
+        **{k: stats.get(k) for k in PATTERN_KEYS},
+        "regions": region_summaries(sim, rows, every) if every is not None else None,
+        "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
+        "phyllotaxis": _phyllotaxis(sim),
+        "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
+        **(extra or {}),
+        "wall_time_s": wall_time_s,
+        "conventions": "orientation: degrees from horizontal in [0, 180), 90 = along the trunk axis; "
+        "horizontal = increasing theta seen from outside; anisotropy = 2A - 1",
+    }
+
+
+def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None,
+              extra: dict | None = None) -> dict:
+    """Write what the scene's effects ask for into ``out_dir``: summary.json always; patches.csv
+    (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml),
+    tree.vtu and tree.ply (mesh)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    analyses = sim.analyze()
+    if scene.has("patch-statistics"):
+        measured = pattern_of(analyses.values())
+        rows = measured.patches if measured is not None else []
+        write_csv(out / "patches.csv", rows, patch_columns(rows))
+    if scene.has("break-log"):
+        write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()})
+    s = sim.state
+    if scene.has("state-snapshot"):
+        write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases
+            out / "state.npz", compress=False,
+            x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs.astype(np.int64), rest=s.rest, fmax=s.fmax, intact=s.intact,
+            labels=sim.patch_labels(), t=np.float64(s.t),
+        )
+    if scene.has("graphml"):
+        write_graphml(out / "graph.graphml", sim)
+    if scene.has("mesh"):
+        from bark.io.mesh import write_mesh
+
+        write_mesh(sim, out, scene.run.min_patch_size)
+    summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
+    write_json(out / "summary.json", summary)
+    return summary
+
+
+def write_graphml(path: str | Path, sim) -> Path:
+    """The leaf-base graph of record (intact springs) as GraphML, for networkx, Gephi, ParaView …:
+    nodes carry their site (theta0 in (−π, π], z0), birth time, position now (x, y, z) and patch id;
+    edges their spring id, rest length and threshold (all read from the state's arrays)."""
+    import networkx as nx
+
+    s, labels = sim.state, sim.patch_labels()
+    theta0 = np.arctan2(s.anchor_dir[:, 1], s.anchor_dir[:, 0])
+    g = nx.Graph()
+    g.add_nodes_from((int(q), {"theta0": float(theta0[q]), "z0": float(s.anchor[q, 2]), "born": float(s.born[q]),
+                                "x": float(s.x[q, 0]), "y": float(s.x[q, 1]), "z": float(s.x[q, 2]),
+                                "patch": int(labels[q])}) for q in sim.graph.nodes)
+    spring = {tuple(p): k for k, p in enumerate(s.pairs.tolist())}
+    g.add_edges_from((i, j, {"spring": spring[(i, j)], "rest": float(s.rest[spring[(i, j)]]),
+                             "fmax": float(s.fmax[spring[(i, j)]])})
+                     for i, j in (sorted(e) for e in sim.graph.edges))
+
+    def write(fh):
+        nx.write_graphml(g, fh)
+
+    return atomic_write(path, write)
+

@@ -1,0 +1,239 @@
+"""Running a scene to its result: the one library call behind ``bark simulate``.
+
+    from bark.studies.runner import run, resume
+    outcome = run(scene, "runs/a")            # builds, runs, writes what the scene's effects ask for
+    outcome = resume("runs/a")                # goes on from the checkpoint in runs/a
+
+A run, in order:
+
+1. **Before anything is written**: the scene is built (``Scene.simulation``, which refuses a run
+   too large for this machine's memory), the numerics checked against the stop conditions
+   (``Simulation.check``), and the output folder opened (``bark.io.folder``: checked, created,
+   locked, cleaned).  Bad input stops here, with nothing written.
+2. **The loop**, ``Simulation.run``, with the along-the-way recorders the scene's effects ask for
+   (statistics series, animation frames), a checkpoint every ``checkpoint_every`` seconds of wall
+   time, and a look at ``interrupted()`` between steps: a signal stops the run there.
+3. **The end, in an order that loses nothing**: the stale summary is removed, the checkpoint is
+   written (``end``, or ``interrupted``: resumable), then the data files, then ``summary.json``
+   (whose presence says the outputs are complete and match the checkpoint), then the pictures.  A
+   picture that cannot be drawn is reported, and every other output stays.  A run killed in the
+   middle of these writes is finished by ``resume``, which writes the missing outputs from the
+   checkpoint.
+
+Drawing is not the core's: ``pictures`` maps an effect (``pattern-image``, ``animation``) to the
+file it writes and a function ``draw(sim, scene, recorded, path)``; ``bark_cli`` supplies
+matplotlib's.  The caller owns signals: ``interrupted()`` returns the reason to stop (e.g.
+``"interrupted"``) or ``None``.  ``observe(sim, stop)`` is called after every advance (a progress bar).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Callable
+
+import attrs
+
+from bark.io import checkpoint
+from bark.errors import BarkError, NonFiniteStateError, one_line
+from bark.io.folder import OutputFolder
+from bark.io.recorders import Dissipation
+from bark.io.recorders import Frames, StatisticsSeries
+from bark.io.output import run_summary, write_run
+
+__all__ = ["Outcome", "run", "resume", "STOPPED_BY_SIGNAL"]
+
+STOPPED_BY_SIGNAL = ("interrupted", "terminated")
+"""Stop reasons of a run stopped from outside between two steps; such a run can be resumed."""
+
+Picture = tuple[str, Callable]
+
+
+@attrs.define
+class Outcome:
+    """What a run left: where, the simulation at its end, why it stopped, its summary, and the
+    outputs that could not be written (one line each; empty when all were)."""
+
+    out: Path | None
+    scene: object
+    sim: object
+    stop_reason: str
+    summary: dict
+    resumed: bool = False
+    error: str | None = None
+    """Why the state went non-finite, if it did (the last finite state was written)."""
+    failed: list[str] = attrs.field(factory=list)
+    drawing_stopped: bool = False
+    """Whether a picture was left undrawn because a signal stopped the drawing."""
+
+
+def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkpoint_every: float = 60.0,
+        observe: Callable | None = None, interrupted: Callable[[], str | None] | None = None,
+        pictures: dict[str, Picture] | None = None, warn: Callable[[str], None] | None = None,
+        notice: Callable[[str], None] | None = None) -> Outcome:
+    """Run ``scene`` into the folder ``out`` (see the module's docstring; ``None``: in memory only,
+    for studies and sweeps that read the outcome, not files).  ``warn`` receives what a
+    user must hear (a run with no time bound, a fallback to an older checkpoint), ``notice`` what is
+    merely worth saying (an earlier run's files replaced)."""
+    _check_every(checkpoint_every)
+    sim, stop = scene.simulation(), scene.stop()
+    sim.prepare(stop)
+    if out is None:  # in memory: nothing written, nothing drawn, no checkpoints
+        return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None)
+    with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:
+        if stop.until_time is None and warn is not None:
+            conds = [f"radius {stop.until_radius:g}" if stop.until_radius is not None else None,
+                     f"{stop.until_patches} patches" if stop.until_patches is not None else None]
+            warn(f"no time bound: this run ends only at {' or '.join(c for c in conds if c)}; "
+                 "a signal (Ctrl-C) stops it with a checkpoint")
+        return _drive(scene, sim, stop, folder.path, {}, 0.0, False, checkpoint_every, observe, interrupted, pictures)
+
+
+def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable | None = None,
+           interrupted: Callable[[], str | None] | None = None, pictures: dict[str, Picture] | None = None,
+           warn: Callable[[str], None] | None = None, notice: Callable[[str], None] | None = None) -> Outcome:
+    """Go on with the run in ``out`` from its checkpoint (every setting comes from there).  A run
+    that had ended but whose outputs were not all written gets them written."""
+    _check_every(checkpoint_every)
+    with OutputFolder.open(out, fresh=False, key="resume") as folder:
+        scene, sim, stop, meta, recorded, _ = checkpoint.load(folder.path, warn=warn)
+        wall = float(meta.get("wall_time_s") or 0.0)
+        if meta["reason"] == "end":
+            if _outputs_complete(folder.path, meta):
+                raise BarkError(f"the run in {str(folder.path)!r} has ended ({meta.get('stop_reason')}): nothing to resume")
+            if warn is not None:
+                warn("the run had ended, but not all of its outputs were written: writing them now")
+            recorders = _recorders(scene, sim, recorded)
+            return _finish(scene, sim, stop, folder.path, recorders, meta.get("stop_reason") or "time", wall, True,
+                           None, pictures, save=False)
+        return _drive(scene, sim, stop, folder.path, recorded, wall, True, checkpoint_every, observe, interrupted, pictures)
+
+
+def _check_every(seconds) -> None:
+    if not (isinstance(seconds, (int, float)) and 0 <= seconds <= 1e9):
+        from bark.errors import Ref
+
+        raise BarkError("{0}: must be a number of seconds in [0, 1e+09] (0: only at the end and on a signal)",
+                        Ref(None, "checkpoint_every", seconds))
+
+
+def _outputs_complete(folder: Path, meta: dict) -> bool:
+    """Whether summary.json is there and describes the checkpoint's state (written last, so all is)."""
+    import json
+
+    try:
+        summary = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(summary, dict) and summary.get("steps") == meta["step_count"]
+
+
+def _record_end(sim, scene, recorders: list) -> dict:
+    """The state at the stop recorded, once, by every recorder, each finished (what it makes of its
+    record: the fracture history); the recorders by name."""
+    for rec in recorders:
+        rec.record(sim)
+        rec.finish(sim, scene.run.min_patch_size)
+    return {rec.name: rec for rec in recorders}
+
+
+def _extra(by_name: dict) -> dict:
+    """What the recorders add to summary.json."""
+    return {k: v for rec in by_name.values() for k, v in rec.summary().items()}
+
+
+def _recorders(scene, sim, recorded: dict) -> list:
+    """The along-the-way recorders the scene asks for, on their triggers, with what a checkpoint
+    recorded restored and their triggers brought up to the simulation's time."""
+    from bark.engine.triggers import Every
+
+    wanted = [(StatisticsSeries, "statistics-series", scene.series_every), (Frames, "animation", scene.frame_every),
+              (Dissipation, "fracture-history", scene.history_every)]
+    recorders = []
+    for cls, effect, every in wanted:
+        if not scene.has(effect):
+            continue
+        rec, trigger = cls(), Every(every)
+        if rec.name in recorded:
+            rec.load(recorded[rec.name])
+            trigger.fires(sim)  # past due times were acted on before the checkpoint
+        sim.add_action(trigger, rec.record)
+        recorders.append(rec)
+    return recorders
+
+
+def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resumed: bool, checkpoint_every: float,
+           observe, interrupted, pictures) -> Outcome:
+    recorders = _recorders(scene, sim, recorded)
+    t0 = time.perf_counter()
+    last_save = t0
+    keep = scene.has("checkpoints")
+
+    def look(s) -> None:
+        nonlocal last_save
+        if observe is not None:
+            observe(s, stop)
+        why = interrupted() if interrupted is not None else None
+        if why is not None:
+            s.stop_reason = why
+        elif keep and out is not None and checkpoint_every and time.perf_counter() - last_save >= checkpoint_every:
+            wall = wall_before + time.perf_counter() - t0
+            checkpoint.save(out, sim, scene, stop, "periodic", {"stop_reason": None, "wall_time_s": wall}, recorders)
+            last_save = time.perf_counter()
+
+    error = None
+    try:
+        reason = sim.run(stop, look)
+    except NonFiniteStateError as err:
+        reason, error = "non-finite", str(err)
+    return _finish(scene, sim, stop, out, recorders, reason, wall_before + time.perf_counter() - t0, resumed, error,
+                   pictures)
+
+
+def _pictures_begun(pictures: dict | None, sim, scene, recorded: dict, out: Path) -> list:
+    """Start the scene's pictures: ``[(file name, wait)]``.  A picture writer may return a ``wait()``
+    that ends when its file is written (it draws in another process meanwhile), or draw at once and
+    return ``None``; what it raised is kept, to be reported in its turn."""
+    begun = []
+    for effect, (name, draw) in (pictures or {}).items():
+        if not scene.has(effect):
+            continue
+        try:
+            wait = draw(sim, scene, recorded, out / name)
+        except Exception as err:
+            wait = err
+        begun.append((name, wait if wait is not None else (lambda: None)))
+    return begun
+
+
+def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wall: float, resumed: bool, error,
+            pictures, save: bool = True) -> Outcome:
+    if out is None:
+        by_name = _record_end(sim, scene, recorders)
+        summary = run_summary(sim, scene, sim.analyze(), reason, wall, _extra(by_name))
+        return Outcome(out=None, scene=scene, sim=sim, stop_reason=reason, summary=summary, error=error)
+    (out / "summary.json").unlink(missing_ok=True)  # stale from here on: written again last
+    if save and scene.has("checkpoints"):
+        why = "interrupted" if reason in STOPPED_BY_SIGNAL else "end"
+        checkpoint.save(out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall}, recorders)
+    by_name = _record_end(sim, scene, recorders)  # after the checkpoint: a resumed run records only what
+    for rec in recorders:                          # the uninterrupted run would
+        if rec.file is not None:
+            rec.write(out / rec.file)
+    waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
+    summary = write_run(sim, scene, out, reason, wall, _extra(by_name))
+    outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error)
+    for name, wait in waits:
+        if outcome.drawing_stopped:
+            outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
+            continue
+        try:
+            if isinstance(wait, BaseException):
+                raise wait
+            wait()
+        except KeyboardInterrupt:
+            outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
+            outcome.drawing_stopped = True
+        except Exception as err:  # a picture never costs the data: say what failed, keep the rest
+            outcome.failed.append(f"{name}: could not be drawn ({one_line(err)})")
+    return outcome

@@ -1,0 +1,332 @@
+"""Parameter sweeps: a grid over scene settings, one run per point and seed, each result committed
+to an SQLite table the moment it arrives.
+
+    from bark.studies.sweep import Axis, Sweep, run_sweep
+    sweep = Sweep(base=read_toml("examples/scenes/reticulate.toml"),
+                  axes=(Axis("growth.G", (0.007, 0.011, 0.014)), Axis("mechanics.f_max", (0.0028, 0.005, 0.008))),
+                  seeds=(0, 1))
+    run_sweep(sweep, "sweep.sqlite", workers=2)           # or client=distributed.Client(address)
+
+**One table** (``runs`` in the database file; ``sqlite3`` from the standard library, read by pandas
+``read_sql("select * from runs", con)`` or any SQL client): a row per run — its key, point and seed,
+a column per swept setting (named like ``growth.G``), the end state and the pattern statistics
+(``bark.analysis.pattern``), the stop reason, the wall time, the full scene as JSON.  A second table,
+``patterns``, holds each run's final pattern (unwrapped positions and patch labels, for montages).
+
+**Resumable**: a run's key is a digest of its full scene and seed.  Its rows in both tables are
+written in one transaction, so a run is in the database whole or not at all; a rerun of the same
+sweep skips every key already there.  A worker or a sweep killed at any moment loses only the runs
+in flight.
+
+**Where runs go**: local worker processes (``workers``), or a Dask distributed cluster (``client``, an
+existing ``distributed.Client``: Dask schedules, bark only submits ``run_point`` and commits what
+comes back).  A run is a pure function of its scene and seed, so both give the same table.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import itertools
+import json
+import math
+import os
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import attrs
+import numpy as np
+
+from bark.errors import BarkError, Ref
+from bark.io.output import PATTERN_KEYS
+from bark.engine.stepping import cores
+
+__all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "FIG9_AXES", "RESULT_COLUMNS"]
+
+FIG9_AXES = (("growth.G", (0.007, 0.011, 0.014)), ("mechanics.f_max", (0.0028, 0.005, 0.008)))
+"""The paper's Fig. 9 grid: G across (columns), f_max up (rows), Table 2's three values each."""
+
+RESULT_COLUMNS = {
+    "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
+    "n_patches": "INTEGER", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL",
+    "initial_fractures": "INTEGER", "dissipation_rate": "REAL", "growth_dissipation": "REAL",
+}
+"""What the table holds of each run besides its identity, by SQLite type: the keys of the run's
+summary (summary.json) of these names, and of its ``fracture`` part (the ``fracture-history`` effect;
+else empty)."""
+
+
+class WorkerDied(RuntimeError):
+    """A local worker process died in the middle of a run (killed, out of memory); the runs that
+    finished before are committed."""
+
+
+@attrs.frozen
+class Axis:
+    """One swept setting: ``key`` is ``section.name`` as in ``--set`` (``growth.G``), ``values`` its values."""
+
+    key: str
+    values: tuple = attrs.field(converter=tuple)
+
+    def __attrs_post_init__(self) -> None:
+        section, dot, name = self.key.partition(".")
+        if not dot or not section or not name:
+            raise BarkError(f"sweep axis {self.key!r}: expected SECTION.KEY, e.g. growth.G")
+        if not self.values:
+            raise BarkError(f"sweep axis {self.key}: no values")
+        if len(set(map(repr, self.values))) != len(self.values):
+            raise BarkError(f"sweep axis {self.key}: a value is given twice")
+
+    @property
+    def section(self) -> str:
+        return self.key.partition(".")[0]
+
+    @property
+    def name(self) -> str:
+        return self.key.partition(".")[2]
+
+
+@attrs.frozen
+class Point:
+    """One run of a sweep: where on the grid (``index``, one per axis), its settings, its seed, and
+    the key that identifies it in the table."""
+
+    index: tuple[int, ...]
+    settings: dict
+    seed: int
+    scene: dict
+    key: str
+
+
+def _canonical(obj) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True)
+
+
+@attrs.frozen
+class Sweep:
+    """A grid (the product of ``axes``) over the scene ``base`` (a scene dict, as ``read_toml``
+    gives it), each point run once per seed."""
+
+    base: dict
+    axes: tuple[Axis, ...] = attrs.field(converter=tuple)
+    seeds: tuple[int, ...] = attrs.field(default=(0,), converter=tuple)
+
+    def __attrs_post_init__(self) -> None:
+        keys = [a.key for a in self.axes]
+        if len(set(keys)) != len(keys):
+            raise BarkError(f"sweep: an axis is given twice ({', '.join(keys)})")
+        if "run.seed" in keys:
+            raise BarkError("sweep: seeds are not an axis; give them as the sweep's seeds")
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
+            raise BarkError("sweep: the seeds must be distinct, and at least one")
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(a.values) for a in self.axes)
+
+    def points(self) -> list[Point]:
+        """Every run, grid point by grid point (the first axis slowest), seeds innermost; each scene
+        checked (``Scene.from_dict``) so a bad value stops the sweep before any run.  Built once a
+        sweep (a few ms a point), however often asked."""
+        return list(self._points)
+
+    @functools.cached_property
+    def _points(self) -> tuple[Point, ...]:
+        from bark.engine.scene import Scene, merge
+
+        out = []
+        for index in itertools.product(*(range(n) for n in self.shape)):
+            settings = {a.key: a.values[i] for a, i in zip(self.axes, index)}
+            overrides: dict = {}
+            for a, i in zip(self.axes, index):
+                overrides.setdefault(a.section, {})[a.name] = a.values[i]
+            for seed in self.seeds:
+                scene = merge(merge(self.base, overrides), {"run": {"seed": seed}})
+                Scene.from_dict(scene)  # a bad value: one line, before anything runs
+                key = hashlib.sha256(_canonical({"scene": scene, "seed": seed}).encode()).hexdigest()[:20]
+                out.append(Point(index=index, settings=settings, seed=seed, scene=scene, key=key))
+        return tuple(out)
+
+
+def run_point(scene: dict, key: str) -> dict[str, Any]:
+    """Run one point (in whatever process: a local worker or a Dask worker) and return its row and
+    its final pattern.  Pure: the same scene gives the same row, wherever it runs."""
+    from bark.studies import runner
+    from bark.units import unwrap
+    from bark.analysis.pattern import simulation_colours
+    from bark.engine.scene import Scene
+
+    sc = Scene.from_dict(scene)
+    start = time.perf_counter()
+    outcome = runner.run(sc, None)
+    wall = time.perf_counter() - start
+    sim = outcome.sim
+    found = {**outcome.summary, **(outcome.summary.get("fracture") or {})}  # fracture: with the fracture-history effect
+    row = {k: found.get(k) for k in RESULT_COLUMNS}  # the run's own summary: its analyzer's statistics
+    return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, sim.radius).astype(np.float32),
+            "labels": sim.patch_labels().astype(np.int32), "colours": simulation_colours(sim, sc.run.min_patch_size)}
+
+
+class SweepTable:
+    """The sweep's SQLite file: ``runs`` (a row per finished run) and ``patterns``."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self.con = sqlite3.connect(self.path, timeout=60.0)
+            self.con.execute("PRAGMA journal_mode=WAL")  # readers (pandas, a second look) never block a commit
+            self.con.execute("PRAGMA synchronous=FULL")  # a committed run survives a power cut
+            with self.con:
+                self.con.execute(
+                    "CREATE TABLE IF NOT EXISTS runs (key TEXT PRIMARY KEY, point TEXT NOT NULL, seed INTEGER NOT NULL, "
+                    + ", ".join(f"{c} {t}" for c, t in RESULT_COLUMNS.items())
+                    + ", wall_s REAL, finished TEXT, bark_version TEXT, scene TEXT NOT NULL)")
+                self.con.execute("CREATE TABLE IF NOT EXISTS patterns (key TEXT PRIMARY KEY REFERENCES runs(key), "
+                                 "n INTEGER NOT NULL, uv BLOB NOT NULL, labels BLOB NOT NULL, colours BLOB NOT NULL)")
+                self._add_columns(RESULT_COLUMNS)  # a table of an earlier bark: the columns added since
+        except sqlite3.DatabaseError as err:
+            raise BarkError(f"{self.path}: not a sweep database ({err})") from None
+
+    def close(self) -> None:
+        self.con.close()
+
+    def __enter__(self) -> "SweepTable":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def columns(self) -> list[str]:
+        return [r[1] for r in self.con.execute("PRAGMA table_info(runs)")]
+
+    def add_axes(self, axes: Iterable[Axis]) -> None:
+        """A column per swept setting (``"growth.G"``), added to an older table as needed."""
+        with self.con:
+            self._add_columns({a.key: "" for a in axes})
+
+    def _add_columns(self, columns: dict[str, str]) -> None:
+        """The columns (name: SQLite type, or none) the table lacks, added."""
+        have = set(self.columns())
+        for name, kind in columns.items():
+            if name not in have:
+                self.con.execute(f'ALTER TABLE runs ADD COLUMN "{name}" {kind}')
+
+    def done(self) -> set[str]:
+        return {k for (k,) in self.con.execute("SELECT key FROM runs")}
+
+    def commit(self, point: Point, result: dict) -> None:
+        """The run's row and its pattern, in one transaction: whole, or not at all."""
+        from bark.version import __version__
+
+        row = {"key": point.key, "point": _canonical(point.settings), "seed": point.seed, **result["row"],
+               "wall_s": result["wall_s"], "finished": time.strftime("%Y-%m-%dT%H:%M:%S"),
+               "bark_version": __version__, "scene": _canonical(point.scene), **point.settings}
+        row = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
+        names = ", ".join(f'"{k}"' for k in row)
+        with self.con:
+            self.con.execute(f"INSERT OR REPLACE INTO runs ({names}) VALUES ({', '.join('?' * len(row))})",
+                             list(row.values()))
+            self.con.execute("INSERT OR REPLACE INTO patterns VALUES (?, ?, ?, ?, ?)",
+                             (point.key, int(result["labels"].shape[0]), result["uv"].tobytes(), result["labels"].tobytes(),
+                              np.ascontiguousarray(result["colours"], dtype=np.uint8).tobytes()))
+
+    def rows(self, keys: Sequence[str] | None = None) -> list[dict]:
+        """The table's rows as dicts (those of ``keys`` in that order, else all, by key)."""
+        cur = self.con.execute("SELECT * FROM runs ORDER BY key")
+        names = [d[0] for d in cur.description]
+        rows = {r[0]: dict(zip(names, r)) for r in cur}
+        return [rows[k] for k in keys if k in rows] if keys is not None else list(rows.values())
+
+    def pattern(self, key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """A run's final pattern: unwrapped positions (arc length, height; float32), patch labels and
+        colours (RGB uint8, ``bark.analysis.pattern.patch_colours``)."""
+        got = self.con.execute("SELECT n, uv, labels, colours FROM patterns WHERE key = ?", (key,)).fetchone()
+        if got is None:
+            return None
+        n, uv, labels, colours = got
+        return (np.frombuffer(uv, np.float32).reshape(n, 2), np.frombuffer(labels, np.int32),
+                np.frombuffer(colours, np.uint8).reshape(n, 3))
+
+
+def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=None,
+              progress: Callable[[int, int, Point | None], None] | None = None) -> dict:
+    """Run every point of ``sweep`` not yet in ``database``; commit each as it finishes.  ``client``:
+    a ``distributed.Client`` (Dask) to run on; else ``workers`` local processes.  ``progress(done,
+    total, point)`` is called at the start (point ``None``) and after each commit.  Returns counts:
+    ``total``, ``skipped`` (already in the table), ``ran``."""
+    points = sweep.points()
+    if workers < 1:
+        raise BarkError("{0}: must be at least 1", Ref(None, "workers", workers))
+    with SweepTable(database) as table:
+        table.add_axes(sweep.axes)
+        done = table.done()
+        todo = [p for p in points if p.key not in done]
+        counts = {"total": len(points), "skipped": len(points) - len(todo), "ran": 0}
+        if progress:
+            progress(counts["skipped"], len(points), None)
+        by_key = {p.key: p for p in todo}
+        for result in (_on_dask(client, todo) if client is not None else _local(todo, workers)):
+            table.commit(by_key[result["key"]], result)
+            counts["ran"] += 1
+            if progress:
+                progress(counts["skipped"] + counts["ran"], len(points), by_key[result["key"]])
+    return counts
+
+
+def _local(todo: list[Point], workers: int):
+    """Results as they finish, from ``workers`` worker processes (spawned: a clean interpreter, no
+    threads or locks inherited from the caller)."""
+    if not todo:
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    workers = min(workers, len(todo))
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_start, initargs=(max(1, cores() // workers),))
+    try:
+        pending = {pool.submit(run_point, p.scene, p.key) for p in todo}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            failed = None
+            for f in finished:  # every run that finished is handed on before a failure is raised
+                if f.exception() is None:
+                    yield f.result()
+                else:
+                    failed = f.exception()
+            if isinstance(failed, BrokenProcessPool):
+                raise WorkerDied("a sweep worker died (killed, or out of memory): the runs finished before are in "
+                                 "the table; the same sweep run again goes on from there")
+            if failed is not None:
+                raise failed
+    finally:
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _worker_start(threads: int) -> None:
+    """A local worker leaves signals to the sweep: Ctrl-C stops the sweep (which stops handing out
+    runs), not the runs in flight mid-step with a traceback each.  Its kernels' threads are its share
+    of the cores (``NUMBA_NUM_THREADS``, read when numba is imported, unless the user has set it), so
+    that workers do not contend for them."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_IGN)
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))
+
+
+def _on_dask(client, todo: list[Point]):
+    """Results as they finish, from the Dask cluster behind ``client`` (``distributed.as_completed``)."""
+    if not todo:
+        return
+    from distributed import as_completed
+
+    futures = [client.submit(run_point, p.scene, p.key, key=f"bark-run-{p.key}", pure=False) for p in todo]
+    try:
+        for future in as_completed(futures):
+            yield future.result()
+    finally:
+        client.cancel([f for f in futures if not f.done()])
