@@ -13,9 +13,18 @@ from conftest import build_sim
 
 
 def _graph_matches_arrays(sim) -> bool:
-    edges = {tuple(sorted(e)) for e in sim.graph.edges}
-    intact = {tuple(sorted(p)) for p in sim.state.pairs[sim.state.intact].tolist()}
-    return edges == intact and sim.graph.number_of_nodes() == sim.state.n_bases
+    """Edges, their spring ids, nodes and components: the graph's (networkx's own algorithms) are the
+    arrays' and the backend's patch labels."""
+    import networkx as nx
+
+    edges = {(min(i, j), max(i, j), k) for i, j, k in sim.graph.edges(data="spring")}
+    ids = np.flatnonzero(sim.state.intact)
+    intact = {(min(i, j), max(i, j), k) for (i, j), k in zip(sim.state.pairs[ids].tolist(), ids.tolist())}
+    labels = sim.patch_labels()
+    patches = {frozenset(np.flatnonzero(labels == lab).tolist()) for lab in np.unique(labels)}
+    return (edges == intact and sim.graph.number_of_nodes() == sim.state.n_bases
+            and sim.graph.number_of_edges() == len(ids) == sum(1 for _ in sim.graph.edges)
+            and {frozenset(c) for c in nx.connected_components(sim.graph)} == patches)
 
 
 def _same(a, b) -> None:
@@ -86,3 +95,27 @@ def test_the_intact_flags_change_only_through_the_simulation():
     assert sim.state.intact_version == version + 2 and sim.state.intact.all() and _graph_matches_arrays(sim)
     with pytest.raises(IndexError):
         sim.mend_springs([sim.state.n_springs])
+
+
+def test_the_graph_is_a_read_only_view_of_the_state():
+    """Changing the graph is refused in one line naming the way to do it; a copy is an ordinary graph;
+    a state put in place (a checkpoint restored) is what the graph then shows."""
+    import networkx as nx
+
+    sim = build_sim(n_bases=200)
+    for edit in (lambda g: g.add_edge(0, 1), lambda g: g.remove_edge(*next(iter(g.edges))), lambda g: g.clear(),
+                 lambda g: g.add_nodes_from([10**6]), lambda g: g.remove_node(0)):
+        with pytest.raises(nx.NetworkXError, match="break_springs") as err:
+            edit(sim.graph)
+        assert "\n" not in str(err.value)
+    copy = sim.graph.copy()
+    copy.remove_edge(*next(iter(copy.edges)))
+    assert copy.number_of_edges() == sim.graph.number_of_edges() - 1 and _graph_matches_arrays(sim)
+    other = build_sim(n_bases=300, seed=9)
+    other.run(Stop(until_time=30.0))
+    sim.state = other.state
+    assert sim.graph.number_of_nodes() == 300 and _graph_matches_arrays(sim) and other.n_broken > 0
+    with pytest.raises(TypeError, match="copy"):
+        import pickle
+
+        pickle.dumps(sim.graph)

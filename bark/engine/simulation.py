@@ -1,9 +1,10 @@
 """The :class:`Simulation`: a growth law, an integrator, breakers and analyzers, composed.
 
-The leaf-base graph (networkx) is the topology of record: nodes are leaf bases, edges are *intact*
-springs.  :class:`~bark.model.state.State` mirrors it as arrays for the hot loop; :meth:`Simulation.join`
+The topology has one owner, the :class:`~bark.model.state.State` (springs and their intact flags,
+each edit counted); the leaf-base graph (networkx: nodes are leaf bases, edges the *intact* springs)
+is a read-only view of it, for every topology question outside the hot loop.  :meth:`Simulation.join`
 (bases joining the mechanics), :meth:`Simulation.break_springs` and :meth:`Simulation.mend_springs`
-are the only places topology changes — in both at once.  Step control and the fast-path policy are
+are the only places topology changes.  Step control and the fast-path policy are
 :mod:`bark.engine.stepping`'s; the compute backend is :mod:`bark.engine.kernels`'; the state is data.
 """
 
@@ -138,7 +139,7 @@ class Simulation:
     step_count: int = attrs.field(init=False, default=0)
     stop_reason: str | None = attrs.field(init=False, default=None)
     _built: bool = attrs.field(init=False, default=False)
-    _labels: np.ndarray | None = attrs.field(init=False, default=None)
+    _labels: tuple | None = attrs.field(init=False, default=None)
     _tension: np.ndarray = attrs.field(init=False, factory=lambda: np.empty(0))
 
     # -- building ---------------------------------------------------------------------------------
@@ -151,8 +152,8 @@ class Simulation:
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def build(self, state: State | None = None, clock: Clock | None = None) -> "Simulation":
-        """Lay out the lattice (or take ``state`` and ``clock``, e.g. from a checkpoint), make the graph
-        from it, set the clock below the integrator's stability limit.  Does nothing once built."""
+        """Lay out the lattice (or take ``state`` and ``clock``, e.g. from a checkpoint), its graph a view
+        of it, set the clock below the integrator's stability limit.  Does nothing once built."""
         if self._built:
             return self
         if self.rng is None:
@@ -161,15 +162,13 @@ class Simulation:
         self.forces = ForceField(self.mechanics, self.backend)
         from bark.model.graph import LeafBaseGraph
 
-        self.graph = LeafBaseGraph()
+        self.graph = LeafBaseGraph(lambda: self.state)
         if state is None:
             self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases)
             self._built = True
             self.join(*self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng))
         else:
             self.state, self._built = state, True
-            self.graph.add_bases(state.n_bases)
-            self.graph.add_springs(state.pairs[state.intact])
             self._tension = np.zeros(state.n_springs)
         self.stability_limit, h = stepping.stable_step(self)
         self.clock = clock or Clock(h=h, levels=self.numerics.max_halvings if self.numerics.stepping == "adaptive" else 0)
@@ -193,14 +192,14 @@ class Simulation:
                                                     #   radial velocity removed) -> tensions k(|d| - l)
                                                     #   -> the breakers' part: its rule, its load
                 clock.advance(result.done); t = clock.t     # integer ticks: exact time
-                break_springs(what the rule broke)  # graph and arrays together; logged
+                break_springs(what the rule broke)  # the intact flags (the graph sees them); logged
                 if the last step went NaN or a load overshot (adaptive): it was undone;
                     halve h and go on, or (at the smallest step) raise NonFiniteStateError
                 if the breakers act in Python (no one part, or its rule named candidates):
                     break_springs(union of breaker.select(state, tension, rng))
                 if a step broke more than degenerate_fraction of the springs: record a degenerate event
                 if quiet again (adaptive): double h, staying on its grid
-                join(the bases due by now)          # new bases and springs at rest; graph and arrays
+                join(the bases due by now)          # new bases and springs at rest
                 call the actions whose triggers fire; observe(sim)
 
         Every spring its rule picks at the end of a step breaks in that step, all at once;
@@ -291,17 +290,16 @@ class Simulation:
         if self.on_degenerate == "stop":
             self.stop_reason = "degenerate"
 
-    # -- the two places topology changes --------------------------------------------------------
+    # -- the three places topology changes ------------------------------------------------------
 
     def join(self, theta: np.ndarray, z: np.ndarray) -> np.ndarray:
         """New bases join the mechanics now, at angles ``theta`` and heights ``z`` on the trunk surface,
         each anchored at its site.  Their ids continue the lattice's order; each is joined to the
         lattice neighbours (index offsets) already present — asked of the graph — by springs whose
         rest lengths are the distances now (a new spring is at rest) and whose thresholds come from the
-        material and the growth law's regions.  Graph and arrays change together.  Returns the ids."""
+        material and the growth law's regions.  Returns the ids."""
         s, t = self.state, self.state.t
         ids = s.add_bases(**self._new_bases(theta, z, t))
-        self.graph.add_bases(len(ids))
         pairs = self.lattice.new_pairs(ids, self.graph)
         if len(pairs):  # their ends' positions gathered first (np.take of a few rows copies all of x)
             ends = s.x[pairs.ravel()]
@@ -309,9 +307,7 @@ class Simulation:
             fmax = self.growth.adjust_thresholds(0.5 * (ends[0::2, 2] + ends[1::2, 2]),
                                                  self.mechanics.thresholds(len(pairs), self.rng))
             s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
-            self.graph.add_springs(pairs)
         self._tension = _rows(self._tension, s.n_springs)
-        self._labels = None
         return ids
 
     def _new_bases(self, theta, z, t: float) -> dict[str, np.ndarray]:
@@ -339,7 +335,7 @@ class Simulation:
 
     def break_springs(self, ids, tension: np.ndarray | None = None, *, step=None, t=None,
                       tension_of_ids: bool = False) -> np.ndarray:
-        """Break springs ``ids`` for good, in the graph and in the arrays, and log them.
+        """Break springs ``ids`` for good (their intact flags: the graph no longer has them), and log them.
 
         ``tension`` is every spring's tension (default: the current one), or with ``tension_of_ids``
         each given spring's; ``step`` and ``t`` say when they broke, one value or one per id (default:
@@ -363,14 +359,12 @@ class Simulation:
         ids = ids[order]
         if ids.size:
             s.set_intact(ids, False)
-            self.graph.remove_springs(s.pairs[ids])
             if self.record_breaks:
                 self.breaks.record(ids, s.pairs, steps[order], times[order], values)
-            self._labels = None
         return ids
 
     def mend_springs(self, ids) -> np.ndarray:
-        """Make the broken springs ``ids`` intact again, in the graph and in the arrays (the model
+        """Make the broken springs ``ids`` intact again (their flags, and so the graph's edges; the model
         never does: a broken spring stays broken; this is for tools, and for models of their own that
         heal).  Intact ids are ignored; returns the ids mended.  Their breaks stay in the break log."""
         s = self.state
@@ -380,8 +374,6 @@ class Simulation:
         ids = ids[~s.intact[ids]]
         if ids.size:
             s.set_intact(ids, True)
-            self.graph.add_springs(s.pairs[ids])
-            self._labels = None
         return ids
 
     # -- observables ----------------------------------------------------------------------------
@@ -400,10 +392,13 @@ class Simulation:
         return self.forces.tension(self.state)
 
     def patch_labels(self) -> np.ndarray:
-        """Patch id of every base: connected components of the intact springs (cached until a change)."""
-        if self._labels is None:
-            self._labels = self.backend.patch_labels(self.state)
-        return self._labels
+        """Patch id of every base: connected components of the intact springs (the components of
+        ``graph``, numbered by each one's smallest base), by the backend, cached until the topology changes."""
+        s = self.state
+        key = (id(s), s.n_bases, s.n_springs, s.intact_version)
+        if self._labels is None or self._labels[0] != key:
+            self._labels = (key, self.backend.patch_labels(s))
+        return self._labels[1]
 
     def patch_count(self, min_size: int = 7) -> int:
         """Number of patches of at least ``min_size`` bases."""
@@ -418,7 +413,7 @@ class Simulation:
 
     def __getstate__(self) -> dict:
         """A simulation pickles as its parts, its state and its records; the backend (work buffers)
-        and the graph (made again from the state) are not data."""
+        and the graph (a view of the state) are not data."""
         skip = {"graph", "backend", "forces", "_labels", *(() if self._built else _MADE_BY_BUILD)}
         return {a.name: getattr(self, a.name) for a in attrs.fields(type(self)) if a.name not in skip}
 

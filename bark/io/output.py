@@ -167,7 +167,7 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
 
 
 def write_graphml(path: str | Path, sim) -> Path:
-    """The leaf-base graph of record (intact springs) as GraphML, for networkx, Gephi, ParaView …:
+    """The leaf-base graph (intact springs) as GraphML, for networkx, Gephi, ParaView …:
     nodes carry their site (theta0 in (−π, π], z0), birth time, position now (x, y, z) and patch id;
     edges their spring id, rest length and threshold (all read from the state's arrays)."""
     import networkx as nx
@@ -178,10 +178,8 @@ def write_graphml(path: str | Path, sim) -> Path:
     g.add_nodes_from((int(q), {"theta0": float(theta0[q]), "z0": float(s.anchor[q, 2]), "born": float(s.born[q]),
                                 "x": float(s.x[q, 0]), "y": float(s.x[q, 1]), "z": float(s.x[q, 2]),
                                 "patch": int(labels[q])}) for q in sim.graph.nodes)
-    spring = {tuple(p): k for k, p in enumerate(s.pairs.tolist())}
-    g.add_edges_from((i, j, {"spring": spring[(i, j)], "rest": float(s.rest[spring[(i, j)]]),
-                             "fmax": float(s.fmax[spring[(i, j)]])})
-                     for i, j in (sorted(e) for e in sim.graph.edges))
+    g.add_edges_from((i, j, {"spring": k, "rest": float(s.rest[k]), "fmax": float(s.fmax[k])})
+                     for i, j, k in sim.graph.edges(data="spring"))
 
     def write(fh):
         nx.write_graphml(g, fh)

@@ -1,4 +1,12 @@
-"""The leaf-base graph of record (networkx): bases as nodes, intact springs as edges.
+"""The leaf-base graph (networkx): bases as nodes, intact springs as edges — a view of the state.
+
+The topology has one owner, the :class:`~bark.model.state.State`: its ``pairs`` and ``intact`` flags
+(``State.set_intact`` the one way those change, each edit counted in ``intact_version``).  The graph
+is a read-only ``networkx.Graph`` over them, so every networkx algorithm, query and writer works on
+the simulation's leaf bases, and graph and arrays cannot disagree: there is no second copy to keep in
+step.  Its adjacency is a compressed sparse row table made from the state when first read after an
+edit (a few milliseconds at 70 000 bases, about 3 MiB); asking the number of bases or whether ids are
+bases (what a joining base asks) reads the state alone.
 
 Its own module so that ``import bark`` (and reading a scene) does not pay for networkx's import:
 a simulation imports it when it is built.
@@ -6,71 +14,171 @@ a simulation imports it when it is built.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Callable
+
 import networkx as nx
 import numpy as np
 
-__all__ = ["LeafBaseGraph"]
+__all__ = ["LeafBaseGraph", "components", "count_patches"]
 
-_NO_ATTRIBUTES: dict = {}
-_clear_cache = getattr(nx, "_clear_cache", lambda graph: None)  # what networkx's own edits call (its backends' caches)
+_NO_DATA = MappingProxyType({})
+
+
+class _Nodes(Mapping):
+    """The nodes: the ids ``0 … n_bases − 1`` of the state's bases (bases never leave), no data."""
+
+    def __init__(self, graph: "LeafBaseGraph") -> None:
+        self._graph = graph
+
+    def _n(self) -> int:
+        return self._graph.state.n_bases
+
+    def __getitem__(self, node):
+        if node in self:
+            return _NO_DATA
+        raise KeyError(node)
+
+    def __contains__(self, node) -> bool:
+        try:
+            return 0 <= node < self._n() and int(node) == node
+        except TypeError:
+            return False
+
+    def __iter__(self):
+        return iter(range(self._n()))
+
+    def __len__(self) -> int:
+        return self._n()
+
+
+class _Neighbours(Mapping):
+    """One base's neighbours over intact springs, each with its edge's data ``{"spring": id}``."""
+
+    def __init__(self, ids: np.ndarray, springs: np.ndarray) -> None:
+        self._ids, self._springs = ids, springs
+        self._index = None
+
+    def _lookup(self) -> dict:
+        if self._index is None:
+            self._index = dict(zip(self._ids.tolist(), self._springs.tolist()))
+        return self._index
+
+    def __getitem__(self, node):
+        return MappingProxyType({"spring": self._lookup()[node]})
+
+    def __contains__(self, node) -> bool:
+        return node in self._lookup()
+
+    def __iter__(self):
+        return iter(self._ids.tolist())
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+
+class _Adjacency(Mapping):
+    """The adjacency, base by base, from the graph's table of the state's intact springs."""
+
+    def __init__(self, graph: "LeafBaseGraph") -> None:
+        self._graph = graph
+
+    def __getitem__(self, node):
+        if node not in self._graph._node:
+            raise KeyError(node)
+        indptr, ids, springs = self._graph.table()
+        a, b = indptr[node], indptr[node + 1]
+        return _Neighbours(ids[a:b], springs[a:b])
+
+    def __contains__(self, node) -> bool:
+        return node in self._graph._node
+
+    def __iter__(self):
+        return iter(self._graph._node)
+
+    def __len__(self) -> int:
+        return len(self._graph._node)
+
+
+def _read_only(name: str):
+    def refuse(self, *args, **kwargs):
+        raise nx.NetworkXError(f"the leaf-base graph is a view of the simulation's springs and cannot be changed "
+                               f"({name}): use Simulation.join, break_springs or mend_springs, or copy() it")
+    refuse.__name__ = name
+    return refuse
 
 
 class LeafBaseGraph(nx.Graph):
-    """The graph of record: bases as nodes, intact springs as edges, with no attribute dictionaries
-    (positions, sites and thresholds live in the state's arrays, by node and spring id).  Every node
-    and edge shares one empty mapping, and each base is one int object: 22.6 MiB at 70 000 bases
-    against 71 MiB for a plain ``Graph`` carrying the old per-node and per-edge attributes (measured
-    with tracemalloc).  Do not set attributes on it; ``bark.io.output.write_graphml`` exports a copy with them."""
+    """The leaf-base graph of ``state_of()`` (the simulation's current state): nodes are base ids,
+    edges the intact springs, each edge's data ``{"spring": id}`` (positions, sites and thresholds
+    are the state's, by node and spring id).  Read-only: changing it raises ``NetworkXError``, since
+    the topology changes through the simulation (``join``, ``break_springs``, ``mend_springs``);
+    ``copy()`` gives an ordinary graph to edit."""
 
-    node_attr_dict_factory = staticmethod(lambda: _NO_ATTRIBUTES)
-    edge_attr_dict_factory = staticmethod(lambda: _NO_ATTRIBUTES)
+    def __init__(self, state_of: Callable[[], object]) -> None:  # noqa: D107 (no dicts to fill: nx.Graph's own would)
+        self.graph = {}
+        self.__networkx_cache__ = {}
+        self._state_of = state_of
+        self._table_key = None
+        self._table = None
+        self._node = _Nodes(self)
+        self._adj = _Adjacency(self)
 
-    def add_bases(self, n: int) -> None:
-        """Nodes for the next ``n`` bases (ids continue from the number of nodes)."""
-        keys = self._keys()
-        new = list(range(len(keys), len(keys) + n))
-        self.add_nodes_from(new)
-        keys.extend(new)
+    @property
+    def state(self):
+        return self._state_of()
+
+    def table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(indptr, neighbours, springs)``: each base's neighbours over intact springs, ascending, and
+        the springs to them, as a compressed sparse row table — made again after any edit of the state's
+        topology (a new state, bases or springs added, ``intact_version``)."""
+        s = self.state
+        key = (id(s), s.n_bases, s.n_springs, s.intact_version)
+        if key != self._table_key:
+            springs = np.flatnonzero(s.intact).astype(np.int64)
+            ends = s.pairs[springs].astype(np.int64)
+            rows = np.concatenate([ends[:, 0], ends[:, 1]])
+            cols = np.concatenate([ends[:, 1], ends[:, 0]])
+            order = np.lexsort((cols, rows))
+            indptr = np.zeros(s.n_bases + 1, dtype=np.int64)
+            np.cumsum(np.bincount(rows, minlength=s.n_bases), out=indptr[1:])
+            self._table = (indptr, cols[order].astype(np.int32), np.concatenate([springs, springs])[order].astype(np.int32))
+            self._table_key = key
+            self.__networkx_cache__.clear()
+        return self._table
 
     def has_bases(self, ids: np.ndarray) -> np.ndarray:
-        """Whether each of ``ids`` is a node: the nodes are the ids 0 … n-1 (``add_bases`` adds them in
-        order, and bases never leave)."""
+        """Whether each of ``ids`` is a node (the nodes are the ids 0 … n-1: bases never leave)."""
         ids = np.asarray(ids)
-        return (ids >= 0) & (ids < len(self._node))
+        return (ids >= 0) & (ids < self.state.n_bases)
 
-    def add_springs(self, pairs: np.ndarray) -> None:
-        """Edges for the springs ``pairs`` (rows of base ids, both ends bases already), keyed by the node
-        objects themselves: one int object per base rather than one per spring end, 7.5 MiB less at
-        70 000 bases.  Written into the adjacency directly, as ``add_edges_from`` does for an edge
-        without attributes, less its per-edge checks (the ends are checked at once): 2,400 joins
-        add 50,000 springs."""
-        pairs = np.asarray(pairs)
-        if pairs.size and not self.has_bases(pairs).all():
-            raise ValueError("a spring's ends must be bases of the graph (add_bases first)")
-        keys, adj = self._keys(), self._adj
-        for start in range(0, len(pairs), 4096):  # in chunks: a list of 140 000 pairs is 19 MiB
-            for i, j in pairs[start:start + 4096].tolist():
-                u, v = keys[i], keys[j]
-                adj[u][v] = _NO_ATTRIBUTES
-                adj[v][u] = _NO_ATTRIBUTES
-        _clear_cache(self)
+    def number_of_edges(self, u=None, v=None) -> int:
+        if u is None:
+            return int(np.count_nonzero(self.state.intact))
+        return super().number_of_edges(u, v)
 
-    def remove_springs(self, pairs: np.ndarray) -> None:
-        """Remove the edges of the springs ``pairs`` (each an edge of the graph), as
-        ``remove_edges_from`` does, less its per-edge checks."""
-        adj = self._adj
-        for i, j in np.asarray(pairs).tolist():
-            del adj[i][j]
-            if i != j:
-                del adj[j][i]
-        _clear_cache(self)
+    for _name in ("add_node", "add_nodes_from", "remove_node", "remove_nodes_from", "add_edge", "add_edges_from",
+                  "add_weighted_edges_from", "remove_edge", "remove_edges_from", "update", "clear", "clear_edges"):
+        locals()[_name] = _read_only(_name)
+    del _name
 
-    def _keys(self) -> list:
-        """The node objects by base id (nodes are the ids 0 … n-1, added in order by ``add_bases``)."""
-        keys = self.__dict__.get("_key_list")
-        if keys is None or len(keys) != len(self._node):
-            keys = self.__dict__["_key_list"] = list(self._node)
-        return keys
+    def copy(self, as_view: bool = False) -> nx.Graph:
+        """An ordinary ``networkx.Graph`` with these nodes and edges (and the edges' spring ids)."""
+        if as_view:
+            return nx.graphviews.generic_graph_view(self)
+        g = nx.Graph()
+        g.add_nodes_from(self._node)
+        indptr, ids, springs = self.table()
+        lower = np.repeat(np.arange(self.state.n_bases), np.diff(indptr)) < ids
+        ends = np.column_stack([np.repeat(np.arange(self.state.n_bases), np.diff(indptr)), ids])[lower]
+        g.add_edges_from((int(i), int(j), {"spring": int(k)}) for (i, j), k in zip(ends.tolist(), springs[lower].tolist()))
+        return g
+
+    def __reduce__(self):
+        raise TypeError("the leaf-base graph is a view of a simulation's state: pickle the simulation, or copy() it")
+
+
 def components(n: int, pairs: np.ndarray, kept: np.ndarray) -> np.ndarray:
     """A label per base of ``0 .. n − 1``: the connected components of the springs ``pairs[kept]``
     (``scipy.sparse.csgraph``'s numbering: by each component's smallest base), int32."""
@@ -85,4 +193,3 @@ def components(n: int, pairs: np.ndarray, kept: np.ndarray) -> np.ndarray:
 def count_patches(labels: np.ndarray, min_size: int) -> int:
     """How many patches (labels, as ``components`` gives them) have at least ``min_size`` bases."""
     return int(np.count_nonzero(np.bincount(labels) >= min_size))
-

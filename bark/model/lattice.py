@@ -149,7 +149,7 @@ class Lattice:
 
     def new_pairs(self, new: np.ndarray, present) -> np.ndarray:
         """The springs bases ``new`` (ids in lattice order) make with the bases ``present`` (a
-        container of ids: the graph of record; it includes ``new``): ``(i, i + o)`` for each offset
+        container of ids, e.g. the leaf-base graph; it includes ``new``): ``(i, i + o)`` for each offset
         ``o`` where one end is new and both are present.  Ordered by offset, then by base — for a
         whole lattice, ``(i, i + o)`` for i = 0, 1, ... in each offset's block."""
         new = np.asarray(new, dtype=np.int64)
@@ -182,7 +182,7 @@ class Lattice:
 
 
 def _present(present, ids: np.ndarray) -> np.ndarray:
-    """Which of ``ids`` are in ``present``: a range or the graph of record (``has_bases``) at once,
+    """Which of ``ids`` are in ``present``: a range or the leaf-base graph (``has_bases``) at once,
     any other container one id at a time."""
     if isinstance(present, range) and present.step == 1:
         return (ids >= present.start) & (ids < present.stop)

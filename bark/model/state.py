@@ -1,8 +1,8 @@
 """The mechanical state: arrays and time, nothing else (picklable; no backend, no buffers).
 
-The networkx graph held by :class:`bark.engine.simulation.Simulation` is the topology of record (which bases
-exist, which springs are intact); :class:`State` mirrors it as flat arrays for the hot loop.  Only
-``Simulation.break_springs``, ``mend_springs`` and ``join`` change the topology, in both at once.
+The state owns the topology (which bases exist, which springs are intact): the simulation's networkx
+graph (:class:`bark.model.graph.LeafBaseGraph`) is a read-only view of these arrays, and the hot
+loop runs on them.  Only ``Simulation.break_springs``, ``mend_springs`` and ``join`` change it.
 
 **Fields are declared once** (after LAMMPS's atom styles): ``BASE_FIELDS`` and ``SPRING_FIELDS``
 list every per-base and per-spring array with its shape and type; growing, copying, checkpointing
@@ -145,8 +145,8 @@ class State:
 
     def set_intact(self, ids: np.ndarray, value: bool) -> None:
         """Mark springs ``ids`` intact (``value`` true) or broken: the one way the flags change, one
-        edit (``intact_version``).  ``Simulation.break_springs`` and ``mend_springs`` call it, and
-        change the graph of record with it."""
+        edit (``intact_version``, on which the graph's table and every backend cache of the flags
+        are keyed).  ``Simulation.break_springs`` and ``mend_springs`` call it."""
         self._store["intact"][np.asarray(ids, dtype=np.int64)] = bool(value)
         self.intact_version += 1
 
