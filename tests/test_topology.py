@@ -119,3 +119,33 @@ def test_the_graph_is_a_read_only_view_of_the_state():
         import pickle
 
         pickle.dumps(sim.graph)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_snapshot_and_restore_go_on_exactly(backend):
+    """``Simulation.snapshot()`` / ``restore()``, the one way a run's state goes out and comes back:
+    a run restored from a snapshot taken mid-run (bases still joining, springs broken, a spring mended)
+    ends with the bits of the run it was taken of; a built simulation refuses a snapshot."""
+    import pickle
+
+    from bark.model.lattice import Lattice
+
+    def make():
+        return build_sim(lattice=Lattice(n_bases=500, n_start=300, join_rate=40.0, jitter=0.05), G=0.08, seed=4,
+                         backend=backend, fmax_spread=0.05, stepping="adaptive")
+
+    whole = make()
+    whole.run(Stop(until_time=3.0))
+    whole.mend_springs(np.flatnonzero(~whole.state.intact)[:1])
+    kept = whole.snapshot()
+    snap = pickle.loads(pickle.dumps(kept))  # plain data: it travels
+    assert whole.n_broken > 0 and 300 < whole.state.n_bases < 500
+    resumed = make().restore(snap)
+    for sim in (whole, resumed):
+        sim.run(Stop(until_time=7.0))
+    _same(whole, resumed)
+    assert all(np.array_equal(kept.arrays[k], snap.arrays[k]) for k in snap.arrays)  # the run left it as it was
+    assert resumed.events == whole.events and resumed.rng.random() == whole.rng.random()
+    assert _graph_matches_arrays(resumed)
+    with pytest.raises(RuntimeError, match="not been built"):
+        resumed.restore(snap)

@@ -11,7 +11,7 @@ are the only places topology changes.  Step control and the fast-path policy are
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Iterator
 
 import attrs
 import numpy as np
@@ -80,12 +80,33 @@ class BreakLog:
     def __len__(self) -> int:
         return sum(c[0].size for c in self._chunks)
 
+    COLUMNS: ClassVar[tuple[str, ...]] = ("spring", "i", "j", "step", "t", "tension")
+
     def arrays(self) -> dict[str, np.ndarray]:
         """Columns ``spring, i, j, step, t, tension`` in the order the breaks happened."""
-        names = ("spring", "i", "j", "step", "t", "tension")
         if not self._chunks:
-            return {n: np.empty(0, dtype=float if n in ("t", "tension") else np.int64) for n in names}
-        return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(names)}
+            return {n: np.empty(0, dtype=float if n in ("t", "tension") else np.int64) for n in self.COLUMNS}
+        return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(self.COLUMNS)}
+
+    @classmethod
+    def of_arrays(cls, arrays: dict[str, np.ndarray]) -> "BreakLog":
+        """The log whose ``arrays()`` are ``arrays``."""
+        columns = tuple(np.asarray(arrays[n]) for n in cls.COLUMNS)
+        return cls([columns] if columns[0].size else [])
+
+
+@attrs.frozen
+class Snapshot:
+    """A run where it stands, as plain data: everything needed to go on from there exactly.
+
+    ``arrays``: every field of the state (the topology too, so nothing is rebuilt from the scene) and
+    the break log's columns as ``breaks_<column>``.  ``meta`` (JSON-able): the time and last step,
+    the clock, the step count, the events, the random generator's state and the backend that ran.
+    :meth:`Simulation.snapshot` makes one, :meth:`Simulation.restore` goes on from one; a checkpoint
+    is a snapshot on disk (``bark.io.checkpoint``)."""
+
+    arrays: dict[str, np.ndarray]
+    meta: dict[str, Any]
 
 
 @attrs.define(eq=False, kw_only=True)
@@ -172,6 +193,32 @@ class Simulation:
             self._tension = np.zeros(state.n_springs)
         self.stability_limit, h = stepping.stable_step(self)
         self.clock = clock or Clock(h=h, levels=self.numerics.max_halvings if self.numerics.stepping == "adaptive" else 0)
+        return self
+
+    def snapshot(self) -> Snapshot:
+        """The run where it stands (:class:`Snapshot`): a value, which the run going on leaves as it is."""
+        arrays = {**{k: v.copy() for k, v in self.state.arrays().items()},
+                  **{f"breaks_{k}": v for k, v in self.breaks.arrays().items()}}  # the log's arrays are made afresh
+        meta = {"t": self.state.t, "h_last": self.state.h, "clock": attrs.asdict(self.clock), "step_count": self.step_count,
+                "events": [dict(e) for e in self.events], "rng": self.rng.bit_generator.state, "backend": self.backend.name}
+        return Snapshot(arrays, meta)
+
+    def restore(self, snapshot: Snapshot) -> "Simulation":
+        """This simulation (not yet built, of the snapshot's scene) put where ``snapshot`` stands, to go
+        on exactly as the run it was taken of would have.  A backend left to ``auto`` is the one the run
+        had, where it is available here: auto's choice depends on the process and the time left, and
+        the backends' transcendental functions (numpy's own, the C library's) may differ in the last bit."""
+        if self._built:
+            raise RuntimeError("restore() puts a snapshot into a simulation that has not been built or run")
+        arrays, meta = snapshot.arrays, snapshot.meta
+        self.rng = np.random.default_rng(self.seed)
+        self.rng.bit_generator.state = meta["rng"]
+        if self.numerics.backend == "auto" and meta.get("backend") in ("numpy", "numba") and kernels.available(meta["backend"]):
+            self.numerics = attrs.evolve(self.numerics, backend=meta["backend"])
+        self.build(State.from_arrays(arrays, meta["t"], meta["h_last"]), Clock(**meta["clock"]))
+        self.breaks = BreakLog.of_arrays({k: arrays[f"breaks_{k}"] for k in BreakLog.COLUMNS})
+        self.step_count = int(meta["step_count"])
+        self.events = list(meta["events"])
         return self
 
     # -- the loop ---------------------------------------------------------------------------------

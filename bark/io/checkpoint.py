@@ -40,7 +40,7 @@ from typing import Any, Callable
 import attrs
 import numpy as np
 
-from bark.engine import kernels
+from bark.engine.simulation import Snapshot
 from bark.errors import BarkError
 from bark.io.files import write_npz
 from bark.model.state import BASE_FIELDS, SPRING_FIELDS
@@ -72,36 +72,6 @@ def digest(a: np.ndarray) -> str:
     return h.hexdigest()
 
 
-def snapshot(sim) -> tuple[dict[str, np.ndarray], dict]:
-    """Everything needed to go on from here exactly: the state's arrays (every field: the topology
-    too, so nothing is rebuilt from the scene), the break log, and (JSON-able) the clock, the step
-    count, the random generator's state, the events."""
-    arrays = {**sim.state.arrays(), **{f"breaks_{k}": v for k, v in sim.breaks.arrays().items()}}
-    meta = {"t": sim.state.t, "h_last": sim.state.h, "clock": attrs.asdict(sim.clock), "step_count": sim.step_count,
-            "events": sim.events, "rng": sim.rng.bit_generator.state, "backend": sim.backend.name}
-    return arrays, meta
-
-
-def restore_into(sim, arrays: dict[str, np.ndarray], meta: dict):
-    """``sim`` (unbuilt, of the checkpoint's scene), put in the state ``snapshot`` recorded."""
-    from bark.engine.simulation import BreakLog
-    from bark.model.state import State
-    from bark.engine.stepping import Clock
-
-    sim.rng = np.random.default_rng(sim.seed)
-    sim.rng.bit_generator.state = meta["rng"]
-    if sim.numerics.backend == "auto" and meta.get("backend") in ("numpy", "numba") and kernels.available(meta["backend"]):
-        # go on with the backend the run had: auto's choice depends on the process and on the time left,
-        # and the backends' transcendental functions (numpy's own, the C library's) may differ in the last bit
-        sim.numerics = attrs.evolve(sim.numerics, backend=meta["backend"])
-    sim.build(State.from_arrays(arrays, meta["t"], meta["h_last"]), Clock(**meta["clock"]))
-    log = tuple(np.asarray(arrays[f"breaks_{k}"]) for k in BREAKS)
-    sim.breaks = BreakLog([log] if log[0].size else [])
-    sim.step_count = int(meta["step_count"])
-    sim.events = list(meta["events"])
-    return sim
-
-
 def save(folder: str | Path, sim, scene, stop, reason: str, extra: dict[str, Any] | None = None,
          recorders=()) -> Path:
     """Write ``sim``'s checkpoint into ``folder``: verified before it replaces the last one, which
@@ -109,7 +79,8 @@ def save(folder: str | Path, sim, scene, stop, reason: str, extra: dict[str, Any
     are saved with it."""
     from bark.version import __version__
 
-    arrays, meta = snapshot(sim)
+    snap = sim.snapshot()
+    arrays, meta = dict(snap.arrays), snap.meta
     for rec in recorders:
         arrays.update({f"rec_{rec.name}_{k}": v for k, v in rec.arrays().items()})
     meta = {
@@ -296,7 +267,8 @@ def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
     lattice, pairs = scene.lattice, arrays["pairs"].astype(np.int64)
     if arrays["x"].shape[0] > lattice.n_bases or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():
         raise Damaged(f"checkpoint {str(path)!r} is damaged: its bases and springs do not fit its scene's lattice")
-    sim = restore_into(scene.simulation(), arrays, meta)  # built from the checkpoint's state, not the scene's lattice
+    state = {k: a for k, a in arrays.items() if not k.startswith("rec_")}
+    sim = scene.simulation().restore(Snapshot(state, meta))  # built from the checkpoint's state, not the scene's lattice
     recorded: dict[str, dict[str, np.ndarray]] = {}
     for key, a in arrays.items():
         if key.startswith("rec_"):
