@@ -17,7 +17,7 @@ What is checked (each failure an ``AssertionError`` naming the promise and the v
   then usable (a breaker's part, a growth law's radius are made without an error) — never another
   exception or a traceback;
 * **the verb equals the part** — a breaker's ``select`` picks what its part's rule picks (when the
-  part decides), a growth law's ``radius`` is its compiled form's, an integrator's ``step`` its
+  part decides), a growth law's ``radius`` is its part's, an integrator's ``step`` its
   update's; a part's functions are elementwise (arrays give what each element gives);
 * **numpy equals numba, to the bit** — the part compiled as the stepping kernel compiles it gives
   the bits of its functions on whole arrays, and a short simulation with the strategy ends in the
@@ -129,8 +129,8 @@ def _use(strategy) -> None:
     if isinstance(strategy, Breaker):
         strategy.part()
     elif isinstance(strategy, Growth):
+        strategy.part()
         strategy.radius(1.0, np.array([0.0, 0.5]))
-        strategy.compiled_params()
 
 
 # -- breakers --------------------------------------------------------------------------------------
@@ -216,27 +216,29 @@ def _growth(growth, profile) -> list[str]:
     from hypothesis.extra import numpy as hnp
 
     name = type(growth).__name__
-    if growth.compiled is None:
-        return ["growth: no compiled form (radius runs in Python)"]
+    part = growth.part_
+    if part is None:
+        return ["growth: no part (radius runs in Python)"]
     evaluate = None
     if _have_numba():
         from bark.engine.kernels.numba_backend import radius_at_heights
-        from bark.model.physics import as_given
 
-        evaluate = radius_at_heights(growth.compiled, growth.compiled_time or as_given)
+        evaluate = radius_at_heights(part)
 
     @profile
     @given(st.floats(0.0, 1e4), hnp.arrays(float, st.integers(1, 30), elements=st.floats(-10.0, 10.0)))
-    def radius_is_the_compiled_form(t, z):
+    def radius_is_the_part(t, z):
         r = np.broadcast_to(growth.radius(t, z), z.shape)
         each = [float(np.broadcast_to(growth.radius(t, zi), ())) for zi in z.tolist()]
         assert np.array_equal(r, each, equal_nan=True), f"{name}.radius on an array is not its radius at each height"
+        assert np.array_equal(r, np.broadcast_to(part.radius_at(t, z), z.shape), equal_nan=True), \
+            f"{name}.radius is not its part's radius at t = {t}"
         if evaluate is not None:
-            got = evaluate(t, 0.0 * z if growth.uniform else z, growth.params_array)
-            assert np.array_equal(got, r, equal_nan=True), f"{name}'s compiled radius (numba) differs from numpy at t = {t}"
+            got = evaluate(t, z)
+            assert np.array_equal(got, r, equal_nan=True), f"{name}'s part compiled (numba) differs from numpy at t = {t}"
 
-    radius_is_the_compiled_form()
-    return ["growth: radius is the compiled form" + (", compiled = numpy" if evaluate else "")]
+    radius_is_the_part()
+    return ["growth: radius is the part's" + (", compiled = numpy" if evaluate else "")]
 
 
 def _integrator(integrator, profile) -> list[str]:

@@ -10,6 +10,7 @@ import numpy as np
 
 from bark.validators import construct, non_negative, optional, positive
 from bark.errors import BarkError, Ref
+from bark.contract.parts import GrowthPart
 from bark.contract.strategies import Growth
 from bark.model.effects import Effect
 from bark.model.physics import weighted_radius
@@ -32,28 +33,26 @@ def linear_radius(t, z, p):
 class SqrtGrowth(Growth):
     """``r(t) = r0 + G·√t`` — the paper's secondary growth (eq. 9)."""
 
-    compiled: ClassVar = staticmethod(sqrt_radius)
-    uniform: ClassVar[bool] = True
-
     r0: float = attrs.field(default=0.2, validator=positive)
     """Initial trunk radius r_i (Table 2: 0.2 = 6 cm)."""
     G: float = attrs.field(default=0.014, validator=non_negative)
     """Growth constant, length / time^½ (Table 2: 0.014 vertical, 0.011 reticulate, 0.007 diamond)."""
 
-    def compiled_params(self) -> np.ndarray:
-        return np.array([self.r0, self.G])
+    def part(self) -> GrowthPart:
+        return GrowthPart(radius=sqrt_radius, params=(self.r0, self.G), uniform=True)
 
 
 @attrs.frozen(kw_only=True)
 class LinearGrowth(SqrtGrowth):
     """``r(t) = r0 + G·t`` — constant radial growth rate."""
 
-    compiled: ClassVar = staticmethod(linear_radius)
-
     r0: float = attrs.field(default=0.2, validator=positive)
     """Initial trunk radius."""
     G: float = attrs.field(default=0.014, validator=non_negative)
     """Growth rate, length / time."""
+
+    def part(self) -> GrowthPart:
+        return GrowthPart(radius=linear_radius, params=(self.r0, self.G), uniform=True)
 
 
 def _bulges(value):
@@ -135,24 +134,28 @@ def profile(z, center, half_width) -> np.ndarray:
     return out
 
 
-def bulge_time(t, p):
-    """The per-step part of :class:`BulgeGrowth`'s compiled form (``compiled_time``): everything that
-    depends on time alone, once per step.  From ``p = (kind, r0, G, n, z_1, half_width_1,
-    magnitude_1, decay_1, G_1 or NaN, ...)`` (kind 0: sqrt law, 1: linear) it makes ``q = (r_base(t),
-    extra_1(t), ..., extra_n(t), z_1, half_width_1, ..., z_n, half_width_n, n)``, where a bulge's
-    ``extra`` is its fading magnitude plus what its own growth constant adds to the base law: the
-    radius is ``q[0] + s_1(z)·q[1] + ... + s_n(z)·q[n]`` (``bulge_weights`` gives the ``s_b``)."""
-    ft = np.sqrt(t) if p[0] == 0.0 else t * 1.0
-    base = p[1] + p[2] * ft
-    n = int(p[3])
+def bulge_time(t, p, inner_time, inner_radius):
+    """The per-step part of :class:`BulgeGrowth`'s compiled work (its part's ``time``): everything that
+    depends on time alone, once per step, on the uniform law the bulges sit on (``inner_time`` and
+    ``inner_radius``: that law's part).  From ``p = (nb, the law's nb numbers, n, then for each bulge
+    z, half_width, magnitude, decay, has_G, then for each bulge the law's numbers with its own G)`` it
+    makes ``q = (r_base(t), extra_1(t), ..., extra_n(t), z_1, half_width_1, ..., z_n, half_width_n,
+    n)``, where a bulge's ``extra`` is its fading magnitude plus what its own growth constant adds to
+    the base law: the radius is ``q[0] + s_1(z)·q[1] + ... + s_n(z)·q[n]`` (``bulge_weights`` gives
+    the ``s_b``)."""
+    nb = int(p[0])
+    n = int(p[1 + nb])
+    rows, variants = 2 + nb, 2 + nb + 5 * n
+    base = inner_radius(t, 0.0, inner_time(t, p[1:1 + nb]))
     q = np.empty(2 + 3 * n)
     q[0] = base
-    q[-1] = p[3]
+    q[-1] = p[1 + nb]
     for b in range(n):
-        o = 4 + 5 * b
+        o = rows + 5 * b
         extra = p[o + 2] * math.exp(-p[o + 3] * t)  # a scalar: the C library's exp in numpy and numba alike
-        if not np.isnan(p[o + 4]):
-            extra = extra + (p[1] + p[o + 4] * ft) - base
+        if p[o + 4] != 0.0:
+            g = variants + nb * b
+            extra = extra + inner_radius(t, 0.0, inner_time(t, p[g:g + nb])) - base
         q[1 + b] = extra
         q[1 + n + 2 * b] = p[o]
         q[2 + n + 2 * b] = p[o + 1]
@@ -160,7 +163,7 @@ def bulge_time(t, p):
 
 
 def bulge_radius(t, z, q):
-    """The per-base part of :class:`BulgeGrowth`'s compiled form: ``r_base + Σ_b s_b(z)·extra_b`` with
+    """The per-base part of :class:`BulgeGrowth`'s compiled work: ``r_base + Σ_b s_b(z)·extra_b`` with
     ``q`` from :func:`bulge_time`."""
     n = int(q[-1])
     r = q[0]
@@ -170,7 +173,7 @@ def bulge_radius(t, z, q):
 
 
 def bulge_radii(t, z, q, out):
-    """:class:`BulgeGrowth`'s ``compiled_radii``: :func:`bulge_radius` at each height of the block ``z``
+    """:class:`BulgeGrowth`'s part's ``radii``: :func:`bulge_radius` at each height of the block ``z``
     into ``out``, to the bit, with no branch per height (SIMD lanes): each bulge adds ``s·extra`` to
     every radius, ``s`` the profile of ``u = (z − peak)/half_width`` inside and of ``u = 1`` (exactly
     0) outside, as :func:`bump` does for an array.  A bulge the whole block is out of reach of adds
@@ -194,13 +197,12 @@ def bulge_radii(t, z, q, out):
 
 
 def bulge_weights(z, p):
-    """:class:`BulgeGrowth`'s ``compiled_weights``: each bulge's profile ``s_b`` at heights ``z``, one
+    """:class:`BulgeGrowth`'s part's ``weights``: each bulge's profile ``s_b`` at heights ``z``, one
     row per bulge (``p`` as for :func:`bulge_time`)."""
     z = np.asarray(z, dtype=float)
-    return np.array([profile(z, p[4 + 5 * b], p[5 + 5 * b]) for b in range(int(p[3]))]).reshape(-1, z.size)
-
-
-_BASE_KINDS = {sqrt_radius: 0.0, linear_radius: 1.0}
+    nb = int(p[0])
+    n = int(p[1 + nb])
+    return np.array([profile(z, p[2 + nb + 5 * b], p[3 + nb + 5 * b]) for b in range(n)]).reshape(-1, z.size)
 
 
 @attrs.frozen(kw_only=True)
@@ -242,6 +244,13 @@ class BulgeGrowth(Growth):
     bulges: tuple[Bulge, ...] = attrs.field(default=(), converter=_bulges)
     """The bulges (a scene gives them as an array of tables)."""
 
+    @bulges.validator
+    def _own_growth_constant(self, attribute, value) -> None:
+        for i, b in enumerate(value):
+            if b.G is not None and "G" not in attrs.fields_dict(type(self.base)):
+                raise BarkError("{0}: the law the bulges sit on has no growth constant G to vary",
+                                Ref(None, f"bulges[{i}].G", b.G))
+
     provides: ClassVar[tuple[Effect, ...]] = (
         Effect("bulges", "bulges raise the trunk locally ([growth] name = 'bulge')", ("secondary-growth",)),)
 
@@ -249,41 +258,29 @@ class BulgeGrowth(Growth):
         """Without its bulges, the law they sit on: the bulge code is never built."""
         return self.base
 
-    @property
-    def compiled(self):
-        """``bulge_radius`` when the base law is one it knows (sqrt or linear), else ``None``: the
-        radius is then evaluated in Python once per step."""
-        return bulge_radius if type(self.base).compiled in _BASE_KINDS else None
-
-    @property
-    def compiled_time(self):
-        """``bulge_time`` (the fading and the growth constants, once per step) beside ``compiled``."""
-        return bulge_time if self.compiled is not None else None
-
-    @property
-    def compiled_radii(self):
-        """``bulge_radii`` (a block of heights at once, the same bits) beside ``compiled``."""
-        return bulge_radii if self.compiled is not None else None
-
-    @property
-    def compiled_weights(self):
-        """``bulge_weights`` (each bulge's profile, once per anchor) beside ``compiled``."""
-        return bulge_weights if self.compiled is not None else None
-
-    def compiled_params(self) -> np.ndarray:
-        """``(kind of the base law, r0, G, number of bulges, then z, half_width, magnitude, decay, G or
-        NaN for each bulge)``."""
-        base = self.base
-        rows = [[b.z, b.half_width, b.magnitude, b.decay, np.nan if b.G is None else b.G] for b in self.bulges]
-        return np.array([_BASE_KINDS[type(base).compiled], base.r0, base.G, len(rows), *np.ravel(rows)], dtype=float)
+    def part(self) -> GrowthPart | None:
+        """The bulges on the part of the law they sit on, when that law has one that is uniform (the
+        same radius at every height) and its variants with the bulges' own G are the same work on
+        other numbers; else ``None``: the radius is then taken in Python, one step a call."""
+        base = self.base.part_
+        if base is None or not base.uniform or base.inner is not None:
+            return None
+        variants = [base if b.G is None else attrs.evolve(self.base, G=b.G).part_ for b in self.bulges]
+        if any(v is None or (v.radius, v.time, v.params.size) != (base.radius, base.time, base.params.size) for v in variants):
+            return None
+        rows = [[b.z, b.half_width, b.magnitude, b.decay, 0.0 if b.G is None else 1.0] for b in self.bulges]
+        params = [base.params.size, *base.params, len(rows), *np.ravel(rows), *(x for v in variants for x in v.params)]
+        return GrowthPart(radius=bulge_radius, params=params, time=bulge_time, weights=bulge_weights,
+                          radii=bulge_radii, inner=base)
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray:
         z = np.asarray(z, dtype=float)
-        if self.compiled is not None:  # the compiled form, as every law that has one is evaluated
+        part = self.part_
+        if part is not None:  # the part, as every law that has one is evaluated
             if z.ndim == 0:  # one height (the top of the trunk): the profile's scalar path, the same bits
-                return np.asarray(super().radius(t, float(z)), dtype=float)
-            p = self.params_array  # heights: q[0] + w_0(z) q[1] + ..., the compiled form's sum to the bit
-            return weighted_radius(bulge_time(t, p), bulge_weights(z, p)).reshape(z.shape)
+                return np.asarray(part.radius_at(t, float(z)), dtype=float)
+            # heights: q[0] + w_0(z) q[1] + ..., the kernel's sum to the bit
+            return weighted_radius(part.at(t), bulge_weights(z, part.params)).reshape(z.shape)
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:

@@ -114,18 +114,19 @@ def test_pattern_statistics_per_region_near_bulges_and_away():
 
 
 def test_the_bulge_law_per_base_and_on_arrays_gives_the_same_bits():
-    """The kernel calls ``compiled(t, z, compiled_time(t, params))`` for one height at a time (the sine
-    only inside a bulge), the numpy backend for all heights at once: the same numbers, to the bit, and
-    the same as the ``radius`` verb."""
+    """The kernel calls its part's ``radius(t, z, time(t, params, ...))`` for one height at a time (the
+    sine only inside a bulge), the numpy backend for all heights at once: the same numbers, to the
+    bit, and the same as the ``radius`` verb."""
     from bark_plugins.growth import Bulge, BulgeGrowth, bulge_radius, bulge_time
 
     growth = BulgeGrowth(base={"name": "sqrt", "r0": 0.35, "G": 0.04},
                          bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.1, decay=0.03, G=0.02),
                                  Bulge(z=0.5, half_width=0.05, magnitude=0.02)])
-    assert growth.compiled is bulge_radius and growth.compiled_time is bulge_time
+    part = growth.part_
+    assert part.radius is bulge_radius and part.time is bulge_time and part.inner == growth.base.part_
     z = np.concatenate([np.linspace(0.0, 1.0, 1001), [0.2, 0.6, 0.45, 0.55]])  # edges of both bulges
     for t in (0.0, 0.37, 12.5, 247.5):
-        q = bulge_time(t, growth.compiled_params())
+        q = part.at(t)
         one_by_one = np.array([bulge_radius(t, float(v), q) for v in z])
         assert np.array_equal(one_by_one, bulge_radius(t, z, q))
         assert np.array_equal(one_by_one, growth.radius(t, z))
@@ -134,24 +135,25 @@ def test_the_bulge_law_per_base_and_on_arrays_gives_the_same_bits():
 @given(z=st.lists(st.floats(-1.0, 2.0, allow_nan=False), min_size=1, max_size=50),
        t=st.floats(0.0, 1e4, allow_nan=False))
 def test_the_bulge_laws_weights_give_its_radius_to_the_bit(z, t):
-    """``compiled_weights``: the anchors' radii as ``q[0] + s_1(z)·q[1] + s_2(z)·q[2]`` (the kernel
-    sums them with each anchor's profiles taken once) are the compiled radius exactly, inside, outside
-    and at the edges of overlapping bulges."""
-    from bark_plugins.growth import Bulge, BulgeGrowth, bulge_time, bulge_weights
+    """The part's ``weights``: the anchors' radii as ``q[0] + s_1(z)·q[1] + s_2(z)·q[2]`` (the kernel
+    sums them with each anchor's profiles taken once) are its radius exactly, inside, outside and at
+    the edges of overlapping bulges."""
+    from bark_plugins.growth import Bulge, BulgeGrowth, bulge_weights
 
     growth = BulgeGrowth(base={"name": "sqrt", "r0": 0.35, "G": 0.04},
                          bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.1, decay=0.03, G=0.02),
                                  Bulge(z=0.5, half_width=0.05, magnitude=0.02)])
-    assert growth.compiled_weights is bulge_weights
+    part = growth.part_
+    assert part.weights is bulge_weights
     z = np.array(z + [0.2, 0.6, 0.45, 0.55])
-    w, q = bulge_weights(z, growth.compiled_params()), bulge_time(t, growth.compiled_params())
+    w, q = bulge_weights(z, part.params), part.at(t)
     assert w.shape == (2, len(z))
     assert np.array_equal((q[0] + w[0] * q[1]) + w[1] * q[2], growth.radius(t, z))
 
 
 def test_weights_that_are_not_the_radius_are_refused_at_the_first_step():
-    """A law whose ``compiled_weights`` break their promise would move its anchors wrongly without a
-    trace: the backend checks each anchor's weights against the compiled radius when it takes them."""
+    """A law whose part's ``weights`` break their promise would move its anchors wrongly without a
+    trace: the backend checks each anchor's weights against the part's radius when it takes them."""
     from bark_plugins.growth import Bulge, BulgeGrowth, bulge_weights
 
     def off_by_one_ulp(z, p):
@@ -159,13 +161,12 @@ def test_weights_that_are_not_the_radius_are_refused_at_the_first_step():
 
     @attrs.frozen(kw_only=True)
     class Careless(BulgeGrowth):
-        @property
-        def compiled_weights(self):
-            return off_by_one_ulp
+        def part(self):
+            return attrs.evolve(super().part(), weights=off_by_one_ulp)
 
     growth = Careless(base={"name": "sqrt", "G": 0.05}, bulges=[Bulge(z=0.1, half_width=0.05, magnitude=0.01)])
     sim = build_sim(n_bases=300, growth=growth, backend="numba")
-    with pytest.raises(BarkError, match="compiled_weights"):
+    with pytest.raises(BarkError, match="weights"):
         sim.run(Stop(until_time=0.5))
 
 
@@ -186,29 +187,34 @@ def test_weights_wrong_only_where_bases_join_later_are_refused_as_they_join():
 
     @attrs.frozen(kw_only=True)
     class CarelessAbove(BulgeGrowth):
-        @property
-        def compiled_weights(self):
-            return off_above_the_first_top
+        def part(self):
+            return attrs.evolve(super().part(), weights=off_above_the_first_top)
 
     growth = CarelessAbove(base={"name": "sqrt", "G": 0.05},
                            bulges=[Bulge(z=top + 0.2, half_width=10.0, magnitude=0.01)])
     sim = build_sim(growth=growth, backend="numba", lattice=lattice)
-    with pytest.raises(BarkError, match="compiled_weights"):
+    with pytest.raises(BarkError, match="weights"):
         sim.run(Stop(until_time=(lattice.n_bases - 300) / lattice.join_rate + 1.0))
     assert sim.state.n_bases <= 300 + CHECK_BATCH + 100  # refused with its first batch, not at the end
 
 
-def test_a_growth_law_that_writes_radius_again_loses_the_inherited_compiled_forms():
+def test_a_growth_law_that_writes_radius_again_loses_the_inherited_part():
     import attrs
 
-    from bark_plugins.growth import BulgeGrowth
+    from bark_plugins.growth import BulgeGrowth, SqrtGrowth
 
     @attrs.frozen(kw_only=True)
     class Wider(BulgeGrowth):
         def radius(self, t, z):
             return 2 * super().radius(t, z)
 
-    assert Wider.compiled is None and Wider.compiled_time is None and Wider.compiled_radii is None
+    @attrs.frozen(kw_only=True)
+    class Thicker(SqrtGrowth):
+        def radius(self, t, z):
+            return 2 * super().radius(t, z)  # super() still means the parent's part
+
+    assert Wider(bulges=[Bulge(z=0.1, half_width=0.05)]).part_ is None and Thicker().part_ is None
+    assert Thicker().radius(4.0, 0.0) == 2 * SqrtGrowth().radius(4.0, 0.0)
 
 
 @functools.cache
@@ -230,17 +236,17 @@ _odd_heights = st.one_of(st.floats(-1.0, 6.0), st.sampled_from([np.nan, np.inf, 
 @given(t=st.floats(0.0, 1e4), heights=st.lists(_odd_heights, min_size=0, max_size=40),
        extra=st.sampled_from([None, 0.0, -0.0, 1e308, np.inf, -np.inf, np.nan]))
 def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, heights, extra):
-    """``compiled_radii`` (what the kernel calls on a block of bases: no branch per height, and a
-    bulge the block is out of reach of skipped) gives, to the bit, what ``compiled`` gives height by
+    """The part's ``radii`` (what the kernel calls on a block of bases: no branch per height, and a
+    bulge the block is out of reach of skipped) gives, to the bit, what ``radius`` gives height by
     height — blocks inside, outside and across either bulge's edge, NaN and infinite heights, an
     extra radius that is huge, infinite or NaN (never skipped then: 0·inf is NaN per height too)."""
-    from bark_plugins.growth import bulge_radii, bulge_radius, bulge_time
+    from bark_plugins.growth import bulge_radii, bulge_radius
 
     g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
                     bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
                             Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1)])
-    assert g.compiled_radii is bulge_radii
-    q = bulge_time(t, g.params_array)
+    assert g.part_.radii is bulge_radii
+    q = g.part_.at(t)
     if extra is not None:
         q[2] = extra
     z = np.array(heights, dtype=float)
@@ -252,14 +258,15 @@ def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, height
 
 
 def test_a_law_without_a_block_form_steps_to_the_same_bits():
-    """The kernel calls a law's ``compiled`` per height when the law gives no ``compiled_radii``: the
-    same state, to the bit, as with the bulge law's block form."""
+    """The kernel calls a part's ``radius`` per height when the part gives no ``radii``: the same
+    state, to the bit, as with the bulge law's block form."""
     from bark.engine import stepping
     from bark.model.lattice import Lattice
 
     @attrs.frozen(kw_only=True)
     class PerHeight(BulgeGrowth):
-        compiled_radii = None
+        def part(self):
+            return attrs.evolve(super().part(), radii=None)
 
     runs = {}
     for law in (BulgeGrowth, PerHeight):
@@ -268,7 +275,7 @@ def test_a_law_without_a_block_form_steps_to_the_same_bits():
         sim.run(Stop(until_time=1.5))
         runs[law] = sim
     a, b = runs.values()
-    assert stepping.plan(a, None).radii is not None and stepping.plan(b, None).radii is None
+    assert stepping.plan(a, None).growth.radii is not None and stepping.plan(b, None).growth.radii is None
     assert a.state.n_bases == b.state.n_bases > 400 and a.n_broken == b.n_broken
     for name in ("x", "v", "anchor"):
         np.testing.assert_array_equal(getattr(a.state, name), getattr(b.state, name))
@@ -320,14 +327,14 @@ def test_the_profile_is_sin_squared_by_its_series():
 
 @given(st.floats(0.0, 300.0), st.lists(st.floats(-1.0, 10.0, allow_nan=False), min_size=1, max_size=30))
 def test_a_bulge_laws_radius_of_heights_is_its_compiled_form_to_the_bit(t, heights):
-    """In Python the law sums its anchors' weights (``compiled_weights``: the profile only where a
-    height is inside a bulge); the kernel calls its compiled form per base: the same bits."""
-    from bark_plugins.growth import bulge_radius, bulge_time
+    """In Python the law sums its anchors' weights (its part's ``weights``: the profile only where a
+    height is inside a bulge); the kernel calls its part's radius per base: the same bits."""
+    from bark_plugins.growth import bulge_radius
 
     g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
                     bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
                             Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1)])
     z = np.array(heights)
-    compiled = bulge_radius(t, z, bulge_time(t, g.params_array))
+    compiled = bulge_radius(t, z, g.part_.at(t))
     np.testing.assert_array_equal(g.radius(t, z), compiled)
     np.testing.assert_array_equal([float(g.radius(t, v)) for v in z], compiled)

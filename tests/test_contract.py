@@ -173,3 +173,34 @@ def test_a_load_that_goes_nan_stops_the_run_never_silently(backend, integrator):
     with pytest.raises(NonFiniteStateError):
         sim.run(Stop(until_time=2.0))
     assert sim.step_count == 0 and np.isfinite(sim.state.x).all()
+
+
+def test_bulges_on_a_third_party_growth_law_run_compiled_with_the_same_bits():
+    """The bulge law is built on the part of the law it sits on, whichever that is: on the example
+    plugin's power law it runs compiled (many steps a kernel call, not one), to the bit on both
+    backends, and its radius is that law's plus the bulges' (each with its own G, a variant of it)."""
+    from bark.model.lattice import Lattice
+    from bark_plugins.growth import Bulge, BulgeGrowth
+
+    def bulged(**base):
+        return BulgeGrowth(base=PowerLawGrowth(**base), bulges=[Bulge(z=0.06, half_width=0.04, magnitude=0.01, G=0.03),
+                                                                 Bulge(z=0.12, half_width=0.03, magnitude=0.02, decay=0.1)])
+
+    growth = bulged(G=0.05, a=0.6)
+    assert how_it_runs(growth) == "compiled" and growth.part_.inner == PowerLawGrowth(G=0.05, a=0.6).part_
+    z = np.array([0.0, 0.03, 0.06, 0.12, 0.5])
+    r = growth.radius(9.0, z)
+    assert r[0] == r[-1] == PowerLawGrowth(G=0.05, a=0.6).radius(9.0, 0.0)  # away from the bulges: the law's
+    assert r[2] == pytest.approx(PowerLawGrowth(G=0.03, a=0.6).radius(9.0, 0.0) + 0.01, abs=1e-15)  # at a peak: its own G
+    runs = {}
+    for backend in ("numpy", "numba"):
+        sim = build_sim(growth=growth, backend=backend, fmax_spread=0.05,
+                        lattice=Lattice(n_bases=600, n_start=400, join_rate=60.0, jitter=0.05))
+        calls = []
+        sim.run(Stop(until_time=12.0), lambda s: calls.append(s.step_count))
+        runs[backend] = sim
+        assert len(calls) < sim.step_count / 3, (len(calls), sim.step_count)  # many steps a call
+    a, b = runs.values()
+    assert a.n_broken == b.n_broken > 0 and a.state.n_bases == b.state.n_bases > 400
+    for name in ("x", "v", "anchor", "intact"):
+        assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-from typing import ClassVar
 from functools import lru_cache
 
 import attrs
@@ -22,6 +21,7 @@ from bark.analysis.reference import solve_reference
 from bark.engine.scene import Scene
 from bark.model.stability import explicit_h_max, lambda_max
 from bark.engine.stepping import SAFETY, Numerics
+from bark.contract.parts import GrowthPart
 from bark.contract.strategies import Growth, Integrator
 from bark_cli.main import cli
 from bark_plugins.breakers import ThresholdBreaker
@@ -539,7 +539,7 @@ def test_nan_from_integrator_leaves_last_finite_state(backend):
 
 
 def nan_radius_after(t, z, p):
-    """``r0 + G√t`` with ``p = (r0, G, t_bad)``, NaN once ``t > t_bad``: a compiled form that fails."""
+    """``r0 + G√t`` with ``p = (r0, G, t_bad)``, NaN once ``t > t_bad``: a part that fails."""
     return np.nan if t > p[2] else p[0] + p[1] * np.sqrt(t)
 
 
@@ -547,14 +547,12 @@ def nan_radius_after(t, z, p):
 class _NaNRadiusAfter(Growth):
     """``r0 + G√t`` (uniform), NaN once ``t > t_bad``."""
 
-    compiled: ClassVar = staticmethod(nan_radius_after)
-    uniform: ClassVar[bool] = True
     r0: float = 0.2
     G: float = 0.05
     t_bad: float = 1.0
 
-    def compiled_params(self) -> np.ndarray:
-        return np.array([self.r0, self.G, self.t_bad])
+    def part(self) -> GrowthPart:
+        return GrowthPart(radius=nan_radius_after, params=(self.r0, self.G, self.t_bad), uniform=True)
 
 
 def _growth_sim(growth, backend, dt=0.05) -> Simulation:

@@ -122,7 +122,7 @@ def test_join_radii_are_the_growth_laws_radius_at_each_bases_birth_to_the_bit(me
 
     sim = SimpleNamespace(state=meshed[0].sim.state, growth=registry.create("growth", **growth))
     s = sim.state
-    assert len(np.unique(s.born)) > 2 and (sim.growth.compiled_weights is not None) == (growth["name"] == "bulge")
+    assert len(np.unique(s.born)) > 2 and (sim.growth.part_.weights is not None) == (growth["name"] == "bulge")
     expected = np.concatenate([np.broadcast_to(sim.growth.radius(float(t), s.anchor[i:i + 1, 2]), 1)
                                for i, t in enumerate(s.born)])
     assert np.array_equal(join_radii(sim), expected)

@@ -22,6 +22,27 @@ A breaker's part (:class:`BreakerPart`)
     load's the rule's unless given); ``params`` (the breaker's numbers, a float array) always comes
     last.
 
+A growth law's part (:class:`GrowthPart`)
+------------------------------------------
+``radius(t, z, q) -> r``
+    the trunk radius at time ``t`` and height ``z``; ``q`` is what ``time`` made of the law's
+    ``params`` for this step (the params themselves by default).  ``uniform = True``: the radius is
+    the same at every height, evaluated once per step (``z`` is then 0).
+``time(t, params) -> q``
+    what depends on time alone, once a step (a fading bulge's ``exp``), so that per base only what
+    depends on height is left.
+``weights(z, params) -> w``, optional
+    for a radius ``q[0] + w_0(z)·q[1] + w_1(z)·q[2] + ...`` (summed left to right): one row of
+    weights per term.  The anchors, whose heights never change, then have their weights taken once
+    and their radii summed each step (checked against ``radius`` when first taken).
+``radii(t, z, q, out)``, optional
+    the radius at every height of the array ``z`` into ``out``, the same bits as ``radius`` at each
+    — for a law that does a block of heights faster than one at a time (SIMD lanes).
+``inner``, optional
+    a uniform part this one is built on (a bulge law on any law that has a part): ``time`` is then
+    called as ``time(t, params, inner_time, inner_radius)``, with the inner part's own functions to
+    call on numbers the outer part keeps in its ``params`` (the inner law's, and variants of them).
+
 Written with numpy operations (``np.sqrt``), one function serves arrays and scalars alike.  The
 functions must be importable by name (module-level functions or static methods) for the numba
 backend to cache their compiled kernel on disk; others are compiled once per process.
@@ -37,7 +58,7 @@ import numpy as np
 from bark.model import physics
 from bark.errors import BarkError
 
-__all__ = ["BreakerPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
+__all__ = ["BreakerPart", "GrowthPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
 
 SPRING_INPUTS: tuple[str, ...] = ("tension", "length", "rest", "fmax", "inv_fmax")
 """What a breaker's part may read of each spring: its tension ``k(|d| − l)`` (force units), its
@@ -58,7 +79,7 @@ def _reads(value) -> tuple[str, ...]:
 def _params(value) -> np.ndarray:
     params = np.ascontiguousarray(np.atleast_1d(np.asarray(value, dtype=float)) if np.size(value) else np.empty(0))
     if params.ndim != 1:
-        raise BarkError(f"a breaker part's params must be a flat list of numbers, not of shape {params.shape}")
+        raise BarkError(f"a part's params must be a flat list of numbers, not of shape {params.shape}")
     params.setflags(write=False)
     return params
 
@@ -89,6 +110,63 @@ class BreakerPart:
 
     def __eq__(self, other) -> bool:
         return isinstance(other, BreakerPart) and self.key == other.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+
+def _inner(instance, attribute, value) -> None:
+    if value is not None and (not isinstance(value, GrowthPart) or not value.uniform or value.inner is not None):
+        raise BarkError("a growth part's inner part must be a uniform GrowthPart with no inner part of its own")
+
+
+_callable = attrs.validators.is_callable()
+_optional_callable = attrs.validators.optional(_callable)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class GrowthPart:
+    """A growth law's compiled work (see the module's docstring)."""
+
+    radius: Callable = attrs.field(validator=_callable)
+    """``radius(t, z, q) -> r``."""
+    params: np.ndarray = attrs.field(factory=lambda: np.empty(0), converter=_params)
+    """The law's own numbers, which ``time`` turns into each step's ``q``."""
+    uniform: bool = attrs.field(default=False, validator=attrs.validators.instance_of(bool))
+    """The same radius at every height (evaluated once per step, not per base)."""
+    time: Callable = attrs.field(default=physics.as_given, validator=_callable)
+    """``time(t, params) -> q`` (with ``inner``: ``time(t, params, inner_time, inner_radius)``)."""
+    weights: Callable | None = attrs.field(default=None, validator=_optional_callable)
+    """``weights(z, params) -> w``, shape ``(K, len(z))``: ``radius`` is ``q[0] + w[0]·q[1] + ...``."""
+    radii: Callable | None = attrs.field(default=None, validator=_optional_callable)
+    """``radii(t, z, q, out)``: ``radius`` at a block of heights at once, the same bits."""
+    inner: "GrowthPart | None" = attrs.field(default=None, validator=_inner)
+    """The uniform part this one is built on, whose functions ``time`` is given."""
+
+    def at(self, t: float):
+        """``q`` at time ``t``: what ``radius`` is given for this step."""
+        if self.inner is None:
+            return self.time(t, self.params)
+        return self.time(t, self.params, self.inner.time, self.inner.radius)
+
+    def radius_at(self, t: float, z):
+        """The radius at time ``t`` and heights ``z``, as every backend evaluates it (one value when uniform)."""
+        return self.radius(t, 0.0 if self.uniform else z, self.at(t))
+
+    @property
+    def functions(self) -> tuple[Callable, ...]:
+        """Every function of the part and of its inner part (what the compiled kernel inlines)."""
+        own = tuple(fn for fn in (self.radius, self.time, self.weights, self.radii) if fn is not None)
+        return own + (self.inner.functions if self.inner is not None else ())
+
+    @property
+    def key(self) -> tuple:
+        """What makes two parts the same work (their functions, numbers and inner part)."""
+        return (self.radius, self.time, self.weights, self.radii, self.uniform, self.params.tobytes(),
+                None if self.inner is None else self.inner.key)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, GrowthPart) and self.key == other.key
 
     def __hash__(self) -> int:
         return hash(self.key)
@@ -134,7 +212,7 @@ def how_it_runs(strategy) -> str:
             return "Python (select after every step)"
         return "compiled" if part.decides else "compiled candidates; select in Python"
     if kind == "growth":
-        return "compiled" if strategy.compiled is not None else "Python (radius)"
+        return "compiled" if strategy.part_ is not None else "Python (radius, one step a call)"
     if kind == "integrator":
         return "compiled" if strategy.update is not None else "Python (step)"
     return "Python (after the run)"

@@ -23,7 +23,7 @@ Analyzer       ``analyze(points, patches)``          statistics of a pattern, as
                ``-> Analysis``
 =============  ====================================  =================================================
 
-**Compiled forms: capabilities a strategy declares.**  A strategy whose work fits a pure,
+**Compiled work: what a strategy declares.**  A strategy whose work fits a pure,
 elementwise function may declare it; the engine then runs it inside its stepping kernel (compiled
 and inlined by the numba backend, on whole arrays by the numpy backend) instead of calling the
 strategy in Python once per step.  The function is the definition: the verb is derived from it.
@@ -35,18 +35,10 @@ strategy in Python once per step.  The function is the definition: the verb is d
   breaker's numbers (:mod:`bark.contract.parts`).  ``select`` then follows from it.  A subclass that writes
   ``select`` again and not ``part`` has no part: a compiled rule and a Python ``select`` can never
   disagree.
-* ``Growth.compiled(t, z, params) -> r`` with ``compiled_params()``, and ``uniform = True`` when
-  the radius does not depend on height; ``radius(t, z)`` then follows from it.  A law whose radius
-  has parts that depend on time alone (a fading bulge's ``exp``) may also give
-  ``compiled_time(t, params) -> q``: computed once a step, and ``compiled`` is then called with ``q``
-  in place of ``params`` (per base, only what depends on height is left).  If its radius is a sum
-  of such parts weighted by functions of height, ``r = q[0] + w_0(z)·q[1] + w_1(z)·q[2] + ...``
-  (evaluated left to right), it may give ``compiled_weights(z, params) -> w`` (an array of heights
-  in, one row of weights per term out): the anchors, whose heights never change, then have their
-  weights taken once and their radii summed each step, not computed by a call each.  And it may give
-  ``compiled_radii(t, z, q, out)``: the radius at every height of the array ``z`` written into
-  ``out``, the same bits as ``compiled(t, z[i], q)`` for each — for a law that can do a block of
-  heights faster than one at a time (in SIMD lanes, or skipping what is out of a bulge's reach).
+* ``Growth.part() -> GrowthPart``: its radius as a function of time, height and the law's numbers,
+  what of it depends on time alone (once a step), and optionally the weights of a radius that is a
+  weighted sum and a block form (:mod:`bark.contract.parts`).  ``radius`` then follows from it; a
+  subclass that writes ``radius`` again and not ``part`` has no part.
 
 The functions must be importable by name (module-level functions or static methods) to be cached
 on disk; others are compiled once per process.  Written with numpy ufuncs (``np.sqrt``), one
@@ -62,15 +54,13 @@ from typing import Any, Callable, ClassVar
 import attrs
 import numpy as np
 
-from bark.contract.parts import BreakerPart, picks
+from bark.contract.parts import BreakerPart, GrowthPart, picks
 from bark.model.effects import Effect
-from bark.model.physics import as_given
 
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "pattern_of"]
 
 
-_FORM_DEFAULTS: dict[str, Any] = {"compiled": None, "uniform": False, "compiled_time": None, "compiled_weights": None,
-                                  "compiled_radii": None, "update": None}
+_FORM_DEFAULTS: dict[str, Any] = {"update": None}
 
 
 def _form_owner(strategy, form: str) -> type | None:
@@ -122,58 +112,36 @@ class Strategy(abc.ABC):
 
 @attrs.frozen(kw_only=True)
 class Growth(Strategy):
-    """Secondary growth: how the trunk radius changes with time (and, for bulges, with height)."""
+    """Secondary growth: how the trunk radius changes with time (and, for bulges, with height).
+
+    A law declares its compiled work as a :class:`~bark.contract.parts.GrowthPart` (``part()``): its
+    radius as a pure function of time, height and the law's numbers, and what of it depends on time
+    alone.  ``radius`` is then derived from the part.  A class that writes ``radius`` and not
+    ``part`` has no part: it runs on the Python path, one step a call."""
 
     kind: ClassVar[str] = "growth"
-    _verb_and_form: ClassVar[tuple[str, ...]] = ("radius", "compiled", "uniform", "compiled_time", "compiled_weights",
-                                                 "compiled_radii")
-    compiled: ClassVar[Callable | None] = None
-    """Compiled form ``compiled(t, z, params) -> r`` (see the module's docstring), or ``None``."""
-    uniform: ClassVar[bool] = False
-    """Whether the radius is the same at every height (evaluated once per step, not per base)."""
-    compiled_time: ClassVar[Callable | None] = None
-    """Optional per-step part of the compiled form, ``compiled_time(t, params) -> q``: what depends
-    on time alone, computed once a step; ``compiled`` then receives ``q`` in place of ``params``."""
-    compiled_weights: ClassVar[Callable | None] = None
-    """Optional, beside ``compiled_time``: ``compiled_weights(z, params) -> w``, shape ``(K, len(z))``,
-    such that ``compiled(t, z, q)`` is ``q[0] + w[0]·q[1] + ... + w[K-1]·q[K]`` to the bit (summed left
-    to right; ``q = compiled_time(t, params)``).  The anchors' radii are then sums of weights taken once
-    per anchor (checked against ``compiled`` then).  A subclass that gives ``compiled`` or
-    ``compiled_time`` of its own and not this loses it."""
-    compiled_radii: ClassVar[Callable | None] = None
-    """Optional, beside ``compiled``: ``compiled_radii(t, z, q, out)`` writes the radius at each height
-    of the array ``z`` into ``out``, to the bit what ``compiled(t, z[i], q)`` gives (``q`` as for
-    ``compiled``).  The numba kernel calls it on a block of bases at a time in place of ``compiled``
-    per base.  A subclass that gives ``compiled`` or ``compiled_time`` of its own and not this loses it."""
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
-        for form in ("compiled_weights", "compiled_radii"):  # they promise the bits of the law's compiled form
-            if ("compiled" in vars(cls) or "compiled_time" in vars(cls)) and form not in vars(cls):
-                setattr(cls, form, None)
+        if "radius" in vars(cls) and "part" not in vars(cls):
+            cls.part = Growth.part
 
-    def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
-        """Trunk radius at time ``t`` at heights ``z`` (from the compiled form, when there is one)."""
-        compiled, owner = _form(self, "compiled"), _form_owner(self, "compiled")
-        prepare = getattr(self, "compiled_time", None) or as_given
-        return compiled(t, 0.0 if owner.__dict__.get("uniform", owner.uniform) else z, prepare(t, self.params_array))
-
-    def compiled_params(self) -> np.ndarray:
-        """The ``params`` array of the compiled form."""
-        return np.empty(0)
+    def part(self) -> GrowthPart | None:
+        """This law's compiled work, or ``None`` (its ``radius`` alone, in Python)."""
+        return None
 
     @functools.cached_property
-    def params_array(self) -> np.ndarray:
-        """``compiled_params()``, made once: a strategy's parameters never change, and the engine
-        asks for them at every call of its kernel and every radius it takes in Python.  Not to be
-        written into."""
-        return np.ascontiguousarray(self.compiled_params(), dtype=float)
+    def part_(self) -> GrowthPart | None:
+        """``part()``, made once (a strategy's parameters never change; the engine asks at every call
+        of its kernel and every radius it takes in Python)."""
+        return self.part()
 
-    def weights_form(self) -> Callable | None:
-        """``compiled_weights`` where radii are summed from it — a compiled radius that depends on
-        height — else ``None``.  (With ``compiled_time``, ``q = compiled_time(t, params)``; without,
-        ``q = params``.)"""
-        return self.compiled_weights if self.compiled is not None and not self.uniform else None
+    def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
+        """Trunk radius at time ``t`` at heights ``z`` (from the part: one value when it is uniform)."""
+        part = _declared_part(self, Growth)
+        if part is None:
+            raise NotImplementedError(f"{type(self).__name__} writes neither radius nor part")
+        return part.radius_at(t, z)
 
     def mean_radius(self, t: float, z: np.ndarray) -> float:
         """The mean of ``radius(t, z)`` over the heights ``z`` (derived from ``radius``: a law that
@@ -220,14 +188,14 @@ class Integrator(Strategy):
         return float("inf")
 
 
-def _declared_part(breaker) -> BreakerPart | None:
-    """The part of the nearest class of ``breaker`` that declares one: a subclass that wrote
-    ``select`` again has no part of its own, but its ``super().select(...)`` still means the
-    parent's rule."""
-    for klass in type(breaker).__mro__:
+def _declared_part(strategy, kind: type):
+    """The part of the nearest class of ``strategy`` that declares one (``kind``: the base class whose
+    ``part`` declares none): a subclass that wrote its verb again has no part of its own, but its
+    ``super()`` verb still means the parent's part."""
+    for klass in type(strategy).__mro__:
         declared = vars(klass).get("part")
-        if declared is not None and declared is not Breaker.part:
-            return declared(breaker)
+        if declared is not None and declared is not kind.part:
+            return declared(strategy)
     return None
 
 
@@ -261,7 +229,7 @@ class Breaker(Strategy):
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Ids of intact springs to break, given every spring's current ``tension`` (from the part:
         the live springs its rule picks)."""
-        part = _declared_part(self)
+        part = _declared_part(self, Breaker)
         if part is None:
             raise NotImplementedError(f"{type(self).__name__} writes neither select nor part")
         return picks(part, state, tension, state.intact)

@@ -21,7 +21,6 @@ import attrs
 import numpy as np
 
 from bark.contract import parts, registry
-from bark.model import physics
 from bark.contract.parts import NO_BREAKING, BreakerPart
 from bark.validators import int_in, one_of, positive
 from bark.errors import BarkError, Ref
@@ -208,8 +207,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     clock = sim.clock
     part = breaking_part(sim.breakers)
     steers = steers_step(sim)
-    compiled = sim.integrator.update is not None and sim.growth.compiled is not None \
-        and (part is not None or not steers)
+    growth = sim.growth.part_
+    compiled = sim.integrator.update is not None and growth is not None and (part is not None or not steers)
     breaks = "python" if part is None or not compiled else "kernel" if part.decides else "candidates"
     n = 1
     if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
@@ -220,14 +219,11 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
     must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
     return Plan(
-        h=clock.step, times=times[:n], update=sim.integrator.update, radius=sim.growth.compiled,
-        params=sim.growth.params_array if compiled else np.empty(0), uniform=sim.growth.uniform,
+        h=clock.step, times=times[:n], update=sim.integrator.update, growth=growth if compiled else None,
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
         accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
-        prepare=(sim.growth.compiled_time or physics.as_given) if compiled else physics.as_given, relax=relax,
-        weights=sim.growth.weights_form() if compiled else None, radii=sim.growth.compiled_radii if compiled else None,
-        threads=sim.numerics.threads,
+        relax=relax, threads=sim.numerics.threads,
     )
 
 

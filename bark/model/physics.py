@@ -77,8 +77,8 @@ def as_given(t, params):
 
 def weighted_radius(q: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """``q[0] + w[0]·q[1] + w[1]·q[2] + ...`` summed left to right: the radius a growth law's
-    ``compiled_weights`` promise gives, to the bit.  ``weights`` is ``(K, n)``; ``q`` is one per-step
-    vector (``compiled_time(t, params)``) or ``(K + 1, n)``, each base's own."""
+    part's ``weights`` promise gives, to the bit.  ``weights`` is ``(K, n)``; ``q`` is one per-step
+    vector (the part's ``at(t)``) or ``(K + 1, n)``, each base's own."""
     q = np.asarray(q, dtype=float)
     r = np.array(np.broadcast_to(q[0], weights.shape[1:]), dtype=float)
     for k in range(len(weights)):

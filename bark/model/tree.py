@@ -41,7 +41,7 @@ import numpy as np
 from bark.validators import in_range, one_of
 from bark.errors import BarkError, Ref
 from bark.model.lattice import Lattice
-from bark.model.physics import as_given, weighted_radius
+from bark.model.physics import weighted_radius
 
 __all__ = ["Dome", "Apex", "SAMPLES", "leaf_corners", "join_radii"]
 
@@ -240,12 +240,11 @@ def join_radii(sim) -> np.ndarray:
     s, growth = sim.state, sim.growth
     z, born = s.anchor[:, 2], s.born
     times, group = np.unique(born, return_inverse=True)
-    weights = growth.weights_form()
-    if len(times) and weights is not None:
+    part = growth.part_
+    if len(times) and part is not None and part.weights is not None and not part.uniform:
         # radius = q(t)[0] + w(z)[0]·q(t)[1] + ..., to the bit: the weights of all sites at once
-        p, prepare = growth.params_array, growth.compiled_time or as_given
-        q = np.array([prepare(float(t), p) for t in times]).reshape(len(times), -1)
-        return weighted_radius(q[group].T, np.atleast_2d(np.asarray(weights(z, p), dtype=float)))
+        q = np.array([part.at(float(t)) for t in times]).reshape(len(times), -1)
+        return weighted_radius(q[group].T, np.atleast_2d(np.asarray(part.weights(z, part.params), dtype=float)))
     out = np.empty(s.n_bases)
     for i, t in enumerate(times):  # bases join in groups: one call of the law per group
         at = group == i

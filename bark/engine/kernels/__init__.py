@@ -36,9 +36,8 @@ from typing import Callable
 import attrs
 import numpy as np
 
-from bark.model import physics
 from bark.errors import BarkError, Ref
-from bark.contract.parts import NO_BREAKING, BreakerPart
+from bark.contract.parts import NO_BREAKING, BreakerPart, GrowthPart
 
 __all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
 
@@ -55,12 +54,9 @@ class Plan:
     """Time at the end of each step (from the integer clock: exact, whatever the split into calls)."""
     update: Callable | None
     """The integrator's compiled form: ``update(x, v, f, h/m, h) -> (x, v)`` along one axis."""
-    radius: Callable | None
-    """The growth law's compiled form: ``radius(t, z, params) -> r``."""
-    params: np.ndarray
-    """Its parameters."""
-    uniform: bool
-    """The radius does not depend on height: evaluated once per step, not per base."""
+    growth: GrowthPart | None
+    """The growth law's part (``bark.contract.parts``): its radius, once a step what depends on time
+    alone, and per base what depends on height (``None``: one step in Python)."""
     breaker: BreakerPart = NO_BREAKING
     """The breakers' part (``bark.contract.parts``): its rule picks springs, its load steers the step."""
     breaks: str = "kernel"
@@ -75,21 +71,12 @@ class Plan:
     max_batch: float = math.inf
     """End the call after a step that breaks more springs than this (a degenerate event)."""
     compiled: bool = True
-    """Whether the integrator and the growth law have compiled forms (else one step in Python)."""
-    prepare: Callable = physics.as_given
-    """The growth law's per-step part, ``prepare(t, params) -> q``: ``radius`` gets ``q`` (default: the
-    parameters as given)."""
+    """Whether the integrator and the growth law have compiled work (else one step in Python)."""
     relax: np.ndarray | None = None
     """Per step, whether it ends on the grid of the next larger step (adaptive stepping at a halved
     step): the call ends after such a step whose load is at most 1, so the clock can double the step
     there, as it would after a call of one step (default: never)."""
 
-    weights: Callable | None = None
-    """The growth law's ``compiled_weights(z, params) -> w`` (``bark.contract.strategies.Growth``), or ``None``:
-    the anchors' radii as weighted sums (their heights never change), in place of a call per anchor."""
-    radii: Callable | None = None
-    """The growth law's ``compiled_radii(t, z, q, out)`` (``bark.contract.strategies.Growth``), or ``None``: the
-    radius at a block of heights at once, in place of ``radius`` called per height (the same bits)."""
     threads: int = 1
     """Threads the call may share its work among (``Numerics.threads``: 0 = the backend decides);
     the result does not depend on it."""

@@ -45,6 +45,7 @@ from bark.engine.kernels import Backend, Plan, Steps
 from bark.errors import BarkError
 from bark.model.state import grown
 from bark.model.physics import weighted_radius
+from bark.contract.parts import GrowthPart
 
 NAME = "numba"
 
@@ -299,9 +300,9 @@ def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
 def _per_base_radius(bases, c, b, hm, h, t, update, radii, params, weights, stride, first):
     """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
     the forces and the update (no calls: SIMD lanes), the radius at each base's height (the growth
-    law's block form, ``radii``: ``Growth.compiled_radii``, or its ``compiled`` called per height), the
+    law's block form, its part's ``radii``, or its ``radius`` called per height), the
     surface at those radii (SIMD lanes again), then the anchors at their sites' radii.  The anchors'
-    heights never change, so a law that gives ``compiled_weights`` has each anchor's radius as
+    heights never change, so a part that gives ``weights`` has each anchor's radius as
     ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once (``weights``: weight k of
     base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
     (stride 0), the block form at the anchors' heights.  Per base the same operations in the same
@@ -524,7 +525,7 @@ _update = inline({update})
 _rule_part = inline({rule})
 _load_part = {load}
 _radius = inline({radius})
-_prepare = inline({prepare})
+{prepare}
 _radii = {radii}
 {adapters}
 
@@ -546,6 +547,31 @@ _LOAD_ADAPTER = '''
 def _load(tension, length, rest, fmax, inv_fmax, params):
     return _load_part({load_args})
 '''
+
+
+_COMPOSED = '''_inner_time = inline({inner_time})
+_inner_radius = inline({inner_radius})
+_time_part = inline({time})
+
+
+@inline
+def _prepare(t, params):
+    return _time_part(t, params, _inner_time, _inner_radius)
+'''
+
+
+def _time_of(growth):
+    """The growth part's per-step function as the kernel calls it, ``prepare(t, params) -> q``,
+    compiled in this process: its ``time``, given its inner part's functions when it has one."""
+    if growth.inner is None:
+        return inline(growth.time)
+    time_part, inner_time, inner_radius = (inline(fn) for fn in (growth.time, growth.inner.time, growth.inner.radius))
+
+    @inline
+    def prepare(t, params):
+        return time_part(t, params, inner_time, inner_radius)
+
+    return prepare
 
 
 def _adapters(part) -> str:
@@ -613,7 +639,7 @@ def _make_jitable(functions) -> None:
 
 
 def each_height(radius):
-    """The block form (``Growth.compiled_radii``) of a growth law that gives none: its compiled
+    """The block form (a growth part's ``radii``) of a part that gives none: its
     ``radius`` called for each height."""
     def radii(t, z, q, out):
         for i in range(z.shape[0]):
@@ -653,22 +679,23 @@ def part_on_springs(part):
     return evaluate
 
 
-def radius_at_heights(radius, prepare=physics.as_given):
-    """``evaluate(t, z, params) -> r``: a growth law's compiled radius at each height of ``z``, its
-    per-step part taken once, compiled as the stepping kernel compiles them (for the contract kit)."""
-    g, p = inline(radius), inline(prepare)
-    _make_jitable([h for fn in (radius, prepare) for h in _helpers(fn)[1:]])
+def radius_at_heights(growth):
+    """``evaluate(t, z) -> r``: a growth part's radius at each height of ``z``, its per-step part
+    taken once, compiled as the stepping kernel compiles them (for the contract kit)."""
+    _make_jitable([h for fn in growth.functions for h in _helpers(fn)[1:]])
+    g, p = inline(growth.radius), _time_of(growth)
+    uniform = growth.uniform
 
     @numba.njit(error_model="numpy")
     def each(t, z, params, out):
         q = p(t, params)
         for i in range(z.shape[0]):
-            out[i] = g(t, z[i], q)
+            out[i] = g(t, 0.0 if uniform else z[i], q)
 
-    def evaluate(t, z, params):
+    def evaluate(t, z):
         z = np.ascontiguousarray(z, dtype=float)
         out = np.empty(z.shape[0])
-        each(float(t), z, np.ascontiguousarray(params, dtype=float), out)
+        each(float(t), z, growth.params, out)
         return out
 
     return evaluate
@@ -694,25 +721,30 @@ def update_on_axis(update):
     return evaluate
 
 
-def specialized(update, breaker, radius, prepare=physics.as_given, radii=None, parallel=False):
+def specialized(update, breaker, growth, parallel=False):
     """The stepping kernel with ``update``, the breaker part's rule and load (``breaker``, a
-    :class:`~bark.contract.parts.BreakerPart`), ``radius``, ``prepare`` and ``radii`` (the growth law's block
-    form; ``None``: ``radius`` per height) inlined (compiled once per combination and kept on disk;
-    see the module's docstring), its block loops shared among threads if ``parallel``.  Functions
-    that cannot be imported by name (lambdas, local functions) get a wrapper compiled in this process
-    only."""
-    key = (update, breaker.rule, breaker.reads, breaker.load, breaker.load_reads, radius, prepare, radii,
-           bool(parallel))
+    :class:`~bark.contract.parts.BreakerPart`) and the growth part's functions (``growth``, a
+    :class:`~bark.contract.parts.GrowthPart`: its radius, its per-step ``time`` — given its inner
+    part's functions when it has one — and its block form, or its radius per height) inlined
+    (compiled once per combination and kept on disk; see the module's docstring), its block loops
+    shared among threads if ``parallel``.  Functions that cannot be imported by name (lambdas, local
+    functions) get a wrapper compiled in this process only."""
+    inner = growth.inner
+    named = {"update": update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
+             "load": breaker.load, "radii": growth.radii,
+             "inner_time": inner.time if inner is not None else None,
+             "inner_radius": inner.radius if inner is not None else None}
+    named = {k: fn for k, fn in named.items() if fn is not None}
+    key = (breaker.reads, breaker.load_reads, *named.items(), bool(parallel))
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
-    forms = (update, breaker.rule, radius, prepare)
-    parts = forms + tuple(fn for fn in (breaker.load, radii) if fn is not None)
-    helpers = [h for fn in parts for h in _helpers(fn)[1:]]
+    helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
-    names = [_importable(fn) for fn in parts]
-    if None in names:
-        u, g, p = (inline(fn) for fn in (update, radius, prepare))
-        block = each_height(g) if radii is None else inline(radii)
+    names = {k: _importable(fn) for k, fn in named.items()}
+    if None in names.values():
+        u, g = inline(update), inline(growth.radius)
+        p = _time_of(growth)
+        block = each_height(g) if growth.radii is None else inline(growth.radii)
         rule, load = adapted(breaker)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
@@ -725,20 +757,21 @@ def specialized(update, breaker, radius, prepare=physics.as_given, radii=None, p
         return steps
     adapters = _adapters(breaker)
     digest = hashlib.sha256()
-    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in parts),
-                  *(_source(fn) for fn in helpers), *(f"{m}:{q}" for m, q in names), adapters,
+    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in named.values()),
+                  *(_source(fn) for fn in helpers), *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters,
                   f"parallel={bool(parallel)}"):
         digest.update(piece.encode())
-    imports, refs = [], []
-    for i, (module, qualname) in enumerate(names):
+    imports, refs = [], {}
+    for i, (k, (module, qualname)) in enumerate(names.items()):
         head, _, rest = qualname.partition(".")
         imports.append(f"from {module} import {head} as _f{i}")
-        refs.append(f"_f{i}" + (f".{rest}" if rest else ""))
-    extra = iter(refs[4:])
-    load = f"inline({next(extra)})" if breaker.load is not None else "None"
-    text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names), imports="\n".join(imports),
-                           update=refs[0], rule=refs[1], radius=refs[2], prepare=refs[3], load=load,
-                           radii="each_height(_radius)" if radii is None else f"inline({next(extra)})",
+        refs[k] = f"_f{i}" + (f".{rest}" if rest else "")
+    prepare = f"_prepare = inline({refs['time']})" if inner is None else \
+        _COMPOSED.format(inner_time=refs["inner_time"], inner_radius=refs["inner_radius"], time=refs["time"])
+    text = _WRAPPER.format(names=", ".join(f"{m}.{q}" for m, q in names.values()), imports="\n".join(imports),
+                           update=refs["update"], rule=refs["rule"], radius=refs["radius"], prepare=prepare,
+                           load=f"inline({refs['load']})" if "load" in refs else "None",
+                           radii="each_height(_radius)" if "radii" not in refs else f"inline({refs['radii']})",
                            adapters=adapters, parallel=bool(parallel))
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
@@ -922,7 +955,7 @@ class _Frame:
 
 @attrs.define(eq=False)
 class _Weights:
-    """The anchors' weights (``Growth.compiled_weights``) for one growth law."""
+    """The anchors' weights (a growth part's ``weights``) for one growth law."""
 
     key: tuple
     table: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 0)))
@@ -940,15 +973,15 @@ CHECK_BATCH = 1024
 batches of this many bases as bases join (a check per join cost 3 % of the whole tree's run)."""
 
 
-def _check_weights(plan: Plan, t: float, z: np.ndarray, weights: np.ndarray) -> None:
-    """The promise of ``compiled_weights``: at heights ``z``, ``q[0] + w_0 q[1] + w_1 q[2] + ...``
-    is the compiled radius, to the bit (the kernel sums them in place of calling it)."""
-    q = np.asarray(plan.prepare(t, plan.params), dtype=float)
+def _check_weights(growth: GrowthPart, t: float, z: np.ndarray, weights: np.ndarray) -> None:
+    """The promise of a growth part's ``weights``: at heights ``z``, ``q[0] + w_0 q[1] + w_1 q[2] + ...``
+    is its radius, to the bit (the kernel sums them in place of calling it)."""
+    q = np.asarray(growth.at(t), dtype=float)
     summed = weighted_radius(q, weights)
-    radius = np.broadcast_to(plan.radius(t, z, q), z.shape)
+    radius = np.broadcast_to(growth.radius(t, z, q), z.shape)
     if weights.shape[1:] != z.shape or not np.array_equal(summed, radius):
-        raise BarkError(f"the growth law's compiled_weights ({getattr(plan.weights, '__qualname__', plan.weights)}) "
-                        f"do not reproduce its compiled radius ({getattr(plan.radius, '__qualname__', plan.radius)}) "
+        raise BarkError(f"the growth part's weights ({getattr(growth.weights, '__qualname__', growth.weights)}) "
+                        f"do not reproduce its radius ({getattr(growth.radius, '__qualname__', growth.radius)}) "
                         "at its anchors' heights: they must give q[0] + w[0]·q[1] + w[1]·q[2] + ... exactly")
 
 
@@ -1098,12 +1131,13 @@ class NumbaBackend(Backend):
 
     def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
         """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
-        the growth law's ``compiled_weights`` of each anchor's height, taken when its base is first
-        seen (an anchor's height never changes) and checked against the law's own radius then, or
-        with the next ``CHECK_BATCH`` bases that join; ``(empty, 0)`` for a law without them."""
-        if plan.weights is None:  # the plan gives them only for a radius that depends on height
+        the growth part's ``weights`` of each anchor's height, taken when its base is first seen (an
+        anchor's height never changes) and checked against the part's own radius then, or with the
+        next ``CHECK_BATCH`` bases that join; ``(empty, 0)`` for a law without them, or uniform."""
+        growth = plan.growth
+        if growth.weights is None or growth.uniform:  # only for a radius that depends on height
             return _NO_WEIGHTS
-        key = (plan.weights, plan.params.tobytes())
+        key = (growth.weights, growth.params.tobytes())
         fr = fr or self.frame(state)
         w = fr.weights
         if w is None or w.key != key:
@@ -1111,9 +1145,9 @@ class NumbaBackend(Backend):
         n = state.n_bases
         if w.count < n:
             z = np.ascontiguousarray(state.anchor[w.count:n, 2])
-            new = np.atleast_2d(np.asarray(plan.weights(z, plan.params), dtype=float))
+            new = np.atleast_2d(np.asarray(growth.weights(z, growth.params), dtype=float))
             if new.shape[1:] != z.shape:
-                _check_weights(plan, state.t, z, new)  # refuses them
+                _check_weights(growth, state.t, z, new)  # refuses them
             if w.table.shape[1] < n or w.table.shape[0] != len(new):
                 table = np.zeros((len(new), grown(w.table.shape[1], n)))
                 table[:len(w.table), :w.count] = w.table[:, :w.count]
@@ -1121,7 +1155,7 @@ class NumbaBackend(Backend):
             w.table[:, w.count:n] = new
             w.count = n
             if w.checked == 0 or n - w.checked >= CHECK_BATCH:
-                _check_weights(plan, state.t, np.ascontiguousarray(state.anchor[w.checked:n, 2]), w.table[:, w.checked:n])
+                _check_weights(growth, state.t, np.ascontiguousarray(state.anchor[w.checked:n, 2]), w.table[:, w.checked:n])
                 w.checked = n
         return w.table.ravel(), w.table.shape[1]
 
@@ -1145,7 +1179,7 @@ class NumbaBackend(Backend):
         those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
         fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
-        kernel = specialized(plan.update, plan.breaker, plan.radius, plan.prepare, plan.radii, parallel=self.threads > 1)
+        kernel = specialized(plan.update, plan.breaker, plan.growth, parallel=self.threads > 1)
         if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
             numba.set_num_threads(self.threads)
         fr = self.frame(state)
@@ -1156,7 +1190,7 @@ class NumbaBackend(Backend):
         fresh = min(fr.refresh_from, n)  # forces made again from this base on (all, if those moved)
         start = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.forces = None
-        params = np.ascontiguousarray(plan.params, dtype=float)
+        params = plan.growth.params
         constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                      float(plan.accept_load), float(plan.max_batch))
         rest, fmax, inv_fmax = fr.springs
@@ -1165,7 +1199,7 @@ class NumbaBackend(Backend):
         bp = plan.breaker.params
 
         def call(times, relax, fresh, kept):
-            flags = (bool(plan.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(fresh), self.block,
+            flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(fresh), self.block,
                      int(kept))
             return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
                           flags, fr.log, heights, start)

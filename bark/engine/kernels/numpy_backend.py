@@ -90,9 +90,10 @@ class NumpyBackend(Backend):
             for axis in range(3):
                 g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
                 x[:, axis], v[:, axis] = plan.update(x[:, axis], v[:, axis], g, hm, plan.h)
-            q = plan.prepare(t, plan.params)
-            r_x = plan.radius(t, 0.0, q) if plan.uniform else plan.radius(t, x[:, 2], q)
-            self.constrain(state, r_x, r_x if plan.uniform else plan.radius(t, z0, q))
+            growth = plan.growth
+            q = growth.at(t)
+            r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
+            self.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
             _, length = spring_geometry(x, state.pairs)
             t_all = physics.tension(length, state.rest, mech.k)
             load = largest_load(part, state, t_all, live, length)
