@@ -365,6 +365,18 @@ def plan(scene_file):
         console.print("[yellow]no time bound[/yellow]: the run ends only when its radius or patch condition holds")
 
 
+
+def _default(field) -> str:
+    """A field's default as ``bark strategies`` shows it: a factory's product (a nested strategy with
+    its own defaults), not the factory."""
+    import attrs
+
+    default = field.default
+    if isinstance(default, attrs.Factory):
+        return "(from the other fields)" if default.takes_self else repr(default.factory())
+    return repr(default)
+
+
 @cli.command(context_settings=CONTEXT)
 def strategies():
     """List the installed strategies of every kind (built-in and plugins alike)."""
@@ -384,7 +396,7 @@ def strategies():
             runs = ""
             try:
                 cls = registry.load(kind, name)
-                params = ", ".join(f"{a.alias}={a.default!r}" for a in attrs.fields(cls) if a.init)
+                params = ", ".join(f"{a.alias}={_default(a)}" for a in attrs.fields(cls) if a.init)
             except Exception as err:  # a broken plugin must not hide the others
                 params = f"(cannot load: {err})"
             else:

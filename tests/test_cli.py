@@ -235,13 +235,15 @@ def test_out_that_is_a_file_is_rejected(runner, tmp_path):
 # -- other commands ----------------------------------------------------------------------------
 
 
-def test_strategies_lists_builtins(runner):
+def test_strategies_lists_builtins(runner, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "250")  # rows whole, not cut to the terminal
     result = runner.invoke(cli, ["strategies"])
     assert result.exit_code == 0, result.output
     for name in ("sqrt", "linear", "euler-cromer", "threshold", "patches"):
         assert _names(result.output, name), name
     for kind in ("growth", "integrator", "breaker", "analyzer"):
         assert kind in result.output
+    assert "base=SqrtGrowth(r0=0.2, G=0.014)" in result.output  # a nested strategy's default, not its factory
 
 
 def test_version(runner):
