@@ -247,26 +247,31 @@ def _integrator(integrator, profile) -> list[str]:
     from hypothesis.extra import numpy as hnp
 
     name = type(integrator).__name__
-    if integrator.update is None:
-        return ["integrator: no compiled update (step runs in Python)"]
-    if not _have_numba():
-        return ["integrator: update (compiled check skipped: numba is not installed)"]
-    from bark.engine.kernels.numba_backend import update_on_axis
+    part = integrator.part_
+    if part is None:
+        return ["integrator: no part (step runs in Python)"]
+    evaluate = None
+    if _have_numba():
+        from bark.engine.kernels.numba_backend import update_on_axis
 
-    evaluate = update_on_axis(integrator.update)
+        evaluate = update_on_axis(part)
     finite = st.floats(-1e3, 1e3)
 
     @profile
     @given(st.integers(1, 30).flatmap(lambda n: st.tuples(*(hnp.arrays(float, n, elements=finite) for _ in range(3)))),
            st.floats(1e-6, 1.0), st.floats(1e-3, 10.0))
-    def update_compiled_is_numpy(xvf, h, m):
+    def update_is_elementwise_and_compiled_the_same(xvf, h, m):
         x, v, f = xvf
-        want = integrator.update(x, v, f, h / m, h)
-        got = evaluate(x, v, f, h / m, h)
-        assert all(np.array_equal(a, b) for a, b in zip(got, want)), f"{name}'s compiled update (numba) differs from numpy"
+        want = part.update(x, v, f, h / m, h, part.params)
+        each = [part.update(float(a), float(b), float(c), h / m, h, part.params) for a, b, c in zip(x, v, f)]
+        assert all(np.array_equal(w, [e[i] for e in each]) for i, w in enumerate(want)), \
+            f"{name}'s update on arrays is not its update of each element"
+        if evaluate is not None:
+            got = evaluate(x, v, f, h / m, h)
+            assert all(np.array_equal(a, b) for a, b in zip(got, want)), f"{name}'s compiled update (numba) differs from numpy"
 
-    update_compiled_is_numpy()
-    return ["integrator: compiled update = numpy"]
+    update_is_elementwise_and_compiled_the_same()
+    return ["integrator: update elementwise" + (", compiled = numpy" if evaluate else " (compiled check skipped: numba is not installed)")]
 
 
 # -- a short run on both backends ------------------------------------------------------------------

@@ -10,13 +10,15 @@ import numpy as np
 from bark.validators import one_of, positive, positive_int
 from bark.errors import BarkError, Ref
 from bark.model.stability import euler_cromer_h_max
+from bark.contract.parts import IntegratorPart
 from bark.contract.strategies import Integrator
 
 __all__ = ["EulerCromer", "ImplicitOverdamped"]
 
 
-def euler_cromer_update(x, v, f, hm, h):
-    """One axis of one base (eqs. 7–8): the velocity first, then the position with the new velocity."""
+def euler_cromer_update(x, v, f, hm, h, p):
+    """One axis of one base (eqs. 7–8): the velocity first, then the position with the new velocity
+    (no numbers of its own: ``p`` is empty)."""
     v = v + f * hm
     return x + v * h, v
 
@@ -29,16 +31,17 @@ class EulerCromer(Integrator):
         x ← x + v · dt
 
     First order; stable while ``dt`` is below ``h_max = (√(β² + 4ω²) − β)/ω²`` with ``β = b/m`` and
-    ``ω² = λ_max(K)/m`` (docs/numerics.md; ≈ 0.36 for Table 2's values).  Its compiled form is
+    ``ω² = λ_max(K)/m`` (docs/numerics.md; ≈ 0.36 for Table 2's values).  Its part is its
     ``update``: the engine runs it inside its stepping kernel.
     """
-
-    update: ClassVar = staticmethod(euler_cromer_update)
 
     bound: str = attrs.field(default="gershgorin", validator=one_of("gershgorin", "lanczos"))
     """How λ_max(K) is bounded for the stability guard: gershgorin (c + 2k·max degree; holds for
     every state of the run, however stretched) or lanczos (the current state's exact value, a
     little less conservative)."""
+
+    def part(self) -> IntegratorPart:
+        return IntegratorPart(update=euler_cromer_update)
 
     def stability_limit(self, state, forces) -> float:
         return euler_cromer_h_max(state, forces, self.bound)

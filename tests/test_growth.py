@@ -9,7 +9,6 @@ import json
 import pickle
 import subprocess
 import sys
-from typing import ClassVar
 
 import attrs
 import networkx as nx
@@ -21,7 +20,9 @@ from hypothesis import strategies as st
 from bark import Lattice, Stop
 from bark.studies import runner
 from bark.engine.scene import Scene
+from bark.contract.parts import IntegratorPart
 from bark.contract.strategies import Integrator
+from bark.validators import in_range
 from bark_plugins.integrators import EulerCromer
 
 from conftest import REPO_ROOT, build_sim
@@ -139,19 +140,35 @@ def test_a_pickled_simulation_goes_on_in_another_process(tmp_path):
         assert np.array_equal(far["spring"], sim.breaks.arrays()["spring"])
 
 
-def leapfrog_update(x, v, f, hm, h):
-    """A third party's compiled form: semi-implicit Euler written the other way round (position with
-    the old velocity, then the velocity) — a different method, so its results differ."""
+def leapfrog_update(x, v, f, hm, h, p):
+    """A third party's update: semi-implicit Euler written the other way round (position with the old
+    velocity, then the velocity), the velocity then kept less a share ``p[0]`` (its own number) — a
+    different method, so its results differ."""
     x = x + v * h
-    return x, v + f * hm
+    return x, (v + f * hm) * (1.0 - p[0])
 
 
 @attrs.frozen(kw_only=True)
 class ThirdPartyIntegrator(Integrator):
-    update: ClassVar = staticmethod(leapfrog_update)
+    drag: float = attrs.field(default=0.0, validator=in_range(0.0, 1.0, hi_open=True))
+
+    def part(self) -> IntegratorPart:
+        return IntegratorPart(update=leapfrog_update, params=(self.drag,))
 
     def stability_limit(self, state, forces) -> float:
         return EulerCromer().stability_limit(state, forces)
+
+
+def test_a_third_party_integrators_numbers_reach_the_kernel_to_the_bit():
+    runs = {}
+    for backend in ("numpy", "numba"):
+        for drag in (0.0, 0.05):
+            sim = build_sim(n_bases=400, G=0.05, dt=0.05, backend=backend, integrator=ThirdPartyIntegrator(drag=drag))
+            sim.run(Stop(until_time=5.0))
+            runs[backend, drag] = sim
+    for drag in (0.0, 0.05):
+        assert np.array_equal(runs["numpy", drag].state.x, runs["numba", drag].state.x)
+    assert not np.array_equal(runs["numba", 0.0].state.x, runs["numba", 0.05].state.x)
 
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])

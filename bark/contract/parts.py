@@ -22,6 +22,13 @@ A breaker's part (:class:`BreakerPart`)
     load's the rule's unless given); ``params`` (the breaker's numbers, a float array) always comes
     last.
 
+An integrator's part (:class:`IntegratorPart`)
+----------------------------------------------
+``update(x, v, f, hm, h, params) -> (x, v)``
+    one coordinate of one base advanced by a step ``h`` under its total force ``f`` (``hm = h/m``):
+    Euler–Cromer is ``v ← v + f·hm; x ← x + v·h``.  The surface constraint, the breaking and the
+    clock are the engine's.
+
 A growth law's part (:class:`GrowthPart`)
 ------------------------------------------
 ``radius(t, z, q) -> r``
@@ -58,7 +65,7 @@ import numpy as np
 from bark.model import physics
 from bark.errors import BarkError
 
-__all__ = ["BreakerPart", "GrowthPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
+__all__ = ["BreakerPart", "GrowthPart", "IntegratorPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
 
 SPRING_INPUTS: tuple[str, ...] = ("tension", "length", "rest", "fmax", "inv_fmax")
 """What a breaker's part may read of each spring: its tension ``k(|d| − l)`` (force units), its
@@ -172,6 +179,26 @@ class GrowthPart:
         return hash(self.key)
 
 
+@attrs.frozen(kw_only=True, eq=False)
+class IntegratorPart:
+    """An integrator's compiled work (see the module's docstring)."""
+
+    update: Callable = attrs.field(validator=_callable)
+    """``update(x, v, f, hm, h, params) -> (x, v)`` along one coordinate of one base."""
+    params: np.ndarray = attrs.field(factory=lambda: np.empty(0), converter=_params)
+    """The integrator's own numbers, passed last."""
+
+    @property
+    def key(self) -> tuple:
+        return (self.update, self.params.tobytes())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, IntegratorPart) and self.key == other.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+
 NO_BREAKING = BreakerPart(rule=physics.no_breaking, reads=("tension",))
 """The part of a layer without fracture: nothing breaks, nothing steers the step."""
 
@@ -214,5 +241,5 @@ def how_it_runs(strategy) -> str:
     if kind == "growth":
         return "compiled" if strategy.part_ is not None else "Python (radius, one step a call)"
     if kind == "integrator":
-        return "compiled" if strategy.update is not None else "Python (step)"
+        return "compiled" if strategy.part_ is not None else "Python (step, one step a call)"
     return "Python (after the run)"

@@ -28,8 +28,9 @@ elementwise function may declare it; the engine then runs it inside its stepping
 and inlined by the numba backend, on whole arrays by the numpy backend) instead of calling the
 strategy in Python once per step.  The function is the definition: the verb is derived from it.
 
-* ``Integrator.update(x, v, f, hm, h) -> (x, v)``: one axis of one base, ``hm = h/m`` (Euler–Cromer:
-  ``v ← v + f·hm; x ← x + v·h``).  ``step`` then follows from it.
+* ``Integrator.part() -> IntegratorPart``: its update of one coordinate of one base,
+  ``update(x, v, f, hm, h, params) -> (x, v)`` with ``hm = h/m`` (Euler–Cromer: ``v ← v + f·hm;
+  x ← x + v·h``), and its numbers.  ``step`` then follows from it.
 * ``Breaker.part() -> BreakerPart``: its rule, its own load (how far a spring is from breaking,
   which adaptive stepping holds to its tolerance), the per-spring fields they read and the
   breaker's numbers (:mod:`bark.contract.parts`).  ``select`` then follows from it.  A subclass that writes
@@ -49,57 +50,30 @@ from __future__ import annotations
 
 import abc
 import functools
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
 
 import attrs
 import numpy as np
 
-from bark.contract.parts import BreakerPart, GrowthPart, picks
+from bark.contract.parts import BreakerPart, GrowthPart, IntegratorPart, picks
 from bark.model.effects import Effect
 
 __all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "pattern_of"]
-
-
-_FORM_DEFAULTS: dict[str, Any] = {"update": None}
-
-
-def _form_owner(strategy, form: str) -> type | None:
-    """The nearest class of ``strategy`` (itself first) that gives the compiled ``form``.  A verb
-    derived from a compiled form uses this, so that ``super().select(...)`` in a subclass that wrote
-    ``select`` again (and so lost the rule as its own) still means the parent's rule."""
-    return next((k for k in type(strategy).__mro__ if k.__dict__.get(form) is not None), None)
-
-
-def _form(strategy, form: str):
-    owner = _form_owner(strategy, form)
-    if owner is None:
-        raise NotImplementedError(f"{type(strategy).__name__} writes neither its verb nor a compiled form ({form})")
-    value = owner.__dict__[form]
-    return value.__get__(strategy, type(strategy)) if hasattr(value, "__get__") else value
 
 
 @attrs.frozen(kw_only=True)
 class Strategy(abc.ABC):
     """Common base: parameters are attrs fields, so ``attrs.evolve(s, G=0.01)`` makes a variant.
 
-    A compiled form is the definition only for the verb it came with: a subclass that writes the
-    verb again (``select``, ``step``, ``radius``) and not the compiled form loses the inherited one,
-    so the engine never runs a rule its Python verb no longer follows."""
+    A part is the definition only for the verb it came with: a subclass that writes the verb again
+    (``select``, ``step``, ``radius``) and not ``part`` loses the inherited part, so the engine never
+    runs work its Python verb no longer follows (its ``super()`` verb still means the parent's part)."""
 
     kind: ClassVar[str] = ""
-    _verb_and_form: ClassVar[tuple[str, ...]] = ()
     provides: ClassVar[tuple[Effect, ...]] = ()
     """Effects this strategy simulates beyond the model's own (``bark.model.effects.EFFECTS``): a
     scene that chooses it gets them unless its ``want`` list leaves them out, and then runs
     ``without(name)`` in its place (what a scene does not ask for is never built)."""
-
-    def __init_subclass__(cls, **kwargs) -> None:
-        super().__init_subclass__(**kwargs)
-        verb, *forms = cls._verb_and_form or ("", )
-        if verb and verb in vars(cls):
-            for form in forms:
-                if form not in vars(cls):
-                    setattr(cls, form, _FORM_DEFAULTS[form])
 
     def params(self) -> dict[str, Any]:
         """Constructor keywords of this strategy, as given (for summaries and sweeps)."""
@@ -163,23 +137,42 @@ class Growth(Strategy):
 
 @attrs.frozen(kw_only=True)
 class Integrator(Strategy):
-    """Time integration of the equations of motion (eqs. 5–8)."""
+    """Time integration of the equations of motion (eqs. 5–8).
+
+    An integrator whose step is an update of each coordinate of each base declares it as an
+    :class:`~bark.contract.parts.IntegratorPart` (``part()``); ``step`` is then derived from it.  A
+    class that writes ``step`` and not ``part`` (an implicit method, solving a system) has no part:
+    it runs on the Python path, one step a call."""
 
     kind: ClassVar[str] = "integrator"
-    _verb_and_form: ClassVar[tuple[str, ...]] = ("step", "update")
-    update: ClassVar[Callable | None] = None
-    """Compiled form ``update(x, v, f, hm, h) -> (x, v)`` (see the module's docstring), or ``None``."""
     overdamped: ClassVar[bool] = False
     """Whether it integrates the massless limit ``b·dx/dt = F(x)`` rather than eq. 3 (masses, inertia):
     no stability limit from the masses; a work-precision study measures it against that model."""
 
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "step" in vars(cls) and "part" not in vars(cls):
+            cls.part = Integrator.part
+
+    def part(self) -> IntegratorPart | None:
+        """This integrator's compiled work, or ``None`` (its ``step`` alone, in Python)."""
+        return None
+
+    @functools.cached_property
+    def part_(self) -> IntegratorPart | None:
+        """``part()``, made once (a strategy's parameters never change)."""
+        return self.part()
+
     def step(self, state, dt: float, forces) -> None:
-        """Advance ``state.x`` and ``state.v`` by ``dt`` in place (from the compiled form, when there is one)."""
-        update = _form(self, "update")
+        """Advance ``state.x`` and ``state.v`` by ``dt`` in place (from the part: its update of every
+        coordinate, on whole arrays)."""
+        part = _declared_part(self, Integrator)
+        if part is None:
+            raise NotImplementedError(f"{type(self).__name__} writes neither step nor part")
         f = forces.total(state)
         for axis in range(3):
-            state.x[:, axis], state.v[:, axis] = update(state.x[:, axis], state.v[:, axis], f[:, axis],
-                                                        dt / forces.mechanics.m, dt)
+            state.x[:, axis], state.v[:, axis] = part.update(state.x[:, axis], state.v[:, axis], f[:, axis],
+                                                             dt / forces.mechanics.m, dt, part.params)
 
     def stability_limit(self, state, forces) -> float:
         """Largest ``dt`` for which this method is stable on ``state``; ``inf`` if unconditionally stable.

@@ -6,7 +6,7 @@
   (``t = ticks × h / 2**levels``), never a running sum, so variable steps stay exact and stop times
   are hit exactly.  Adaptive stepping halves the step around breaks and doubles it back on its grid.
 * :func:`plan` — the fast-path policy: how many steps the next call takes and what may happen inside
-  it, from what the parts declare (compiled forms, breaker parts) and what must be seen from Python
+  it, from what the strategies' parts declare and what must be seen from Python
   (stop conditions, triggers, adaptive halving).
 * :func:`python_step` — one step for parts without a compiled form (an integrator that solves a
   linear system, a growth law given only as ``radius``), with the same result as a kernel call.
@@ -207,8 +207,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     clock = sim.clock
     part = breaking_part(sim.breakers)
     steers = steers_step(sim)
-    growth = sim.growth.part_
-    compiled = sim.integrator.update is not None and growth is not None and (part is not None or not steers)
+    growth, integrator = sim.growth.part_, sim.integrator.part_
+    compiled = integrator is not None and growth is not None and (part is not None or not steers)
     breaks = "python" if part is None or not compiled else "kernel" if part.decides else "candidates"
     n = 1
     if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
@@ -219,7 +219,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
     must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
     return Plan(
-        h=clock.step, times=times[:n], update=sim.integrator.update, growth=growth if compiled else None,
+        h=clock.step, times=times[:n], integrator=integrator if compiled else None, growth=growth if compiled else None,
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
         accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
         return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,

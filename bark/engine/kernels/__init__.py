@@ -9,16 +9,16 @@ method                                          does
                                                 returns whether all of them are finite
 ``constrain(state, r_x, r_anchor)``             eq. 9 on the bases (radial velocity removed) and
                                                 the anchors (radius × fixed direction)
-``steps(state, mech, plan, tension) -> Steps``  up to ``len(plan.times)`` whole steps of an integrator
-                                                with a compiled form (``Integrator.update``): forces,
-                                                update, surface, tensions, and the breakers' part
-                                                (``Breaker.part``: its rule and load); the per-step
-                                                and the many-step paths are this one call
+``steps(state, mech, plan, tension) -> Steps``  up to ``len(plan.times)`` whole steps with the
+                                                strategies' parts (``bark.contract.parts``): forces,
+                                                the integrator's update, the surface at the growth
+                                                law's radius, tensions, the breakers' rule and load;
+                                                the per-step and the many-step paths are this one call
 ``patch_labels(state) -> labels``               connected components of the intact springs, numbered
                                                 in order of each component's smallest base
 =============================================  ====================================================
 
-Both backends evaluate the physics of :mod:`bark.model.physics` and the plugins' compiled forms, the
+Both backends evaluate the physics of :mod:`bark.model.physics` and the strategies' parts, the
 same functions; they differ only in the order sums are taken (results agree to round-off).
 ``numpy`` is always there; ``numba`` (compiled, cached on disk) is used when importable and the run
 is long enough to repay its start (``auto``; the results are the same to the bit).  A backend
@@ -31,13 +31,12 @@ import importlib
 import importlib.util
 import math
 import sys
-from typing import Callable
 
 import attrs
 import numpy as np
 
 from bark.errors import BarkError, Ref
-from bark.contract.parts import NO_BREAKING, BreakerPart, GrowthPart
+from bark.contract.parts import NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
 
 __all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
 
@@ -52,8 +51,9 @@ class Plan:
     """Length of every step of the call."""
     times: np.ndarray
     """Time at the end of each step (from the integer clock: exact, whatever the split into calls)."""
-    update: Callable | None
-    """The integrator's compiled form: ``update(x, v, f, h/m, h) -> (x, v)`` along one axis."""
+    integrator: IntegratorPart | None
+    """The integrator's part (``bark.contract.parts``): its update of one coordinate of one base
+    (``None``: one step in Python)."""
     growth: GrowthPart | None
     """The growth law's part (``bark.contract.parts``): its radius, once a step what depends on time
     alone, and per base what depends on height (``None``: one step in Python)."""

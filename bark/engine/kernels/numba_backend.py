@@ -1,10 +1,10 @@
-"""The numba backend: the physics of :mod:`bark.model.physics` and the plugins' compiled forms, compiled.
+"""The numba backend: the physics of :mod:`bark.model.physics` and the strategies' parts, compiled.
 
 **One stepping kernel.**  ``_steps_kernel`` is written once, with the integrator's update, the
 breaking rule and the growth law's radius as parameters.  Each combination gets a tiny wrapper,
 generated into a file of its own (``specialized``), that passes those functions in: numba inlines
 them into the loop (as fast as writing them out, measured) and caches the wrapper on disk like any
-other function, so a plugin's compiled form costs a compilation once, not per run.  The per-step and
+other function, so a plugin's part costs a compilation once, not per run.  The per-step and
 the many-step paths are calls of this one kernel, so their bits agree by construction.
 
 Each piece of physics is :mod:`bark.model.physics`'s function, inlined (``inline="always"``).  No
@@ -221,7 +221,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
 
 
 @inline
-def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update):
+def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip):
     """Base ``q`` moved by its total force (eq. 4: its springs' forces in f, used up and zeroed, its
     anchor at ``(anchor_x, anchor_y)`` and its own height, damping) through the integrator's update:
     its new position and velocity, not yet on the surface."""
@@ -232,14 +232,14 @@ def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update):
     f0[q] = 0.0
     f1[q] = 0.0
     f2[q] = 0.0
-    px, u0 = update(x0[q], v0[q], g0, hm, h)
-    py, u1 = update(x1[q], v1[q], g1, hm, h)
-    pz, u2 = update(x2[q], v2[q], g2, hm, h)
+    px, u0 = update(x0[q], v0[q], g0, hm, h, ip)
+    py, u1 = update(x1[q], v1[q], g1, hm, h, ip)
+    pz, u2 = update(x2[q], v2[q], g2, hm, h, ip)
     return px, py, pz, u0, u1, u2
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, radii, params, uniform, r_now, r_before, from_radius, heights, block):
+def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now, r_before, from_radius, heights, block):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
@@ -257,9 +257,9 @@ def _base_pass(bases, c, b, hm, h, t, update, radii, params, uniform, r_now, r_b
         lo, hi = blk * block, min(n, (blk + 1) * block)
         part = _slices(bases, lo, hi)
         if uniform:
-            block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, r_now, r_before, from_radius)
+            block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
         else:
-            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, radii, params, weights, stride, lo)
+            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, ip, radii, params, weights, stride, lo)
     return block_bad.sum() == 0
 
 
@@ -272,7 +272,7 @@ def _slices(bases, lo, hi):
 
 
 @inline
-def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
+def _uniform_radius(bases, c, b, hm, h, update, ip, r_now, r_before, from_radius):
     """``_base_pass`` on a block, for a radius that does not depend on height; returns how many bases
     went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
@@ -280,7 +280,7 @@ def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
     for q in range(x0.shape[0]):
         anchor_x = r_before * dx[q] if from_radius else ax[q]
         anchor_y = r_before * dy[q] if from_radius else ay[q]
-        px, py, pz, u0, u1, u2 = _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update)
+        px, py, pz, u0, u1, u2 = _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip)
         r = r_now
         scale = _surface_scale(px, py, r)
         px *= scale
@@ -297,7 +297,7 @@ def _uniform_radius(bases, c, b, hm, h, update, r_now, r_before, from_radius):
 
 
 @inline
-def _per_base_radius(bases, c, b, hm, h, t, update, radii, params, weights, stride, first):
+def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, stride, first):
     """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
     the forces and the update (no calls: SIMD lanes), the radius at each base's height (the growth
     law's block form, its part's ``radii``, or its ``radius`` called per height), the
@@ -310,7 +310,7 @@ def _per_base_radius(bases, c, b, hm, h, t, update, radii, params, weights, stri
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
-        x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update)
+        x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update, ip)
     by_weights = stride > 0
     r_at = np.empty(n)  # each base's radius at its height
     radii(t, x2, params, r_at)
@@ -376,12 +376,13 @@ def _refresh(x, runs, rest, k, live, f, work, first):
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags, log,
                   heights, start, update, rule, load, radius, prepare, radii):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log, whether the rule named a candidate in the last
     step)``, the load NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
-    part's (its numbers ``bp``).
+    part's (its numbers ``bp``), ``update`` the integrator part's (its numbers ``ip``), ``radius``,
+    ``prepare`` and ``radii`` the growth part's (its numbers ``params``).
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
@@ -425,7 +426,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         t = times[step]
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
-        finite = _base_pass(bases, c, b, hm, h, t, update, radii, q, uniform, r_now, r_before,
+        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
                             uniform and step > 0, heights, block)
         r_before = r_now
         before = n_log
@@ -515,7 +516,7 @@ def _last_load(x, runs, rest, k, live, fmax, inv_fmax, work, broke, load, bp):
     return top
 
 
-# -- one wrapper per combination of compiled forms, generated and cached ---------------------------
+# -- one wrapper per combination of parts, generated and cached -----------------------------------
 
 _WRAPPER = '''"""Generated by bark: its stepping kernel specialised for {names}.  Safe to delete."""
 import numba
@@ -530,9 +531,10 @@ _radii = {radii}
 {adapters}
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log, heights, start):
-    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
-                         heights, start, _update, _rule, _load, _radius, _prepare, _radii)
+def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags, log, heights,
+          start):
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags,
+                         log, heights, start, _update, _rule, _load, _radius, _prepare, _radii)
 '''
 
 _ADAPTERS = '''
@@ -628,7 +630,7 @@ def _helpers(fn, seen=None) -> list:
 
 
 def _make_jitable(functions) -> None:
-    """Let compiled code call these plain functions (``register_jitable``): a plugin's compiled form
+    """Let compiled code call these plain functions (``register_jitable``): a plugin's part
     may call its own helpers without importing numba.  They are inlined where called, as the compiled
     forms themselves are: a call per base and step otherwise costs more than the helper (a bulge's
     profile: 3.5x slower measured)."""
@@ -701,28 +703,29 @@ def radius_at_heights(growth):
     return evaluate
 
 
-def update_on_axis(update):
-    """``evaluate(x, v, f, hm, h) -> (x, v)``: an integrator's compiled update at each entry, compiled
-    as the stepping kernel compiles it (for the contract kit)."""
-    u = inline(update)
-    _make_jitable(_helpers(update)[1:])
+def update_on_axis(part):
+    """``evaluate(x, v, f, hm, h) -> (x, v)``: an integrator part's update at each entry, compiled as
+    the stepping kernel compiles it (for the contract kit)."""
+    u = inline(part.update)
+    _make_jitable(_helpers(part.update)[1:])
 
     @numba.njit(error_model="numpy")
-    def each(x, v, f, hm, h, x_out, v_out):
+    def each(x, v, f, hm, h, ip, x_out, v_out):
         for i in range(x.shape[0]):
-            x_out[i], v_out[i] = u(x[i], v[i], f[i], hm, h)
+            x_out[i], v_out[i] = u(x[i], v[i], f[i], hm, h, ip)
 
     def evaluate(x, v, f, hm, h):
         x, v, f = (np.ascontiguousarray(a, dtype=float) for a in (x, v, f))
         x_out, v_out = np.empty_like(x), np.empty_like(v)
-        each(x, v, f, float(hm), float(h), x_out, v_out)
+        each(x, v, f, float(hm), float(h), part.params, x_out, v_out)
         return x_out, v_out
 
     return evaluate
 
 
-def specialized(update, breaker, growth, parallel=False):
-    """The stepping kernel with ``update``, the breaker part's rule and load (``breaker``, a
+def specialized(integrator, breaker, growth, parallel=False):
+    """The stepping kernel with the integrator part's ``update`` (``integrator``, an
+    :class:`~bark.contract.parts.IntegratorPart`), the breaker part's rule and load (``breaker``, a
     :class:`~bark.contract.parts.BreakerPart`) and the growth part's functions (``growth``, a
     :class:`~bark.contract.parts.GrowthPart`: its radius, its per-step ``time`` — given its inner
     part's functions when it has one — and its block form, or its radius per height) inlined
@@ -730,7 +733,7 @@ def specialized(update, breaker, growth, parallel=False):
     shared among threads if ``parallel``.  Functions that cannot be imported by name (lambdas, local
     functions) get a wrapper compiled in this process only."""
     inner = growth.inner
-    named = {"update": update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
+    named = {"update": integrator.update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
              "load": breaker.load, "radii": growth.radii,
              "inner_time": inner.time if inner is not None else None,
              "inner_radius": inner.radius if inner is not None else None}
@@ -742,15 +745,15 @@ def specialized(update, breaker, growth, parallel=False):
     _make_jitable(helpers)
     names = {k: _importable(fn) for k, fn in named.items()}
     if None in names.values():
-        u, g = inline(update), inline(growth.radius)
+        u, g = inline(integrator.update), inline(growth.radius)
         p = _time_of(growth)
         block = each_height(g) if growth.radii is None else inline(growth.radii)
         rule, load = adapted(breaker)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
-        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, flags, log,
+        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags, log,
                   heights, start):
-            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip,
                                  flags, log, heights, start, u, rule, load, g, p, block)
 
         _SPECIALIZED[key] = steps
@@ -802,7 +805,7 @@ def _write_once(name: str, text: str) -> Path:
     raise OSError("no folder to write bark's generated kernels to: set BARK_CACHE_DIR")
 
 
-# -- per-step operations (integrators without a compiled form, growth laws without one) ---------
+# -- per-step operations (integrators and growth laws without a part) ---------------------------
 
 
 @jit
@@ -1179,7 +1182,7 @@ class NumbaBackend(Backend):
         those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
         fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
-        kernel = specialized(plan.update, plan.breaker, plan.growth, parallel=self.threads > 1)
+        kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=self.threads > 1)
         if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
             numba.set_num_threads(self.threads)
         fr = self.frame(state)
@@ -1196,13 +1199,13 @@ class NumbaBackend(Backend):
         rest, fmax, inv_fmax = fr.springs
         heights = self._heights(state, plan, fr)
 
-        bp = plan.breaker.params
+        bp, ip = plan.breaker.params, plan.integrator.params
 
         def call(times, relax, fresh, kept):
             flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(fresh), self.block,
                      int(kept))
             return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
-                          flags, fr.log, heights, start)
+                          ip, flags, fr.log, heights, start)
 
         times = np.ascontiguousarray(plan.times, dtype=float)
         relax = plan.relax_flags()

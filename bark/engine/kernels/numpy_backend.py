@@ -1,4 +1,4 @@
-"""The numpy backend: the physics of :mod:`bark.model.physics` and the plugins' compiled forms on whole
+"""The numpy backend: the physics of :mod:`bark.model.physics` and the strategies' parts on whole
 arrays at once; no compiled code.  The reference, and the baseline every speed-up is quoted against
 (``bark bench speed`` also measures it against a plain vectorised numpy step)."""
 
@@ -82,6 +82,7 @@ class NumpyBackend(Backend):
         log: list[tuple[np.ndarray, int, np.ndarray]] = []
         fs = self._spring_forces(state, mech, state.x, live)
         hm = plan.h / mech.m
+        update, ip = plan.integrator.update, plan.integrator.params
         z0 = state.anchor[:, 2]
         done, load = 0, -math.inf
         relax = plan.relax_flags()
@@ -89,7 +90,7 @@ class NumpyBackend(Backend):
             x, v, a = state.x, state.v, state.anchor
             for axis in range(3):
                 g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
-                x[:, axis], v[:, axis] = plan.update(x[:, axis], v[:, axis], g, hm, plan.h)
+                x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
             growth = plan.growth
             q = growth.at(t)
             r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
