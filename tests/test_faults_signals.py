@@ -157,20 +157,26 @@ def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, m
     assert not (out / "pattern.png").exists()
 
 
+# a signal while the simulation is built: sent by the process to itself as Simulation.build begins
+_SIGNAL_WHILE_BUILDING = """
+import os, signal, sys
+from bark.engine.simulation import Simulation
+build = Simulation.build
+def build_after_a_signal(self, *args, **kwargs):
+    os.kill(os.getpid(), signal.SIGTERM)
+    return build(self, *args, **kwargs)
+Simulation.build = build_after_a_signal
+sys.argv = ["bark", "simulate", "--n-bases", "1500000", "--until-time", "1", "--quiet", "--out", sys.argv[1]]
+from bark_cli.__main__ import main
+main()
+"""
+
+
 def test_a_signal_while_a_large_scene_is_built_stops_at_once(tmp_path):
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", "--n-bases", "1500000", "--until-time", "1",
-                             "--quiet", "--out", str(out)], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
-    time.sleep(2.0)  # imports done, building the lattice and its graph (about 20 s at this size)
-    proc.send_signal(signal.SIGTERM)
-    try:
-        _, err = proc.communicate(timeout=10)  # not the whole build
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
-        raise
-    code = proc.returncode
-    assert code == 143 and err == "bark: terminated before the run began: nothing was run\n", err
+    proc = subprocess.run([sys.executable, "-c", _SIGNAL_WHILE_BUILDING, str(out)], cwd=REPO_ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert (proc.returncode, proc.stderr) == (143, "bark: terminated before the run began: nothing was run\n"), proc.stderr
     assert not out.exists()
 
 
