@@ -170,7 +170,7 @@ def _breaker(breaker, profile) -> list[str]:
     name = type(breaker).__name__
     if part is None:
         return ["part: none (select runs in Python after every step)"]
-    evaluate = _compiled_part(part)
+    evaluate = _compiled(part, "part_on_springs")
 
     @profile
     @given(_spring_data())
@@ -200,12 +200,14 @@ def _breaker(breaker, profile) -> list[str]:
     return ["breaker part: elementwise, select follows" + (", compiled = numpy" if evaluate else "")]
 
 
-def _compiled_part(part):
+def _compiled(part, how: str):
+    """The part compiled as the stepping kernel compiles it, by ``bark.engine.kernels.numba_backend``'s
+    function ``how`` (``None`` where numba is not installed)."""
     if not _have_numba():
         return None
-    from bark.engine.kernels.numba_backend import part_on_springs
+    from bark.engine.kernels import numba_backend
 
-    return part_on_springs(part)
+    return getattr(numba_backend, how)(part)
 
 
 # -- growth laws and integrators -------------------------------------------------------------------
@@ -219,11 +221,7 @@ def _growth(growth, profile) -> list[str]:
     part = growth.part_
     if part is None:
         return ["growth: no part (radius runs in Python)"]
-    evaluate = None
-    if _have_numba():
-        from bark.engine.kernels.numba_backend import radius_at_heights
-
-        evaluate = radius_at_heights(part)
+    evaluate = _compiled(part, "radius_at_heights")
 
     @profile
     @given(st.floats(0.0, 1e4), hnp.arrays(float, st.integers(1, 30), elements=st.floats(-10.0, 10.0)))
@@ -250,11 +248,7 @@ def _integrator(integrator, profile) -> list[str]:
     part = integrator.part_
     if part is None:
         return ["integrator: no part (step runs in Python)"]
-    evaluate = None
-    if _have_numba():
-        from bark.engine.kernels.numba_backend import update_on_axis
-
-        evaluate = update_on_axis(part)
+    evaluate = _compiled(part, "update_on_axis")
     finite = st.floats(-1e3, 1e3)
 
     @profile

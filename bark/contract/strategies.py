@@ -75,6 +75,26 @@ class Strategy(abc.ABC):
     scene that chooses it gets them unless its ``want`` list leaves them out, and then runs
     ``without(name)`` in its place (what a scene does not ask for is never built)."""
 
+    verb: ClassVar[str] = ""
+    """The verb a part defines (``radius``, ``step``, ``select``): a class that writes it again and
+    not ``part`` has no part."""
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.verb and cls.verb in vars(cls) and "part" not in vars(cls):
+            cls.part = Strategy.part
+
+    def part(self):
+        """This strategy's compiled work (a :mod:`bark.contract.parts` value), or ``None``: its verb
+        alone, in Python."""
+        return None
+
+    @functools.cached_property
+    def part_(self):
+        """``part()``, made once (a strategy's parameters never change; the engine asks at every call
+        of its kernel)."""
+        return self.part()
+
     def params(self) -> dict[str, Any]:
         """Constructor keywords of this strategy, as given (for summaries and sweeps)."""
         return attrs.asdict(self, recurse=False)
@@ -94,25 +114,11 @@ class Growth(Strategy):
     ``part`` has no part: it runs on the Python path, one step a call."""
 
     kind: ClassVar[str] = "growth"
-
-    def __init_subclass__(cls, **kwargs) -> None:
-        super().__init_subclass__(**kwargs)
-        if "radius" in vars(cls) and "part" not in vars(cls):
-            cls.part = Growth.part
-
-    def part(self) -> GrowthPart | None:
-        """This law's compiled work, or ``None`` (its ``radius`` alone, in Python)."""
-        return None
-
-    @functools.cached_property
-    def part_(self) -> GrowthPart | None:
-        """``part()``, made once (a strategy's parameters never change; the engine asks at every call
-        of its kernel and every radius it takes in Python)."""
-        return self.part()
+    verb: ClassVar[str] = "radius"
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray | float:
         """Trunk radius at time ``t`` at heights ``z`` (from the part: one value when it is uniform)."""
-        part = _declared_part(self, Growth)
+        part: GrowthPart | None = _declared_part(self)
         if part is None:
             raise NotImplementedError(f"{type(self).__name__} writes neither radius nor part")
         return part.radius_at(t, z)
@@ -145,28 +151,15 @@ class Integrator(Strategy):
     it runs on the Python path, one step a call."""
 
     kind: ClassVar[str] = "integrator"
+    verb: ClassVar[str] = "step"
     overdamped: ClassVar[bool] = False
     """Whether it integrates the massless limit ``b·dx/dt = F(x)`` rather than eq. 3 (masses, inertia):
     no stability limit from the masses; a work-precision study measures it against that model."""
 
-    def __init_subclass__(cls, **kwargs) -> None:
-        super().__init_subclass__(**kwargs)
-        if "step" in vars(cls) and "part" not in vars(cls):
-            cls.part = Integrator.part
-
-    def part(self) -> IntegratorPart | None:
-        """This integrator's compiled work, or ``None`` (its ``step`` alone, in Python)."""
-        return None
-
-    @functools.cached_property
-    def part_(self) -> IntegratorPart | None:
-        """``part()``, made once (a strategy's parameters never change)."""
-        return self.part()
-
     def step(self, state, dt: float, forces) -> None:
         """Advance ``state.x`` and ``state.v`` by ``dt`` in place (from the part: its update of every
         coordinate, on whole arrays)."""
-        part = _declared_part(self, Integrator)
+        part: IntegratorPart | None = _declared_part(self)
         if part is None:
             raise NotImplementedError(f"{type(self).__name__} writes neither step nor part")
         f = forces.total(state)
@@ -181,13 +174,12 @@ class Integrator(Strategy):
         return float("inf")
 
 
-def _declared_part(strategy, kind: type):
-    """The part of the nearest class of ``strategy`` that declares one (``kind``: the base class whose
-    ``part`` declares none): a subclass that wrote its verb again has no part of its own, but its
-    ``super()`` verb still means the parent's part."""
+def _declared_part(strategy):
+    """The part of the nearest class of ``strategy`` that declares one: a subclass that wrote its verb
+    again has no part of its own, but its ``super()`` verb still means the parent's part."""
     for klass in type(strategy).__mro__:
         declared = vars(klass).get("part")
-        if declared is not None and declared is not kind.part:
+        if declared is not None and declared is not Strategy.part:
             return declared(strategy)
     return None
 
@@ -203,26 +195,12 @@ class Breaker(Strategy):
     path, asked after every step, and does not steer the step."""
 
     kind: ClassVar[str] = "breaker"
-
-    def __init_subclass__(cls, **kwargs) -> None:
-        super().__init_subclass__(**kwargs)
-        if "select" in vars(cls) and "part" not in vars(cls):
-            cls.part = Breaker.part
-
-    def part(self) -> BreakerPart | None:
-        """This breaker's compiled work, or ``None`` (its ``select`` alone, in Python)."""
-        return None
-
-    @functools.cached_property
-    def part_(self) -> BreakerPart | None:
-        """``part()``, made once (a strategy's parameters never change; the engine asks at every call
-        of its kernel)."""
-        return self.part()
+    verb: ClassVar[str] = "select"
 
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Ids of intact springs to break, given every spring's current ``tension`` (from the part:
         the live springs its rule picks)."""
-        part = _declared_part(self, Breaker)
+        part: BreakerPart | None = _declared_part(self)
         if part is None:
             raise NotImplementedError(f"{type(self).__name__} writes neither select nor part")
         return picks(part, state, tension, state.intact)
