@@ -91,8 +91,20 @@ def _params(value) -> np.ndarray:
     return params
 
 
+class _ByKey:
+    """Equality and hashing by ``key``: two parts are equal when they are the same work."""
+
+    __slots__ = ()
+
+    def __eq__(self, other) -> bool:
+        return type(other) is type(self) and self.key == other.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+
 @attrs.frozen(kw_only=True, eq=False)
-class BreakerPart:
+class BreakerPart(_ByKey):
     """A breaker's compiled work (see the module's docstring)."""
 
     rule: Callable = attrs.field(validator=attrs.validators.is_callable())
@@ -115,12 +127,6 @@ class BreakerPart:
         """What makes two parts the same work (their functions, fields and numbers)."""
         return (self.rule, self.load, self.reads, self.load_reads, self.params.tobytes(), self.decides)
 
-    def __eq__(self, other) -> bool:
-        return isinstance(other, BreakerPart) and self.key == other.key
-
-    def __hash__(self) -> int:
-        return hash(self.key)
-
 
 def _inner(instance, attribute, value) -> None:
     if value is not None and (not isinstance(value, GrowthPart) or not value.uniform or value.inner is not None):
@@ -132,7 +138,7 @@ _optional_callable = attrs.validators.optional(_callable)
 
 
 @attrs.frozen(kw_only=True, eq=False)
-class GrowthPart:
+class GrowthPart(_ByKey):
     """A growth law's compiled work (see the module's docstring)."""
 
     radius: Callable = attrs.field(validator=_callable)
@@ -172,15 +178,9 @@ class GrowthPart:
         return (self.radius, self.time, self.weights, self.radii, self.uniform, self.params.tobytes(),
                 None if self.inner is None else self.inner.key)
 
-    def __eq__(self, other) -> bool:
-        return isinstance(other, GrowthPart) and self.key == other.key
-
-    def __hash__(self) -> int:
-        return hash(self.key)
-
 
 @attrs.frozen(kw_only=True, eq=False)
-class IntegratorPart:
+class IntegratorPart(_ByKey):
     """An integrator's compiled work (see the module's docstring)."""
 
     update: Callable = attrs.field(validator=_callable)
@@ -190,13 +190,8 @@ class IntegratorPart:
 
     @property
     def key(self) -> tuple:
+        """What makes two parts the same work (the function and the numbers)."""
         return (self.update, self.params.tobytes())
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, IntegratorPart) and self.key == other.key
-
-    def __hash__(self) -> int:
-        return hash(self.key)
 
 
 NO_BREAKING = BreakerPart(rule=physics.no_breaking, reads=("tension",))

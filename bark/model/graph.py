@@ -170,9 +170,10 @@ class LeafBaseGraph(nx.Graph):
         g = nx.Graph()
         g.add_nodes_from(self._node)
         indptr, ids, springs = self.table()
-        lower = np.repeat(np.arange(self.state.n_bases), np.diff(indptr)) < ids
-        ends = np.column_stack([np.repeat(np.arange(self.state.n_bases), np.diff(indptr)), ids])[lower]
-        g.add_edges_from((int(i), int(j), {"spring": int(k)}) for (i, j), k in zip(ends.tolist(), springs[lower].tolist()))
+        rows = np.repeat(np.arange(self.state.n_bases), np.diff(indptr))
+        once = rows < ids  # each spring once, from its lower end
+        g.add_edges_from((i, j, {"spring": k}) for i, j, k in zip(rows[once].tolist(), ids[once].tolist(),
+                                                                  springs[once].tolist()))
         return g
 
     def __reduce__(self):

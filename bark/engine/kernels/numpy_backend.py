@@ -83,6 +83,7 @@ class NumpyBackend(Backend):
         fs = self._spring_forces(state, mech, state.x, live)
         hm = plan.h / mech.m
         update, ip = plan.integrator.update, plan.integrator.params
+        growth = plan.growth
         z0 = state.anchor[:, 2]
         done, load = 0, -math.inf
         relax = plan.relax_flags()
@@ -91,7 +92,6 @@ class NumpyBackend(Backend):
             for axis in range(3):
                 g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
                 x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
-            growth = plan.growth
             q = growth.at(t)
             r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
             self.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
