@@ -128,3 +128,59 @@ def test_with_no_breakers_adaptive_steps_are_not_halved_for_tension(make_sim, ba
     assert float(np.max(sim.forces.tension(sim.state) / sim.state.fmax)) > 1.0 + sim.numerics.overshoot_tol
     assert sim.step_count == round(6.0 / sim.clock.h) and sim.clock.halvings == 0
     assert not [e for e in sim.events if e["kind"] == "overshoot"]
+
+
+class _Recorded:
+    """A Call that ends after ``ends_at`` steps with ``load``, and records what it is asked."""
+
+    def __init__(self, ends_at: int, load: float) -> None:
+        self.ends_at, self.load, self.asked = ends_at, load, []
+
+    def take(self, times, relax):
+        self.asked.append(("take", len(times)))
+        done = min(self.ends_at, len(times))
+        return done, (self.load if done == self.ends_at else 0.5), done == 2
+
+    def undo(self):
+        self.asked.append(("undo",))
+
+    def result(self, done, load, picked):
+        from bark.engine.kernels import Steps
+
+        empty = np.empty(0, np.int64)
+        return Steps(done=done, load=load, picked=picked, broken=empty, step=empty, tension=np.empty(0))
+
+
+@pytest.mark.parametrize("load, ends_at, asked, done", [
+    (math.nan, 3, [("take", 5), ("undo",), ("take", 2)], 2),   # non-finite: undone, replayed up to it
+    (1.5, 1, [("take", 5), ("undo",)], 0),                     # over at the first step: nothing to replay
+    (1.001, 3, [("take", 5)], 3),                              # within the tolerance: kept
+])
+def test_every_backend_undoes_a_step_by_one_algorithm(load, ends_at, asked, done):
+    """``take_steps`` — what every backend's ``steps`` and the Python path are — undoes a last step
+    that went non-finite or over ``accept_load`` by replaying the call up to it, and only then."""
+    from bark.engine.kernels import Plan, take_steps
+
+    plan = Plan(h=0.1, times=np.arange(1, 6) * 0.1, integrator=None, growth=None, accept_load=1.002)
+    call = _Recorded(ends_at, load)
+    result = take_steps(call, plan)
+    assert call.asked == asked and result.done == done
+    assert math.isnan(result.load) if math.isnan(load) else result.load == load
+    assert result.picked == (done == 2)
+
+
+@pytest.mark.parametrize("finite, load, candidate, broke, return_on_break, max_batch, relax, ends", [
+    (True, 0.9, False, 0, False, 10, False, False),
+    (False, 0.9, False, 0, False, 10, False, True),     # non-finite
+    (True, 1.01, False, 0, False, 10, False, True),     # over accept_load (1.002)
+    (True, 0.9, True, 0, False, 10, False, True),       # a candidate for Python
+    (True, 1.001, False, 3, False, 10, False, False),   # broke, nobody must see
+    (True, 1.001, False, 3, True, 10, False, True),     # broke, Python must see
+    (True, 1.001, False, 11, False, 10, False, True),   # a degenerate batch
+    (True, 1.0, False, 0, False, 10, True, True),       # quiet on the coarser grid
+    (True, 1.001, False, 1, False, 10, True, False),    # not quiet: the clock keeps the halved step
+])
+def test_one_rule_ends_a_call(finite, load, candidate, broke, return_on_break, max_batch, relax, ends):
+    from bark.engine.kernels import ends_call
+
+    assert ends_call(finite, load, 1.002, candidate, broke, return_on_break, max_batch, relax) == ends

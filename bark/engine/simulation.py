@@ -10,7 +10,6 @@ are the only places topology changes.  Step control and the fast-path policy are
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Any, Callable, ClassVar, Iterator
 
 import attrs
@@ -298,7 +297,7 @@ class Simulation:
             self.break_springs(result.broken, result.tension, step=first_step + result.step,
                                t=(first_tick + result.step * size) * self.clock.h_min, tension_of_ids=True)
             self._check_degenerate(np.count_nonzero(result.step == result.step[-1]))
-        if math.isnan(result.load) or result.load > plan.accept_load:
+        if plan.undoes(result.load):
             if self.clock.can_halve():
                 self.clock.halve()  # the step was undone: take it again, smaller
                 return result.done

@@ -9,7 +9,7 @@
   it, from what the strategies' parts declare and what must be seen from Python
   (stop conditions, triggers, adaptive halving).
 * :func:`python_step` — one step for parts without a compiled form (an integrator that solves a
-  linear system, a growth law given only as ``radius``), with the same result as a kernel call.
+  linear system, a growth law given only as ``radius``), by the backends' step algorithm.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from bark.contract.parts import NO_BREAKING, BreakerPart
 from bark.validators import int_in, one_of, positive
 from bark.errors import BarkError, Ref
 from bark.model.forces import ForceField
-from bark.engine.kernels import BACKENDS, Plan, Steps
+from bark.engine.kernels import BACKENDS, Call, Plan, Steps, take_steps
 
 __all__ = ["Numerics", "Clock", "plan", "steers_step", "breaking_part", "python_step", "stable_step", "check_countable",
            "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
@@ -267,23 +267,38 @@ def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
 
 
 def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
-    """One step with the integrator's ``step`` and the growth law's ``radius`` in Python, then the
-    backend's surface constraint and tensions, and the largest of the breakers' loads (their parts',
-    evaluated on whole arrays: the kernel's bits): a kernel call's result, for parts without compiled
-    forms.  A step that goes non-finite or over ``plan.accept_load`` is undone."""
-    keep = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
-    sim.integrator.step(state, plan.h, sim.forces)
-    t = float(plan.times[0])
-    r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))
-    r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
-    sim.backend.constrain(state, r_x, r_a)
-    finite = sim.backend.measure(state, mech, tension) and state.is_finite()
-    loads = [parts.largest_load(p, state, tension, state.intact) for p in {b.part_ for b in sim.breakers} if p is not None]
-    load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
-    done = 1
-    if math.isnan(load) or load > plan.accept_load:
-        for saved, arr in zip(keep, (state.x, state.v, state.anchor)):
+    """One step for parts without compiled forms, by the backends' step algorithm
+    (:func:`~bark.engine.kernels.take_steps`): a kernel call's result, a step that goes non-finite
+    or over ``plan.accept_load`` undone."""
+    return take_steps(_PythonCall(sim, state, mech, plan, tension), plan)
+
+
+class _PythonCall(Call):
+    """A call of one step with the integrator's ``step`` and the growth law's ``radius`` in Python,
+    then the backend's surface constraint and tensions, and the largest of the breakers' loads
+    (their parts', evaluated on whole arrays: the kernel's bits)."""
+
+    def __init__(self, sim, state, mech, plan: Plan, tension: np.ndarray) -> None:
+        self.sim, self.state, self.mech, self.plan, self.tension = sim, state, mech, plan, tension
+        self.start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+
+    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+        sim, state = self.sim, self.state
+        sim.integrator.step(state, self.plan.h, sim.forces)
+        t = float(times[0])
+        r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))
+        r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
+        sim.backend.constrain(state, r_x, r_a)
+        finite = sim.backend.measure(state, self.mech, self.tension) and state.is_finite()
+        loads = [parts.largest_load(p, state, self.tension, state.intact) for p in {b.part_ for b in sim.breakers}
+                 if p is not None]
+        load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
+        return 1, load, False
+
+    def undo(self) -> None:
+        for saved, arr in zip(self.start, (self.state.x, self.state.v, self.state.anchor)):
             arr[...] = saved
-        done = 0
-    empty = np.empty(0, np.int64)
-    return Steps(done=done, load=load, broken=empty, step=empty, tension=np.empty(0))
+
+    def result(self, done: int, load: float, picked: bool) -> Steps:
+        empty = np.empty(0, np.int64)
+        return Steps(done=done, load=load, broken=empty, step=empty, tension=np.empty(0))

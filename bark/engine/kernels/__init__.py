@@ -9,14 +9,19 @@ method                                          does
                                                 returns whether all of them are finite
 ``constrain(state, r_x, r_anchor)``             eq. 9 on the bases (radial velocity removed) and
                                                 the anchors (radius × fixed direction)
-``steps(state, mech, plan, tension) -> Steps``  up to ``len(plan.times)`` whole steps with the
+``call(state, mech, plan, tension) -> Call``    one call's steps (:class:`Call`) with the
                                                 strategies' parts (``bark.contract.parts``): forces,
                                                 the integrator's update, the surface at the growth
-                                                law's radius, tensions, the breakers' rule and load;
-                                                the per-step and the many-step paths are this one call
+                                                law's radius, tensions, the breakers' rule and load
 ``patch_labels(state) -> labels``               connected components of the intact springs, numbered
                                                 in order of each component's smallest base
 =============================================  ====================================================
+
+``Backend.steps`` runs a call by the one step algorithm every backend shares (:func:`take_steps`):
+each step ends the call or not by :func:`ends_call`, and a last step that is undone is taken back by
+replaying the call up to it.  A backend supplies only how its steps are computed (the numba
+backend compiles ``ends_call`` into its kernel; the Python path of ``bark.engine.stepping`` is a
+third ``Call``, of one step); the per-step and the many-step paths are this one algorithm.
 
 Both backends evaluate the physics of :mod:`bark.model.physics` and the strategies' parts, the
 same functions; they differ only in the order sums are taken (results agree to round-off).
@@ -38,7 +43,7 @@ import numpy as np
 from bark.errors import BarkError, Ref
 from bark.contract.parts import NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
 
-__all__ = ["BACKENDS", "Backend", "Plan", "Steps", "available", "resolve", "load"]
+__all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "ends_call", "take_steps", "available", "resolve", "load"]
 
 BACKENDS = ("auto", "numpy", "numba")
 
@@ -85,6 +90,20 @@ class Plan:
         """``relax`` as one bool per step."""
         return np.zeros(len(self.times), bool) if self.relax is None else np.ascontiguousarray(self.relax, dtype=bool)
 
+    def undoes(self, load: float) -> bool:
+        """Whether a step that ends with ``load`` is undone: it went non-finite (NaN) or overshot."""
+        return math.isnan(load) or load > self.accept_load
+
+
+def ends_call(finite, load, accept_load, candidate, broke, return_on_break, max_batch, relax_here):
+    """Whether a call ends after a step: the step went non-finite or its load passed ``accept_load``
+    (it is undone), the rule named a ``candidate`` for the breakers to judge in Python, it ``broke``
+    springs that Python must see (``return_on_break``) or more than ``max_batch`` of them, or it ends
+    quiet (load at most 1) where the clock may double the step (``relax_here``).  Scalars only: the
+    numba backend compiles this into its kernel, the others call it."""
+    return (not finite or load > accept_load or candidate or broke > 0 and (return_on_break or broke > max_batch)
+            or relax_here and load <= 1.0)
+
 
 @attrs.frozen
 class Steps:
@@ -105,10 +124,49 @@ class Steps:
     """Whether the rule named a candidate in the last step kept (``Plan.breaks == "candidates"``)."""
 
 
+class Call:
+    """One call of :meth:`Backend.steps` as a backend computes it; :func:`take_steps` drives it."""
+
+    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+        """Steps at ``times`` from the state the call began with, each followed by :func:`ends_call`;
+        returns ``(steps taken, the last one's load, whether the rule named a candidate in it)``, the
+        last step counted even if it is to be undone (the state holds it), its load NaN if it went
+        non-finite."""
+        raise NotImplementedError
+
+    def undo(self) -> None:
+        """The state, and what the call broke, back to where the call began."""
+        raise NotImplementedError
+
+    def result(self, done: int, load: float, picked: bool) -> Steps:
+        """What the call did, its last :meth:`take` kept."""
+        raise NotImplementedError
+
+
+def take_steps(call: Call, plan: Plan) -> Steps:
+    """The one step algorithm: the call's steps; a last step that is undone (``Plan.undoes``) is
+    taken back by replaying the call up to it from its start, exact because a step's arithmetic does
+    not depend on where calls begin and end."""
+    times, relax = np.ascontiguousarray(plan.times, dtype=float), plan.relax_flags()
+    done, load, picked = call.take(times, relax)
+    if plan.undoes(load):
+        call.undo()
+        picked = done > 1 and call.take(times[:done - 1], relax[:done - 1])[2]
+        done -= 1
+    return call.result(done, load, picked)
+
+
 class Backend:
     """The hot loop's operations (see the module's docstring)."""
 
     name = ""
+
+    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
+        """Up to ``len(plan.times)`` whole steps (:func:`take_steps` of :meth:`call`)."""
+        return take_steps(self.call(state, mech, plan, tension), plan)
+
+    def call(self, state, mech, plan: Plan, tension: np.ndarray) -> Call:
+        raise NotImplementedError
 
     def spring_forces(self, state, mech, x: np.ndarray) -> np.ndarray:
         raise NotImplementedError
@@ -117,9 +175,6 @@ class Backend:
         raise NotImplementedError
 
     def constrain(self, state, r_x, r_anchor) -> None:
-        raise NotImplementedError
-
-    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
         raise NotImplementedError
 
     def patch_labels(self, state) -> np.ndarray:

@@ -27,7 +27,6 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import inspect
-import math
 import os
 import sys
 import tempfile
@@ -41,7 +40,7 @@ from numba import prange
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, order_keys
-from bark.engine.kernels import Backend, Plan, Steps
+from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
 from bark.errors import BarkError
 from bark.model.state import grown
 from bark.model.physics import weighted_radius
@@ -58,6 +57,7 @@ _force_scale = inline(physics.spring_force_scale)
 _base_force = inline(physics.base_force)
 _surface_scale = inline(physics.surface_scale)
 _radial_speed = inline(physics.radial_speed)
+_ends_call = inline(ends_call)
 
 
 @inline
@@ -435,11 +435,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
                                                           log_t, n_log, step + 1, block)
         finite = finite and springs_finite
         done = step + 1
-        if not finite or top > accept_load or picked:
-            break
-        if n_log > before and (return_on_break or n_log - before > max_batch):
-            break
-        if relax[step] and top <= 1.0:  # quiet again on the coarser grid: the clock doubles the step
+        if _ends_call(finite, top, accept_load, picked, n_log - before, return_on_break, max_batch, relax[step]):
             break
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
@@ -760,7 +756,7 @@ def specialized(integrator, breaker, growth, parallel=False):
         return steps
     adapters = _adapters(breaker)
     digest = hashlib.sha256()
-    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), *(_source(fn) for fn in named.values()),
+    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), _source(ends_call), *(_source(fn) for fn in named.values()),
                   *(_source(fn) for fn in helpers), *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters,
                   f"parallel={bool(parallel)}"):
         digest.update(piece.encode())
@@ -1174,55 +1170,65 @@ class NumbaBackend(Backend):
     def constrain(self, state, r_x, r_anchor) -> None:
         _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
 
-    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
-        """Up to ``len(plan.times)`` steps in one kernel call.  The spring forces the last call left
-        in f are kept where they are of the positions, springs and stiffness now (``k`` the same, no
-        break outside the kernel, and the positions those the call ended with, compared in full by
-        the kernel as it copies the state it starts from): only the bases that joined since, and
-        those their springs reach, get theirs made again (from ``refresh_from``; the same bits as a
-        fresh pass over all)."""
+    def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "_NumbaCall":
+        """One kernel call's steps.  The spring forces the last call left in f are kept where they
+        are of the positions, springs and stiffness now (``k`` the same, no break outside the kernel,
+        and the positions those the call ended with, compared in full by the kernel as it copies the
+        state it starts from): only the bases that joined since, and those their springs reach, get
+        theirs made again (from ``refresh_from``; the same bits as a fresh pass over all)."""
         self.threads = self._threads(plan.threads, state.n_bases)
-        kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=self.threads > 1)
         if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
             numba.set_num_threads(self.threads)
-        fr = self.frame(state)
-        live = self._live(state, fr)
-        k = float(mech.k)
-        n = state.n_bases
-        kept = fr.kept if fr.forces == k and fr.kept <= n else -1  # the kernel compares their positions
-        fresh = min(fr.refresh_from, n)  # forces made again from this base on (all, if those moved)
-        start = tuple(a[:, i] for a in fr.start for i in range(3))
+        return _NumbaCall(self, state, mech, plan, tension)
+
+    def patch_labels(self, state) -> np.ndarray:
+        labels = np.empty(state.n_bases, dtype=np.int32)
+        _components(state.n_bases, state.pairs[:, 0], state.pairs[:, 1], state.intact, labels)
+        return labels
+
+
+class _NumbaCall(Call):
+    """One call of the kernel specialised for the plan's parts, on the backend's frame of the state."""
+
+    def __init__(self, backend: NumbaBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
+        self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
+        self.kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=backend.threads > 1)
+        fr = self.frame = backend.frame(state)
+        self.live = backend._live(state, fr)
+        self.k = float(mech.k)
+        self.kept = fr.kept if fr.forces == self.k and fr.kept <= state.n_bases else -1  # the kernel compares them
+        self.fresh = min(fr.refresh_from, state.n_bases)  # forces made again from this base on (all, if those moved)
+        self.start = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.forces = None
-        params = plan.growth.params
-        constants = (k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
-                     float(plan.accept_load), float(plan.max_batch))
+        self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
+                          float(plan.accept_load), float(plan.max_batch))
+        self.heights = backend._heights(state, plan, fr)
+        self.n_log, self.valid = 0, True  # valid: the forces in f are of the positions the last call ended with
+
+    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+        plan, fr = self.plan, self.frame
         rest, fmax, inv_fmax = fr.springs
-        heights = self._heights(state, plan, fr)
+        flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(self.fresh),
+                 self.backend.block, int(self.kept))
+        done, load, self.n_log, picked = self.kernel(
+            fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, self.live, self.constants, times, relax,
+            plan.growth.params, plan.breaker.params, plan.integrator.params, flags, fr.log, self.heights, self.start)
+        return done, load, picked
 
-        bp, ip = plan.breaker.params, plan.integrator.params
+    def undo(self) -> None:
+        fr = self.frame
+        for keep, arr in zip(fr.start, (self.state.x, self.state.v, self.state.anchor)):
+            np.copyto(arr, keep)
+        self.live[fr.log[0][:self.n_log]] = True  # what the call broke is intact again at its start
+        self.n_log, self.fresh, self.kept = 0, 0, -1  # a replay makes every force again
+        self.valid = False
 
-        def call(times, relax, fresh, kept):
-            flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(fresh), self.block,
-                     int(kept))
-            return kernel(fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp,
-                          ip, flags, fr.log, heights, start)
-
-        times = np.ascontiguousarray(plan.times, dtype=float)
-        relax = plan.relax_flags()
-        done, load, n_log, picked = call(times, relax, fresh, kept)
-        valid = True  # the forces in f are of the positions the last call ended with
-        if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
-            for keep, arr in zip(fr.start, (state.x, state.v, state.anchor)):
-                np.copyto(arr, keep)
-            live[fr.log[0][:n_log]] = True  # what the call broke is intact again at its start
-            n_log, valid, picked = 0, done > 1, False
-            if done > 1:
-                n_log, picked = call(times[: done - 1], relax[: done - 1], 0, -1)[2:]
-            done -= 1
-        if valid:  # for the next call (the kernel has put the positions it ended with in start)
-            fr.forces, fr.kept, fr.refresh_from = k, n, n
-        if plan.breaks != "kernel":  # the breakers judge in Python: they see every tension of the state left
-            self.measure(state, mech, tension)
+    def result(self, done: int, load: float, picked: bool) -> Steps:
+        state, fr, n_log = self.state, self.frame, self.n_log
+        if self.valid or done > 0:  # for the next call (the kernel has put the positions it ended with in start)
+            fr.forces, fr.kept, fr.refresh_from = self.k, state.n_bases, state.n_bases
+        if self.plan.breaks != "kernel":  # the breakers judge in Python: they see every tension of the state left
+            self.backend.measure(state, self.mech, self.tension)
         positions, step, t = (a[:n_log] for a in fr.log)
         ids = fr.ids[positions]
         if n_log:  # positions -> spring ids, by step then id
@@ -1232,11 +1238,6 @@ class NumbaBackend(Backend):
         fr.pending = ids
         return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy(),
                      picked=bool(picked))
-
-    def patch_labels(self, state) -> np.ndarray:
-        labels = np.empty(state.n_bases, dtype=np.int32)
-        _components(state.n_bases, state.pairs[:, 0], state.pairs[:, 1], state.intact, labels)
-        return labels
 
 
 BACKEND_CLASS = NumbaBackend

@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, incidence, spring_geometry
-from bark.engine.kernels import Backend, Plan, Steps
+from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
 from bark.contract.parts import largest_load, picks
 
 NAME = "numpy"
@@ -59,34 +59,35 @@ class NumpyBackend(Backend):
         v[:, 1] -= vr * x[:, 1]
         state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
 
-    def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
-        start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
-        done, load, live, log, candidate = self._run(state, mech, plan, plan.times, tension)
-        if math.isnan(load) or load > plan.accept_load:  # undo the last step: replay the call up to it (exact)
-            for keep, arr in zip(start, (state.x, state.v, state.anchor)):
-                arr[...] = keep
-            _, _, live, log, candidate = self._run(state, mech, plan, plan.times[:done], tension)
-        broke = [b for b, _, _ in log]
-        return Steps(done=done, load=load, picked=candidate,
-                     broken=np.concatenate(broke) if log else np.empty(0, np.int64),
-                     step=np.concatenate([np.full(b.size, s, np.int64) for b, s, _ in log]) if log else np.empty(0, np.int64),
-                     tension=np.concatenate([t for _, _, t in log]) if log else np.empty(0))
+    def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "_NumpyCall":
+        return _NumpyCall(self, state, mech, plan, tension)
 
-    def _run(self, state, mech, plan: Plan, times: np.ndarray, tension: np.ndarray):
-        """Steps at ``times``; stops after a step that ends the call (see ``Plan``).  Returns the steps
-        kept (a failed last step is not counted, but the state holds it: the caller replays), the
-        last load, the working intact mask, the breaks and whether the rule named a candidate in the
-        last step."""
+    def patch_labels(self, state) -> np.ndarray:
+        """Connected components of the intact springs (scipy.sparse.csgraph)."""
+        from bark.model.graph import components
+
+        return components(state.n_bases, state.pairs, state.intact)
+
+
+class _NumpyCall(Call):
+    """One call's steps on whole arrays: the parts' functions over every base and spring at once."""
+
+    def __init__(self, backend: NumpyBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
+        self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
+        self.start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+        self.log: list[tuple[np.ndarray, int, np.ndarray]] = []
+
+    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+        state, mech, plan = self.state, self.mech, self.plan
         part, breaking = plan.breaker, plan.breaks == "kernel"
         live = state.intact.copy()
-        log: list[tuple[np.ndarray, int, np.ndarray]] = []
-        fs = self._spring_forces(state, mech, state.x, live)
+        self.log = log = []
+        fs = self.backend._spring_forces(state, mech, state.x, live)
         hm = plan.h / mech.m
         update, ip = plan.integrator.update, plan.integrator.params
         growth = plan.growth
         z0 = state.anchor[:, 2]
-        done, load = 0, -math.inf
-        relax = plan.relax_flags()
+        done, load, candidate = 0, -math.inf, False
         for step, t in enumerate(times.tolist(), start=1):
             x, v, a = state.x, state.v, state.anchor
             for axis in range(3):
@@ -94,32 +95,36 @@ class NumpyBackend(Backend):
                 x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
             q = growth.at(t)
             r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
-            self.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
+            self.backend.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
             _, length = spring_geometry(x, state.pairs)
             t_all = physics.tension(length, state.rest, mech.k)
             load = largest_load(part, state, t_all, live, length)
-            if not (np.isfinite(x).all() and np.isfinite(t_all[live]).all()) or math.isnan(load):
-                return done, math.nan, live, log, False
-            if load > plan.accept_load:
-                return done, load, live, log, False
-            tension[:] = t_all
-            done = step
-            picked = picks(part, state, t_all, live, length)
-            if breaking and picked.size:
-                live[picked] = False
-                log.append((picked, step, t_all[picked]))
-            fs = self._spring_forces(state, mech, x, live)
-            if picked.size and (not breaking or plan.return_on_break or picked.size > plan.max_batch):
-                return done, load, live, log, not breaking
-            if relax[step - 1] and load <= 1.0:  # quiet again on the coarser grid: the clock doubles the step
+            finite = bool(np.isfinite(x).all() and np.isfinite(t_all[live]).all()) and not math.isnan(load)
+            load, done = (load if finite else math.nan), step
+            picked = picks(part, state, t_all, live, length) if finite else np.empty(0, np.int64)
+            candidate, broke = bool(picked.size) and not breaking, picked.size if breaking else 0
+            if not plan.undoes(load):
+                self.tension[:] = t_all
+                if broke:
+                    live[picked] = False
+                    log.append((picked, step, t_all[picked]))
+                fs = self.backend._spring_forces(state, mech, x, live)
+            if ends_call(finite, load, plan.accept_load, candidate, broke, plan.return_on_break, plan.max_batch,
+                         relax[step - 1]):
                 break
-        return done, load, live, log, False
+        return done, load, candidate
 
-    def patch_labels(self, state) -> np.ndarray:
-        """Connected components of the intact springs (scipy.sparse.csgraph)."""
-        from bark.model.graph import components
+    def undo(self) -> None:
+        for keep, arr in zip(self.start, (self.state.x, self.state.v, self.state.anchor)):
+            arr[...] = keep
+        self.log = []
 
-        return components(state.n_bases, state.pairs, state.intact)
+    def result(self, done: int, load: float, picked: bool) -> Steps:
+        log = self.log
+        return Steps(done=done, load=load, picked=picked,
+                     broken=np.concatenate([b for b, _, _ in log]) if log else np.empty(0, np.int64),
+                     step=np.concatenate([np.full(b.size, s, np.int64) for b, s, _ in log]) if log else np.empty(0, np.int64),
+                     tension=np.concatenate([t for _, _, t in log]) if log else np.empty(0))
 
 
 BACKEND_CLASS = NumpyBackend
