@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import attrs
 
-__all__ = ["Ref", "BarkError", "NonFiniteStateError", "show", "one_line"]
+__all__ = ["Ref", "BarkError", "BarkWarning", "NonFiniteStateError", "show", "one_line"]
 
 
 def show(value: Any) -> str:
@@ -35,6 +35,11 @@ def one_line(err: BaseException) -> str:
     type and the first line of its message, at most 200 characters of it."""
     text = str(err)
     return f"{type(err).__name__}: {text.splitlines()[0][:200] if text else ''}"
+
+
+class BarkWarning(UserWarning):
+    """A condition bark works around and says so in one line (a setting of the environment it ignores,
+    a cache it moves): the command line prints it as ``bark: warning: ...``."""
 
 
 @attrs.frozen

@@ -4,7 +4,11 @@ This package sits on top of the core: it imports click, rich and matplotlib, and
 imports it.
 """
 
+import os
 import signal
+import tempfile
+import warnings
+from pathlib import Path
 
 REASONS = {signal.SIGINT: "interrupted", signal.SIGTERM: "terminated", signal.SIGHUP: "terminated"}
 """The signals that stop a command, in the words its one line says."""
@@ -21,3 +25,23 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, signum: int) -> None:
         super().__init__(signum)
         self.signum = signum
+
+
+def matplotlib_folder() -> None:
+    """Give matplotlib a folder it can write its settings and font cache to, before it is imported:
+    where the home cannot be written (a cluster job, a service user) a temporary one, said in one
+    line, instead of matplotlib's own paragraph (``MPLCONFIGDIR``, if set, is left as it is)."""
+    if os.environ.get("MPLCONFIGDIR"):  # matplotlib takes an empty one as not set
+        return
+    from bark.engine.kernels.numba_env import writable
+
+    home = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
+    if writable(Path(home) / "matplotlib"):
+        return
+    folder = Path(tempfile.gettempdir()) / f"bark-matplotlib-{os.getuid() if hasattr(os, 'getuid') else 0}"
+    if writable(folder):
+        os.environ["MPLCONFIGDIR"] = str(folder)
+        from bark.errors import BarkWarning
+
+        warnings.warn(f"matplotlib cannot write its settings in {home!r}: keeping them in {str(folder)!r}",
+                      BarkWarning, stacklevel=2)

@@ -13,14 +13,16 @@ option or scene key as the user gave it, and exit with status 2, before anything
 from __future__ import annotations
 
 import contextlib
+import logging
 import shlex
 import signal
 import sys
 import threading
+import warnings
 
 import click
 
-from bark.errors import BarkError
+from bark.errors import BarkError, BarkWarning
 from bark.engine.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.contract.strategies import KINDS
 from bark_cli import REASONS, Interrupted
@@ -35,6 +37,8 @@ class BarkGroup(click.Group):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         token = NAMER.set(None)
+        warnings.showwarning = _show_warning
+        _listen_to_the_library()
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.ClickException as err:
@@ -216,6 +220,32 @@ def _warn(message: str) -> None:
     click.echo(f"bark: warning: {message}", err=True)
 
 
+_python_show_warning = warnings.showwarning
+
+
+class _Notices(logging.Handler):
+    """The library's notices (logger ``bark``, level INFO: a first compilation) as ``bark: ...`` lines."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        _notice(record.getMessage())
+
+
+def _listen_to_the_library(quiet: bool = False) -> None:
+    log = logging.getLogger("bark")
+    if not any(isinstance(h, _Notices) for h in log.handlers):
+        log.addHandler(_Notices())
+        log.propagate = False
+    log.setLevel(logging.WARNING if quiet else logging.INFO)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """The library's warnings (:class:`~bark.errors.BarkWarning`) as one line, ``bark: warning: ...``."""
+    if issubclass(category, BarkWarning):
+        _warn(str(message))
+    else:
+        _python_show_warning(message, category, filename, lineno, file, line)
+
+
 def _notice(message: str) -> None:
     click.echo(f"bark: {message}", err=True)
 
@@ -259,6 +289,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
     steps, writes the outputs and a checkpoint, and prints the command that goes on."""
     from bark.studies import runner
 
+    _listen_to_the_library(quiet)
     if resume is not None:
         given = [p for p, v in ctx.params.items()
                  if ctx.get_parameter_source(p) == click.core.ParameterSource.COMMANDLINE

@@ -28,6 +28,7 @@ from bark.errors import one_line
 from bark.units import unwrap
 from bark.engine.stepping import cores
 from bark.units import metres
+from bark_cli import matplotlib_folder
 
 
 @attrs.frozen
@@ -210,6 +211,7 @@ class Painter:
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
         self._ends: list = []
+        matplotlib_folder()  # here: the drawing processes inherit it, and the warning is said once, here
         if "fork" in multiprocessing.get_all_start_methods() and sys.platform.startswith("linux"):
             count = max(1, workers if workers is not None else min(2, cores()))
             ctx = multiprocessing.get_context("fork")

@@ -11,10 +11,15 @@ import io
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import LineCollection
-from matplotlib.figure import Figure
-from scipy.ndimage import distance_transform_edt  # here, not in raster(): the drawing process imports it while the run goes on
+
+from bark_cli import matplotlib_folder
+
+matplotlib_folder()  # before matplotlib looks for its own
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from scipy.ndimage import distance_transform_edt  # noqa: E402 — here, not in raster(): the drawing process imports it while the run goes on
 
 from bark.io.files import atomic_write
 

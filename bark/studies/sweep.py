@@ -42,6 +42,7 @@ import numpy as np
 from bark.errors import BarkError, Ref
 from bark.io.output import PATTERN_KEYS
 from bark.engine.stepping import cores
+from bark.engine.kernels import numba_env
 
 __all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "FIG9_AXES", "RESULT_COLUMNS"]
 
@@ -285,6 +286,7 @@ def _local(todo: list[Point], workers: int):
     from concurrent.futures.process import BrokenProcessPool
 
     workers = min(workers, len(todo))
+    numba_env.thread_count()  # a value numba would fail on is dropped here, once, not in every worker
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_worker_start, initargs=(max(1, cores() // workers),))
     try:

@@ -36,11 +36,12 @@ import importlib
 import importlib.util
 import math
 import sys
+import warnings
 
 import attrs
 import numpy as np
 
-from bark.errors import BarkError, Ref
+from bark.errors import BarkError, BarkWarning, Ref
 from bark.contract.parts import NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
 
 __all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "ends_call", "take_steps", "available", "resolve", "load"]
@@ -217,5 +218,16 @@ def resolve(name: str, work: float | None = None) -> str:
 def load(name: str, work: float | None = None) -> Backend:
     """A new instance of the backend ``name`` stands for (``resolve``; its module imported only when
     asked for; its compiled code is shared, its work buffers are this instance's: one per simulation)."""
-    module = importlib.import_module(f"bark.engine.kernels.{resolve(name, work)}_backend")
+    concrete = resolve(name, work)
+    try:
+        module = importlib.import_module(f"bark.engine.kernels.{concrete}_backend")
+    except (ImportError, OSError) as err:  # numba installed but unusable here (no cache folder, a broken install)
+        if concrete != "numba":
+            raise
+        if name != "auto":
+            raise BarkError(f"{{0}} cannot be loaded here ({type(err).__name__}: {err}): use the numpy backend",
+                            Ref("run", "backend", name)) from err
+        warnings.warn(f"the numba backend cannot be loaded here ({type(err).__name__}: {err}): running on numpy, "
+                      "with the same results, more slowly", BarkWarning, stacklevel=2)
+        module = importlib.import_module("bark.engine.kernels.numpy_backend")
     return module.BACKEND_CLASS()

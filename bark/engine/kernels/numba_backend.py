@@ -24,29 +24,41 @@ costs a few microseconds to start: ``PARALLEL_BASES``).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.util
 import inspect
+import logging
 import os
+import pickle
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import attrs
-import numba
-import numba.extending
+
+from bark.engine.kernels import numba_env
+
+numba_env.settle()  # before numba reads the environment
+
+import numba  # noqa: E402
+import numba.core.caching  # noqa: E402
+import numba.extending  # noqa: E402
 import numpy as np
 from numba import prange
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, order_keys
 from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
-from bark.errors import BarkError
+from bark.errors import BarkError, BarkWarning
 from bark.model.state import grown
 from bark.model.physics import weighted_radius
 from bark.contract.parts import GrowthPart
 
 NAME = "numba"
+LOG = logging.getLogger("bark")
+"""Where the backend says what takes long (a first compilation): a notice, not a warning."""
 
 jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 inline = numba.njit(inline="always", error_model="numpy")
@@ -600,11 +612,9 @@ def _source(fn) -> str:
 
 
 def cache_dir() -> Path:
-    """Where generated kernels live: ``$BARK_CACHE_DIR``, else ``$XDG_CACHE_HOME/bark``, else
-    ``~/.cache/bark`` (numba caches their compiled code beside them)."""
-    base = os.environ.get("BARK_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "bark")
-    return Path(base) / "kernels"
+    """Where generated kernels live: ``kernels`` in bark's cache folder (``numba_env.cache_dir``;
+    numba caches their compiled code beside them)."""
+    return numba_env.cache_dir() / "kernels"
 
 
 _JITABLE: set = set()
@@ -774,6 +784,9 @@ def specialized(integrator, breaker, growth, parallel=False):
                            adapters=adapters, parallel=bool(parallel))
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
+    if not _compiled_before(path):
+        LOG.info(f"compiling the stepping kernel for {integrator.update.__name__}, {breaker.rule.__name__} and "
+                 f"{growth.radius.__name__} (once: later runs load it from {str(path.parent)!r})")
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
@@ -782,22 +795,90 @@ def specialized(integrator, breaker, growth, parallel=False):
     return module.steps
 
 
+def _cache_folders(source: Path) -> list[Path]:
+    """The folders numba may cache the compiled functions of ``source`` in (its locators': under
+    ``NUMBA_CACHE_DIR``, beside the source, in the user's cache)."""
+    sub = numba.core.caching._CacheLocator.get_suitable_cache_subpath(str(source))
+    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    given = [Path(os.environ["NUMBA_CACHE_DIR"]) / sub] if os.environ.get("NUMBA_CACHE_DIR") else []
+    return [*given, source.parent / "__pycache__", Path(home) / "numba" / sub]
+
+
+def _holds(path: Path, text: str) -> bool:
+    """Whether the file ``path`` holds ``text`` (not missing, damaged or another's)."""
+    try:
+        return path.read_text(encoding="utf-8") == text
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def _compiled_before(source: Path) -> bool:
+    """Whether numba has compiled code cached for the functions of ``source`` (an index file of
+    theirs, undamaged: a damaged entry is removed, and compiled again)."""
+    _drop_damaged(source)
+    return any(next(folder.glob(f"{source.stem}.*.nbi"), None) is not None for folder in _cache_folders(source))
+
+
+def _drop_damaged(source: Path) -> None:
+    """Remove numba's cache entries of ``source``'s functions that cannot be read (a garbled or
+    truncated file): numba would stop with a traceback on them, and compiles the function again
+    without them.  Each file is read through to its end as a pickle, nothing in it built or imported
+    (``_Readable``)."""
+    for folder in _cache_folders(source):
+        for index in folder.glob(f"{source.stem}.*.nbi") if folder.is_dir() else ():
+            entries = [index, *index.parent.glob(f"{index.name[:-len('.nbi')]}.*.nbc")]
+            try:
+                with open(index, "rb") as fh:
+                    _Readable(fh).load()  # the version, then the stamp and the names of the data files
+                    _Readable(fh).load()
+                for data in entries[1:]:
+                    with open(data, "rb") as fh:
+                        _Readable(fh).load()
+            except Exception:  # noqa: BLE001 — any failure to read is a damaged entry
+                for entry in entries:
+                    with contextlib.suppress(OSError):
+                        entry.unlink()
+                warnings.warn(f"numba's cache entry {str(index)!r} was damaged: removed, compiled again", BarkWarning,
+                              stacklevel=2)
+
+
+class _Anything:
+    """What :class:`_Readable` makes of every class a pickle names: it takes any arguments and state."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        pass
+
+    def __setstate__(self, state) -> None:
+        pass
+
+
+class _Readable(pickle.Unpickler):
+    """Reads a pickle through without importing or building what it names: a check of its form."""
+
+    def find_class(self, module, name):
+        return _Anything
+
+
 def _write_once(name: str, text: str) -> Path:
-    """The generated file ``name``.py, written (atomically) if it is not there yet; in a temporary
-    folder when the cache folder cannot be written (then compiled once per process)."""
-    for folder in (cache_dir(), Path(tempfile.gettempdir()) / f"bark-kernels-{os.getuid() if hasattr(os, 'getuid') else 0}"):
+    """The generated file ``name``.py holding ``text``: written (atomically) unless it is there with
+    that text already (a damaged one is written again); in the temporary folder, said in one line,
+    when bark's cache folder cannot be written (numba then caches its compiled code there too)."""
+    first = cache_dir()
+    for folder in (first, Path(tempfile.gettempdir()) / f"bark-kernels-{os.getuid() if hasattr(os, 'getuid') else 0}"):
         path = folder / f"{name}.py"
-        if path.exists():
-            return path
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-            with os.fdopen(fd, "w") as fh:
-                fh.write(text)
-            os.replace(tmp, path)
-            return path
-        except OSError:
-            continue
+        if not _holds(path, text):
+            try:
+                folder.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
+                with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                    fh.write(text)
+                os.replace(tmp, path)
+            except OSError:
+                continue
+        if folder is not first:
+            warnings.warn(f"bark's cache folder {str(first)!r} cannot be written: generated kernels go to "
+                          f"{str(folder)!r} (BARK_CACHE_DIR chooses another)", BarkWarning, stacklevel=2)
+        return path
     raise OSError("no folder to write bark's generated kernels to: set BARK_CACHE_DIR")
 
 
@@ -1241,3 +1322,5 @@ class _NumbaCall(Call):
 
 
 BACKEND_CLASS = NumbaBackend
+
+_drop_damaged(Path(__file__))  # this module's own compiled functions load lazily, at their first call: after this

@@ -1,0 +1,94 @@
+"""numba's settings, made safe before numba is imported.
+
+A shared node hands a job whatever its environment holds.  numba reads two things from it when it is
+first imported, and fails on ordinary values of both: ``NUMBA_NUM_THREADS`` of 0, a negative number
+or text (a ``ValueError``, or silently all cores), and a cache it cannot write (no writable
+``__pycache__`` beside bark's source and no writable home: a ``RuntimeError`` for the first cached
+function).  :func:`settle` runs before the numba backend imports numba and makes both usable: a
+thread count numba would fail on is ignored, and compiled code goes to the first place that can be
+written — ``NUMBA_CACHE_DIR`` if set, beside the source, the user's cache, bark's cache folder, the
+temporary folder.  Each change is said once, in one line (:class:`~bark.errors.BarkWarning`).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import warnings
+from pathlib import Path
+
+from bark.errors import BarkWarning
+
+__all__ = ["settle", "thread_count", "cache_dir", "writable"]
+
+_SETTLED = False
+
+
+def thread_count() -> int | None:
+    """``NUMBA_NUM_THREADS`` as a count of threads, ``None`` where it is not set; a value that is not
+    a whole number of at least 1 is removed from the environment (numba then takes the cores it sees),
+    with one line."""
+    text = os.environ.get("NUMBA_NUM_THREADS")
+    if text is None:
+        return None
+    try:
+        count = int(text.strip())
+    except ValueError:
+        count = 0
+    if count >= 1:
+        return count
+    del os.environ["NUMBA_NUM_THREADS"]
+    warnings.warn(f"NUMBA_NUM_THREADS={text!r} is not a whole number of threads of at least 1: ignored "
+                  f"(numba takes the {os.cpu_count() or 1} cores it sees)", BarkWarning, stacklevel=2)
+    return None
+
+
+def writable(folder: Path) -> bool:
+    """Whether files can be made in ``folder`` (made if missing), by the test numba's cache applies."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+        return True
+    except (OSError, ValueError):  # ValueError: a path with a NUL byte
+        return False
+
+
+def cache_dir() -> Path:
+    """bark's cache folder: ``$BARK_CACHE_DIR``, else ``$XDG_CACHE_HOME/bark``, else
+    ``~/.cache/bark`` (generated kernels, and numba's compiled code where it has nowhere else)."""
+    base = os.environ.get("BARK_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "bark")
+    return Path(base)
+
+
+def _numba_cache() -> None:
+    """Point numba's cache at a folder it can write, unless the one it would choose can be."""
+    given = os.environ.get("NUMBA_CACHE_DIR")
+    if given:  # numba takes an empty one as not set
+        if writable(Path(given)):
+            return
+        del os.environ["NUMBA_CACHE_DIR"]
+        warnings.warn(f"NUMBA_CACHE_DIR={given!r} cannot be written: ignored", BarkWarning, stacklevel=3)
+    home_cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    if writable(Path(__file__).parent / "__pycache__") or writable(Path(home_cache) / "numba"):
+        return  # numba's own choice works
+    temp = Path(tempfile.gettempdir()) / f"bark-numba-{os.getuid() if hasattr(os, 'getuid') else 0}"
+    for folder in (cache_dir() / "numba", temp):
+        if writable(folder):
+            os.environ["NUMBA_CACHE_DIR"] = str(folder)
+            warnings.warn(f"numba cannot cache compiled code beside bark or in {home_cache!r}: caching it in "
+                          f"{str(folder)!r}", BarkWarning, stacklevel=3)
+            return
+    warnings.warn("no folder can be written to cache compiled code in: the numba backend is unavailable",
+                  BarkWarning, stacklevel=3)
+    raise OSError("no writable folder for numba's cache")
+
+
+def settle() -> None:
+    """Make numba's settings usable (see the module's docstring); once per process, before numba is
+    imported.  Raises ``OSError`` where no folder at all can hold numba's cache."""
+    global _SETTLED
+    if not _SETTLED:
+        thread_count()
+        _numba_cache()
+        _SETTLED = True
