@@ -6,6 +6,7 @@ imports it.
 
 import os
 import signal
+import sys
 import tempfile
 import warnings
 from pathlib import Path
@@ -45,3 +46,30 @@ def matplotlib_folder() -> None:
 
         warnings.warn(f"matplotlib cannot write its settings in {home!r}: keeping them in {str(folder)!r}",
                       BarkWarning, stacklevel=2)
+
+
+def write_owned(folder: Path, owned: tuple, writers: dict) -> list[str]:
+    """Write a command's files into ``folder``: ``writers`` maps a file name to what writes it there
+    (called with its path), ``owned`` names every file the command may write.  One it does not write
+    this time is removed, so that nothing of an earlier call is left beside this one's; one the file
+    system refuses (a full disk, a file-size limit) is said in one line, and its earlier version
+    removed too.  Returns the files written."""
+    import contextlib
+
+    from bark.io.files import attempt
+
+    failed: list[str] = []
+    written = []
+    for name in owned:
+        if name not in writers:
+            with contextlib.suppress(OSError):
+                (folder / name).unlink(missing_ok=True)
+    for name, write in writers.items():
+        if attempt(name, lambda: write(folder / name), failed):
+            written.append(name)
+        else:
+            with contextlib.suppress(OSError):
+                (folder / name).unlink(missing_ok=True)
+    for problem in failed:
+        sys.stderr.write(f"bark: error: {problem}\n")
+    return written

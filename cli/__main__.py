@@ -24,6 +24,7 @@ def main() -> None:
 
     for sig in REASONS:  # kept until the command's own handlers take over (``bark_cli.main.Signals``)
         signal.signal(sig, stop)
+    _closed_streams_to_devnull()
     try:
         from bark_cli.main import main as command
     except KeyboardInterrupt as err:
@@ -36,6 +37,16 @@ def main() -> None:
     except SystemExit as done:  # how click ends every command
         code = done.code
     _leave(code)
+
+
+def _closed_streams_to_devnull() -> None:
+    """A standard stream the caller closed (``bark ... >&-``: Python then has ``None`` for it) writes
+    to ``/dev/null``: what would be said there is lost, the run and its exit status are not."""
+    import os
+
+    for name in ("stdout", "stderr"):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))
 
 
 def _leave(code) -> None:

@@ -50,6 +50,10 @@ class BarkGroup(click.Group):
         except StoppedBeforeStart as stop:
             click.echo(f"bark: {REASONS[stop.signum]} before the run began: nothing was run", err=True)
             sys.exit(128 + int(stop.signum))
+        except OSError as err:  # the file system refused what no command says itself: one line, status 1
+            where = f"{err.filename}: " if err.filename else ""
+            click.echo(f"bark: error: {where}{err.strerror or err}", err=True)
+            sys.exit(1)
         except (click.Abort, KeyboardInterrupt) as err:  # click makes a KeyboardInterrupt an Abort (its cause)
             signum = getattr(err.__cause__ if isinstance(err, click.Abort) else err, "signum", signal.SIGINT)
             click.echo(f"bark: {REASONS[signum]}", err=True)
@@ -345,10 +349,18 @@ def _report(outcome, quiet: bool, signum: int | None = None) -> int:
     for problem in outcome.failed:
         click.echo(f"bark: error: {problem}; every other output is in {out}", err=True)
         code = code or (128 + signum if outcome.drawing_stopped and signum is not None else 1)
+    unwritten = [p for p in outcome.failed if "could not be written" in p]
+    if unwritten and (out / "checkpoint.npz").exists():
+        click.echo(f"bark: once there is room, bark simulate --resume {shlex.quote(str(out))} writes what is missing",
+                   err=True)
     if not quiet:
         from bark_cli.progress import print_summary
 
-        print_summary(summary, out)
+        try:
+            print_summary(summary, out)
+        except OSError as err:  # a full or closed standard output: the run and its files stand
+            click.echo(f"bark: warning: the summary could not be printed ({err.strerror or err}); it is in "
+                       f"{out / 'summary.json'}", err=True)
     if outcome.stop_reason in ("interrupted", "terminated"):
         signum = {"interrupted": signal.SIGINT, "terminated": signal.SIGTERM}[outcome.stop_reason]
         click.echo(f"bark: {outcome.stop_reason} at t = {sim.state.t:.6g}; outputs of that state and a checkpoint "

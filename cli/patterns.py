@@ -14,6 +14,20 @@ import math
 import click
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
+ANALYZE_FILES = ("statistics.json", "patches.csv", "radial.png", "histogram.png")
+"""Every file ``bark analyze`` may write into its --out (the folder holds only this call's)."""
+COMPARE_FILES = ("comparison.json", "quartets.png")
+"""Every file ``bark compare`` may write into its --out."""
+
+
+def _wrote(folder, owned: tuple, writers: dict) -> int:
+    """``write_owned``, then say what was written; exit status 1 if a file could not be."""
+    from bark_cli import write_owned
+
+    written = write_owned(folder, owned, writers)
+    if written:
+        click.echo(f"wrote {', '.join(written)} to {folder}")
+    return 0 if len(written) == len(writers) else 1
 
 
 def _namer() -> None:
@@ -68,18 +82,15 @@ def analyze(pattern, min_size, out):
     (stats,) = _read_all([pattern], min_size)
     folder = writable_folder(out)
     Console(width=150).print(_statistics_table([stats]))
-    write_json(folder / "statistics.json", stats.as_dict())
-    written = ["statistics.json"]
+    writers = {"statistics.json": lambda path: write_json(path, stats.as_dict())}
     if stats.patches is not None:
-        write_csv(folder / "patches.csv", stats.patches.rows(), stats.patches.columns)
-        written.append("patches.csv")
+        writers["patches.csv"] = lambda path: write_csv(path, stats.patches.rows(), stats.patches.columns)
         if stats.n_patches:
             from bark_cli.figures import plot_histogram, plot_radial
 
-            plot_radial(stats, folder / "radial.png")
-            plot_histogram(stats, folder / "histogram.png")
-            written += ["radial.png", "histogram.png"]
-    click.echo(f"wrote {', '.join(written)} to {folder}")
+            writers.update({"radial.png": lambda path: plot_radial(stats, path),
+                            "histogram.png": lambda path: plot_histogram(stats, path)})
+    return _wrote(folder, ANALYZE_FILES, writers)
 
 
 @click.command(context_settings=CONTEXT)
@@ -142,14 +153,12 @@ def compare(patterns, min_size, mirror, out):
                           + ", ".join(f"{names[i]}→{names[j] if j >= 0 else 'none'}" for i, j in enumerate(p.nearest)))
             entry["d_p_pairing"] = {"nearest": [names[j] if j >= 0 else None for j in p.nearest], "valid": p.valid}
         report[quantity] = entry
-    write_json(folder / "comparison.json", report)
-    written = ["comparison.json"]
+    writers = {"comparison.json": lambda path: write_json(path, report)}
     if len(stats) == 4:
         from bark_cli.figures import plot_quartets
 
-        plot_quartets(result, folder / "quartets.png")
-        written.append("quartets.png")
-    click.echo(f"wrote {', '.join(written)} to {folder}")
+        writers["quartets.png"] = lambda path: plot_quartets(result, path)
+    return _wrote(folder, COMPARE_FILES, writers)
 
 
 def _shared(q, names) -> str:

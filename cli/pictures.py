@@ -176,6 +176,8 @@ def _draw_jobs(jobs, replies) -> None:
         try:
             _draw(*job)
             reply = None
+        except OSError as err:  # the file system refused the file: the command says it could not be written
+            reply = (err.errno, err.strerror or str(err))
         except Exception as err:  # reported by the command, one line
             reply = one_line(err)
         try:
@@ -260,8 +262,9 @@ class Painter:
     def submit(self, kind: str, data, path: Path, min_size: int):
         """Hand ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) to a drawing process and
         return at once with a ``wait()`` that ends when the picture is written: the command writes
-        its other outputs meanwhile.  ``wait`` raises what drawing raised (a ``RuntimeError`` naming
-        it), or ``KeyboardInterrupt`` if a signal stopped it.  Without a drawing process, draws now."""
+        its other outputs meanwhile.  ``wait`` raises what drawing raised (an ``OSError`` where the
+        file system refused the file, else a ``RuntimeError`` naming it), or ``KeyboardInterrupt`` if
+        a signal stopped it.  Without a drawing process, draws now."""
         if self._proc is None:
             _draw(kind, data, str(path), min_size)
             return lambda stop=False: None
@@ -279,6 +282,8 @@ class Painter:
                 raise
             if job.outcome is _LOST:
                 raise RuntimeError("the drawing process ended unexpectedly")
+            if isinstance(job.outcome, tuple):
+                raise OSError(*job.outcome)
             if job.outcome is not None:
                 raise RuntimeError(job.outcome)
         return wait

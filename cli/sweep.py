@@ -152,13 +152,23 @@ class _bar:
 
 def _finish(plan, folder, counts: dict, quiet: bool) -> None:
     from bark.studies.sweep import SweepTable
+    from bark_cli import write_owned
     from bark_cli.figures import plot_montage
 
     points = plan.points()
     with SweepTable(folder / "sweep.sqlite") as table:
         rows = table.rows([p.key for p in points])
         by_key = {r["key"]: r for r in rows}
-        drawn = plot_montage(plan, points, by_key, table, folder / "montage.png") if len(plan.axes) <= 2 else None
+        drawn = None
+        if len(plan.axes) <= 2:
+            def montage(path):  # nothing run yet: no sheet, and none of an earlier sweep's
+                if plot_montage(plan, points, by_key, table, path) is None:
+                    path.unlink(missing_ok=True)
+
+            write_owned(folder, ("montage.png",), {"montage.png": montage})
+            drawn = folder / "montage.png" if (folder / "montage.png").exists() else None
+        else:  # no montage for more axes: none of an earlier sweep's is left to mislead
+            write_owned(folder, ("montage.png",), {})
     if not quiet:
         from rich.console import Console
         from rich.table import Table

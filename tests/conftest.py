@@ -124,8 +124,29 @@ def assert_clean_outcome(result, out: Path | None = None) -> None:
     elif code == 0:
         assert not any(line.startswith("bark: error") for line in lines), err
     elif code == 1:
-        assert any("NaN or infinite" in line or "could not be drawn" in line for line in lines), err
+        assert any("NaN or infinite" in line or "could not be drawn" in line or "could not be written" in line
+                   for line in lines), err
     elif code in (128 + signal.SIGTERM, 128 + signal.SIGINT):
         assert "go on with: bark simulate --resume" in err or "not drawn" in err or "before the run began" in err, err
     else:
         raise AssertionError(f"exit status {code}: {err}")
+
+
+def as_a_user_who_cannot_write() -> tuple:
+    """A command prefix that runs a command as a user for whom read-only folders, bark's source and
+    a missing home cannot be written: none needed for an ordinary user; as root (who writes
+    anywhere) ``nobody``, by ``setpriv``.  Skips where no such user is to be had."""
+    import shutil
+    import subprocess
+    import sys
+
+    if os.geteuid() != 0:
+        return ()
+    if shutil.which("setpriv") is None:
+        pytest.skip("running as root without setpriv: no user to run as who cannot write")
+    prefix = ("setpriv", "--reuid=65534", "--regid=65534", "--clear-groups")
+    probe = subprocess.run([*prefix, sys.executable, "-c", "import bark_cli.main"], cwd=REPO_ROOT, capture_output=True,
+                           timeout=120)
+    if probe.returncode != 0:
+        pytest.skip("the checkout cannot be read by the user nobody")
+    return prefix

@@ -20,7 +20,7 @@ from bark.engine import kernels
 from bark.engine.kernels import numba_env
 from bark.errors import BarkError, BarkWarning
 
-from conftest import REPO_ROOT
+from conftest import REPO_ROOT, as_a_user_who_cannot_write
 
 numba_backend = pytest.importorskip("bark.engine.kernels.numba_backend")
 
@@ -189,25 +189,10 @@ def test_matplotlib_gets_a_writable_folder_in_one_line(tmp_path, monkeypatch):
     assert numba_env.writable(Path(os.environ["MPLCONFIGDIR"]))
 
 
-def _as_nobody() -> tuple:
-    """A prefix that runs a command as a user who cannot write the home or bark's source (root can
-    write anywhere, so as root the command runs as ``nobody``); skips where no such user is to be had."""
-    if os.geteuid() != 0:
-        return ()
-    if shutil.which("setpriv") is None:
-        pytest.skip("running as root without setpriv: no user to run as who cannot write the home")
-    prefix = ("setpriv", "--reuid=65534", "--regid=65534", "--clear-groups")
-    probe = subprocess.run([*prefix, sys.executable, "-c", "import bark_cli.main"], cwd=REPO_ROOT, capture_output=True,
-                           timeout=120)
-    if probe.returncode != 0:
-        pytest.skip("the checkout cannot be read by the user nobody")
-    return prefix
-
-
 @pytest.mark.slow
 def test_the_default_run_goes_to_its_end_with_a_home_that_cannot_be_written(tmp_path):
     """The acceptance case: ``HOME=/nonexistent bark simulate`` as a user who cannot write there."""
-    prefix = _as_nobody()
+    prefix = as_a_user_who_cannot_write()
     work = Path(tempfile.mkdtemp(prefix="bark-nobody-"))  # pytest's own folders are root's alone
     try:
         work.chmod(0o777)

@@ -6,6 +6,9 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import subprocess
+import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -22,7 +25,7 @@ from bark.io.folder import OutputFolder
 from bark.engine.scene import Scene
 from bark_cli.main import cli
 
-from conftest import assert_clean_outcome
+from conftest import REPO_ROOT, as_a_user_who_cannot_write, assert_clean_outcome
 
 SMALL = ["--n-bases", "300", "-G", "0.05", "--until-time", "6", "--quiet"]
 
@@ -225,18 +228,26 @@ def test_a_file_as_parent_a_long_name_proc_and_sys_are_one_line(tmp_path):
     assert not (tmp_path / "a").exists()  # folders made for a refused run are removed again
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
-def test_an_unwritable_folder_is_refused_before_the_run(tmp_path):
-    folder = tmp_path / "ro"
+def test_an_unwritable_folder_is_refused_before_the_run():
+    """As a user who cannot write there: root writes into read-only folders, so as root the command
+    runs as ``nobody`` (``conftest.as_a_user_who_cannot_write``)."""
+    prefix = as_a_user_who_cannot_write()
+    work = Path(tempfile.mkdtemp(prefix="bark-readonly-"))  # pytest's own folders are root's alone
+    folder = work / "ro"
     folder.mkdir()
+    work.chmod(0o777)
     folder.chmod(0o555)
     try:
-        result = _simulate(*SMALL, "--out", str(folder / "out"))
-        assert result.exit_code == 2 and "--out" in result.stderr
-        result = _simulate(*SMALL, "--out", str(folder))
-        assert result.exit_code == 2 and "cannot write" in result.stderr
+        for out, says in ((folder / "out", "--out"), (folder, "cannot write")):
+            proc = subprocess.run([*prefix, sys.executable, "-m", "bark_cli", "simulate", *SMALL, "--out", str(out)],
+                                  cwd=REPO_ROOT, capture_output=True, text=True, timeout=600,
+                                  env={**os.environ, "HOME": str(work)})  # a home of its own: only the folder is refused
+            assert proc.returncode == 2 and says in proc.stderr, proc.stderr
+            assert len(proc.stderr.splitlines()) == 1 and proc.stderr.startswith("bark: error: "), proc.stderr
+        assert not any(folder.iterdir())
     finally:
         folder.chmod(0o755)
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def test_empty_out_is_the_current_folder(tmp_path, monkeypatch):

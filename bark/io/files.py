@@ -18,7 +18,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["atomic_write", "write_csv", "write_columns", "write_json", "write_npz"]
+__all__ = ["atomic_write", "attempt", "write_csv", "write_columns", "write_json", "write_npz"]
 
 
 
@@ -72,6 +72,22 @@ def atomic_write(path: str | Path, write: Callable[[io.BufferedWriter], None], *
         raise
     _sync_folder(path.parent)
     return path
+
+
+def attempt(name: str, write: Callable[[], Any], failed: list[str] | None) -> bool:
+    """Write one output with ``write()``.  With ``failed`` given, a file system that refuses it (a
+    full disk or quota, a file-size limit, a read-only folder) is said as ``"name: could not be
+    written (why)"`` in ``failed`` and the caller goes on with its other outputs; the file is then as
+    it was (``atomic_write``).  Returns whether it was written."""
+    if failed is None:
+        write()
+        return True
+    try:
+        write()
+        return True
+    except OSError as err:
+        failed.append(f"{name}: could not be written ({err.strerror or err})")
+        return False
 
 
 def _sync_folder(folder: Path) -> None:

@@ -27,6 +27,7 @@ from typing import Callable
 from bark.io.checkpoint import CHECKPOINT_NAME, PREVIOUS_NAME, Damaged, read_meta
 from bark.errors import BarkError, Ref
 from bark.io.files import TMP_SUFFIX, temp_name_prefix
+from bark.model.effects import EFFECTS
 
 try:
     import fcntl
@@ -35,9 +36,9 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 
 __all__ = ["RUN_FILES", "OutputFolder", "writable_folder"]
 
-RUN_FILES = ("summary.json", "patches.csv", "breaks.csv", "state.npz", "graph.graphml", "statistics.csv",
-             "pattern.png", "development.gif", "tree.vtu", "tree.ply", "tree.png", CHECKPOINT_NAME, PREVIOUS_NAME)
-"""Every file a run may write.  A fresh run removes these (and only these) from its folder."""
+RUN_FILES = ("summary.json", *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
+"""Every file a run may write: summary.json and each effect's files (``Effect.files``).  A fresh run
+removes these (and only these) from its folder."""
 PROBE = "bark-probe"
 
 

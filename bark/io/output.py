@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from bark.contract.strategies import pattern_of
-from bark.io.files import atomic_write, write_columns, write_csv, write_json, write_npz
+from bark.io.files import atomic_write, attempt, write_columns, write_csv, write_json, write_npz
 from bark.units import metres
 
 __all__ = ["run_summary", "write_run", "write_graphml"]
@@ -135,34 +135,38 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
 
 
 def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None,
-              extra: dict | None = None) -> dict:
+              extra: dict | None = None, failed: list[str] | None = None) -> dict:
     """Write what the scene's effects ask for into ``out_dir``: summary.json always; patches.csv
     (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml),
-    tree.vtu and tree.ply (mesh)."""
+    tree.vtu and tree.ply (mesh).  With ``failed`` given, a file the file system refuses is said
+    there and the others are written (``attempt``); summary.json, written last, is then left out, so
+    that the folder does not claim a complete run (``bark simulate --resume`` writes what is
+    missing).  Returns the summary."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     analyses = sim.analyze()
     if scene.has("patch-statistics"):
         measured = pattern_of(analyses.values())
         rows = measured.patches if measured is not None else []
-        write_csv(out / "patches.csv", rows, patch_columns(rows))
+        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows)), failed)
     if scene.has("break-log"):
-        write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()})
+        attempt("breaks.csv", lambda: write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()}), failed)
     s = sim.state
     if scene.has("state-snapshot"):
-        write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases
+        attempt("state.npz", lambda: write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases
             out / "state.npz", compress=False,
             x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs.astype(np.int64), rest=s.rest, fmax=s.fmax, intact=s.intact,
             labels=sim.patch_labels(), t=np.float64(s.t),
-        )
+        ), failed)
     if scene.has("graphml"):
-        write_graphml(out / "graph.graphml", sim)
+        attempt("graph.graphml", lambda: write_graphml(out / "graph.graphml", sim), failed)
     if scene.has("mesh"):
         from bark.io.mesh import write_mesh
 
-        write_mesh(sim, out, scene.run.min_patch_size)
+        attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size), failed)
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
-    write_json(out / "summary.json", summary)
+    if not failed:
+        attempt("summary.json", lambda: write_json(out / "summary.json", summary), failed)
     return summary
 
 

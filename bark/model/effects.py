@@ -28,6 +28,8 @@ class Effect:
     name: str
     does: str
     needs: tuple[str, ...] = ()
+    files: tuple[str, ...] = ()
+    """The files of a run's folder it writes (a fresh run removes every effect's, and only those)."""
 
 
 EFFECTS: dict[str, Effect] = {
@@ -38,21 +40,24 @@ EFFECTS: dict[str, Effect] = {
         Effect("damping", "damping of the bases' motion (eq. 3; without: b = 0)"),
         Effect("fracture", "springs over their threshold break ([breaker])", ("secondary-growth",)),
         Effect("patch-statistics", "patches, PCA orientation, anisotropy at the end: patches.csv, summary.json",
-               ("fracture",)),
+               ("fracture",), ("patches.csv",)),
         Effect("statistics-series", "the patch statistics along the way, every series_every: statistics.csv",
-               ("patch-statistics",)),
-        Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",)),
-        Effect("break-log", "every break recorded as it happens: breaks.csv", ("fracture",)),
+               ("patch-statistics",), ("statistics.csv",)),
+        Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",), ("pattern.png",)),
+        Effect("break-log", "every break recorded as it happens: breaks.csv", ("fracture",), ("breaks.csv",)),
         Effect("fracture-history", "broken springs, cracks, patches and the damping's power against time, every "
-               "history_every: fracture.csv, fracture.png, summary.json's initial fractures", ("break-log",)),
-        Effect("state-snapshot", "the mechanical state at the end: state.npz"),
-        Effect("checkpoints", "checkpoint.npz: periodic, on Ctrl-C and at the end (for --resume)"),
-        Effect("graphml", "the leaf-base graph of intact springs at the end: graph.graphml"),
-        Effect("animation", "frames of the pattern along the way: development.gif", ("fracture",)),
+               "history_every: fracture.csv, fracture.png, summary.json's initial fractures", ("break-log",),
+               ("fracture.csv", "fracture.png")),
+        Effect("state-snapshot", "the mechanical state at the end: state.npz", (), ("state.npz",)),
+        Effect("checkpoints", "checkpoint.npz: periodic, on Ctrl-C and at the end (for --resume)", (),
+               ("checkpoint.npz", "checkpoint.prev.npz")),
+        Effect("graphml", "the leaf-base graph of intact springs at the end: graph.graphml", (), ("graph.graphml",)),
+        Effect("animation", "frames of the pattern along the way: development.gif", ("fracture",),
+               ("development.gif",)),
         Effect("tree-image", "the trunk seen from the side at the end, leaf bases coloured by patch: tree.png",
-               ("fracture",)),
+               ("fracture",), ("tree.png",)),
         Effect("mesh", "the trunk's leaf bases as a 3-D mesh coloured by patch at the end: tree.vtu (ParaView), "
-               "tree.ply (Blender)", ("fracture",)),
+               "tree.ply (Blender)", ("fracture",), ("tree.vtu", "tree.ply")),
     ]
 }
 

@@ -36,6 +36,7 @@ import attrs
 
 from bark.io import checkpoint
 from bark.errors import BarkError, NonFiniteStateError, one_line
+from bark.io.files import attempt
 from bark.io.folder import OutputFolder
 from bark.io.recorders import Dissipation
 from bark.io.recorders import Frames, StatisticsSeries
@@ -86,7 +87,8 @@ def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkp
                      f"{stop.until_patches} patches" if stop.until_patches is not None else None]
             warn(f"no time bound: this run ends only at {' or '.join(c for c in conds if c)}; "
                  "a signal (Ctrl-C) stops it with a checkpoint")
-        return _drive(scene, sim, stop, folder.path, {}, 0.0, False, checkpoint_every, observe, interrupted, pictures)
+        return _drive(scene, sim, stop, folder.path, {}, 0.0, False, checkpoint_every, observe, interrupted, pictures,
+                      warn)
 
 
 def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable | None = None,
@@ -106,7 +108,8 @@ def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable
             recorders = _recorders(scene, sim, recorded)
             return _finish(scene, sim, stop, folder.path, recorders, meta.get("stop_reason") or "time", wall, True,
                            None, pictures, save=False)
-        return _drive(scene, sim, stop, folder.path, recorded, wall, True, checkpoint_every, observe, interrupted, pictures)
+        return _drive(scene, sim, stop, folder.path, recorded, wall, True, checkpoint_every, observe, interrupted, pictures,
+                      warn)
 
 
 def _check_every(seconds) -> None:
@@ -163,11 +166,12 @@ def _recorders(scene, sim, recorded: dict) -> list:
 
 
 def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resumed: bool, checkpoint_every: float,
-           observe, interrupted, pictures) -> Outcome:
+           observe, interrupted, pictures, warn=None) -> Outcome:
     recorders = _recorders(scene, sim, recorded)
     t0 = time.perf_counter()
     last_save = t0
     keep = scene.has("checkpoints")
+    refusals: list[str] = []
 
     def look(s) -> None:
         nonlocal last_save
@@ -178,7 +182,14 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
             s.stop_reason = why
         elif keep and out is not None and checkpoint_every and time.perf_counter() - last_save >= checkpoint_every:
             wall = wall_before + time.perf_counter() - t0
-            checkpoint.save(out, sim, scene, stop, "periodic", {"stop_reason": None, "wall_time_s": wall}, recorders)
+            refused: list[str] = []
+            if not attempt(checkpoint.CHECKPOINT_NAME, lambda: checkpoint.save(
+                    out, sim, scene, stop, "periodic", {"stop_reason": None, "wall_time_s": wall}, recorders), refused) \
+                    and warn is not None and not refusals:
+                kept = (out / checkpoint.CHECKPOINT_NAME).exists()
+                warn(f"{refused[0]}: the run goes on; " + ("the last checkpoint written is kept" if kept else
+                     "it has no checkpoint yet, so a stop before its end cannot be resumed") + " (said once)")
+            refusals.extend(refused)
             last_save = time.perf_counter()
 
     error = None
@@ -213,16 +224,20 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
         summary = run_summary(sim, scene, sim.analyze(), reason, wall, _extra(by_name))
         return Outcome(out=None, scene=scene, sim=sim, stop_reason=reason, summary=summary, error=error)
     (out / "summary.json").unlink(missing_ok=True)  # stale from here on: written again last
+    unsaved: list[str] = []  # a checkpoint the disk refused: the one before it stays
     if save and scene.has("checkpoints"):
         why = "interrupted" if reason in STOPPED_BY_SIGNAL else "end"
-        checkpoint.save(out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall}, recorders)
+        attempt(checkpoint.CHECKPOINT_NAME, lambda: checkpoint.save(
+            out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall}, recorders), unsaved)
     by_name = _record_end(sim, scene, recorders)  # after the checkpoint: a resumed run records only what
-    for rec in recorders:                          # the uninterrupted run would
+    failed: list[str] = []                         # the uninterrupted run would
+    for rec in recorders:
         if rec.file is not None:
-            rec.write(out / rec.file)
+            attempt(rec.file, lambda: rec.write(out / rec.file), failed)
     waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
-    summary = write_run(sim, scene, out, reason, wall, _extra(by_name))
-    outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error)
+    summary = write_run(sim, scene, out, reason, wall, _extra(by_name), failed)
+    outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error,
+                      failed=unsaved + failed)
     for name, wait in waits:
         if outcome.drawing_stopped:
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
@@ -234,6 +249,8 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
         except KeyboardInterrupt:
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
             outcome.drawing_stopped = True
+        except OSError as err:  # a full disk, a file-size limit: as for the data files
+            outcome.failed.append(f"{name}: could not be written ({err.strerror or err})")
         except Exception as err:  # a picture never costs the data: say what failed, keep the rest
             outcome.failed.append(f"{name}: could not be drawn ({one_line(err)})")
     return outcome

@@ -25,6 +25,7 @@ comes back).  A run is a pure function of its scene and seed, so both give the s
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
 import itertools
@@ -170,11 +171,27 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
             "labels": sim.patch_labels().astype(np.int32), "colours": simulation_colours(sim, sc.run.min_patch_size)}
 
 
+_FULL = ("SQLITE_FULL", "SQLITE_IOERR")
+"""SQLite's words for a file system that refuses to write (a full disk or quota, a file-size limit)."""
+
+
+def _table_error(path: Path, err: sqlite3.DatabaseError) -> Exception:
+    """What SQLite's ``err`` means for the sweep table at ``path``: a file system that refused to
+    write (an ``OSError``, status 1: the rows committed stay, the same command goes on later), or a
+    file that is not a sweep table, or is damaged (a one-line ``BarkError``)."""
+    name = getattr(err, "sqlite_errorname", "") or ""
+    if name.startswith(_FULL):
+        return OSError(errno.ENOSPC, f"could not be written ({err}); the runs committed stay, and the same "
+                       "command goes on once there is room", str(path))
+    return BarkError(f"{path}: not a sweep database, or a damaged one ({err})")
+
+
 class SweepTable:
     """The sweep's SQLite file: ``runs`` (a row per finished run) and ``patterns``."""
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
+        new = not self.path.exists()
         try:
             self.con = sqlite3.connect(self.path, timeout=60.0)
             self.con.execute("PRAGMA journal_mode=WAL")  # readers (pandas, a second look) never block a commit
@@ -188,7 +205,10 @@ class SweepTable:
                                  "n INTEGER NOT NULL, uv BLOB NOT NULL, labels BLOB NOT NULL, colours BLOB NOT NULL)")
                 self._add_columns(RESULT_COLUMNS)  # a table of an earlier bark: the columns added since
         except sqlite3.DatabaseError as err:
-            raise BarkError(f"{self.path}: not a sweep database ({err})") from None
+            if new:  # what this call began to make: nothing of it is left
+                for part in ("", "-wal", "-shm", "-journal"):
+                    Path(f"{self.path}{part}").unlink(missing_ok=True)
+            raise _table_error(self.path, err) from None
 
     def close(self) -> None:
         self.con.close()
@@ -226,6 +246,12 @@ class SweepTable:
                "bark_version": __version__, "scene": _canonical(point.scene), **point.settings}
         row = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()}
         names = ", ".join(f'"{k}"' for k in row)
+        try:
+            self._insert(names, row, point, result)
+        except sqlite3.DatabaseError as err:  # the transaction is rolled back: the table is as it was
+            raise _table_error(self.path, err) from None
+
+    def _insert(self, names: str, row: dict, point: Point, result: dict) -> None:
         with self.con:
             self.con.execute(f"INSERT OR REPLACE INTO runs ({names}) VALUES ({', '.join('?' * len(row))})",
                              list(row.values()))

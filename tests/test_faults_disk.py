@@ -1,0 +1,242 @@
+"""Fault injection, file systems that refuse to write: a file-size limit (``ulimit -f``), a full disk
+(ENOSPC, injected), ``/dev/full`` and closed standard streams.  Each refused output is one line and
+exit status 1; every other output, and the last good checkpoint, is kept; nothing half-written or
+stale is left; a run's state is never lost to a full standard output.  Also: every command's folder
+holds only that call's files."""
+
+from __future__ import annotations
+
+import errno
+import json
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from bark.io import checkpoint, files
+from bark.io.folder import RUN_FILES
+from bark_cli.main import cli
+
+from conftest import REPO_ROOT, assert_clean_outcome
+
+SMALL = ["--n-bases", "300", "-G", "0.05", "--until-time", "6"]
+PATTERNED = ["--n-bases", "800", "--until-time", "200"]
+"""A run that ends with patches (19): analyze and compare then draw their pictures."""
+
+
+@pytest.fixture(scope="module")
+def patterned(tmp_path_factory):
+    runs = []
+    for seed in range(4):
+        run = tmp_path_factory.mktemp(f"patterned{seed}")
+        result = CliRunner().invoke(cli, ["simulate", *PATTERNED, "--seed", str(seed), "--quiet", "--out", str(run)])
+        assert result.exit_code == 0, result.output
+        runs.append(run)
+    return runs
+
+
+def _bark(*args: str, limit: int | None = None, stdout=subprocess.PIPE, stderr=subprocess.PIPE):
+    """``bark ARGS`` in a process of its own, its files limited to ``limit`` bytes (``ulimit -f``)."""
+    def cap():
+        if limit is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return subprocess.run([sys.executable, "-m", "bark_cli", *args], cwd=REPO_ROOT, preexec_fn=cap, stdout=stdout,
+                          stderr=stderr, text=True, timeout=600)
+
+
+def _lines(text: str | None) -> list[str]:
+    lines = (text or "").splitlines()
+    assert "Traceback" not in (text or ""), text
+    assert all(line.startswith("bark: ") for line in lines), text
+    return lines
+
+
+def _no_temporaries(folder: Path) -> None:
+    assert not [p.name for p in folder.iterdir() if p.name.endswith(files.TMP_SUFFIX)]
+
+
+@pytest.mark.parametrize("limit", [2_000, 30_000, 120_000])
+def test_a_file_size_limit_costs_only_the_files_it_refuses(limit, tmp_path):
+    out = tmp_path / "run"
+    proc = _bark("simulate", *SMALL, "--quiet", "--out", str(out), limit=limit)
+    lines = _lines(proc.stderr)
+    refused = sorted({line.split(": ")[2] for line in lines if "could not be written" in line})
+    assert proc.returncode == (1 if refused else 0), proc.stderr
+    present = {p.name for p in out.iterdir()}
+    assert not set(refused) & present  # a refused file is not there half-written ...
+    assert present <= set(RUN_FILES)   # ... and what is there is the run's
+    assert all((out / name).stat().st_size <= limit for name in present)
+    if refused:
+        assert "summary.json" not in present  # the folder does not claim a complete run
+    _no_temporaries(out)
+
+
+def test_a_refused_output_is_written_by_resume_once_there_is_room(tmp_path, monkeypatch):
+    """The end checkpoint fits, state.npz does not: exit 1, and ``--resume`` writes it (the bits of
+    an uninterrupted run) once the file system takes it."""
+    whole, out = tmp_path / "whole", tmp_path / "out"
+    assert CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--out", str(whole)]).exit_code == 0
+    real = files.write_npz
+
+    def full(path, **kwargs):
+        if Path(path).name == "state.npz":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, **kwargs)
+
+    monkeypatch.setattr("bark.io.output.write_npz", full)
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--out", str(out)])
+    assert result.exit_code == 1
+    assert_clean_outcome(result)
+    assert "state.npz: could not be written (No space left on device)" in result.stderr
+    assert "--resume" in result.stderr
+    assert not (out / "state.npz").exists() and not (out / "summary.json").exists()
+    monkeypatch.undo()
+    again = CliRunner().invoke(cli, ["simulate", "--resume", str(out), "--quiet"])
+    assert again.exit_code == 0, again.output
+    for name in ("state.npz", "breaks.csv", "patches.csv"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+
+
+def test_a_refused_periodic_checkpoint_is_said_once_and_the_run_goes_on(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    real = checkpoint.save
+    tries = []
+
+    def full(folder, sim, scene, stop, reason, *args, **kwargs):
+        if reason == "periodic":
+            tries.append(sim.state.t)
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(folder, sim, scene, stop, reason, *args, **kwargs)
+
+    monkeypatch.setattr(checkpoint, "save", full)
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--checkpoint-every", "0.000001", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert_clean_outcome(result)
+    warned = [line for line in result.stderr.splitlines() if "checkpoint.npz: could not be written" in line]
+    assert len(tries) > 1 and len(warned) == 1, (tries, result.stderr)
+    assert "the run goes on" in warned[0]
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "end"
+    assert (out / "summary.json").exists()
+
+
+def test_a_refused_end_checkpoint_keeps_the_last_good_one(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    real = checkpoint.save
+
+    def full_at_the_end(folder, sim, scene, stop, reason, *args, **kwargs):
+        if reason == "end":
+            raise OSError(errno.EFBIG, "File too large")
+        return real(folder, sim, scene, stop, reason, *args, **kwargs)
+
+    monkeypatch.setattr(checkpoint, "save", full_at_the_end)
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--checkpoint-every", "0.000001", "--out", str(out)])
+    assert result.exit_code == 1
+    assert_clean_outcome(result)
+    assert "checkpoint.npz: could not be written (File too large)" in result.stderr
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "periodic"
+    assert {"state.npz", "breaks.csv", "summary.json"} <= {p.name for p in out.iterdir()}
+
+
+def test_a_full_standard_output_costs_nothing_of_the_run(tmp_path):
+    out = tmp_path / "run"
+    with open("/dev/full", "w") as full:
+        proc = _bark("simulate", *SMALL, "--out", str(out), stdout=full)
+    lines = _lines(proc.stderr)
+    assert proc.returncode == 0, proc.stderr
+    assert any("the summary could not be printed" in line for line in lines), proc.stderr
+    assert json.loads((out / "summary.json").read_text())["steps"] > 0
+
+
+@pytest.mark.parametrize("closed", ["1>&-", "2>&-", "1>&- 2>&-"])
+def test_closed_standard_streams_cost_nothing_of_the_run(closed, tmp_path):
+    out = tmp_path / "run"
+    command = f"{sys.executable} -m bark_cli simulate {' '.join(SMALL)} --out {out} {closed}"
+    proc = subprocess.run(["bash", "-c", command], cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert (out / "summary.json").exists() and (out / "state.npz").exists()
+
+
+@pytest.mark.parametrize("limit", [1_000, 20_000])
+def test_analyze_says_each_refused_file_and_leaves_none_half_written(limit, patterned, tmp_path):
+    out = tmp_path / "analysis"
+    proc = _bark("analyze", str(patterned[0]), "--out", str(out), limit=limit)
+    refused = [line for line in _lines(proc.stderr) if "could not be written" in line]
+    assert proc.returncode == (1 if refused else 0) and refused, proc.stderr
+    names = {line.split(": ")[2] for line in refused}
+    assert not names & {p.name for p in out.iterdir()}
+    _no_temporaries(out)
+
+
+def test_a_fresh_run_leaves_nothing_of_an_earlier_one(tmp_path):
+    """Every file an effect writes is one a fresh run removes (``Effect.files``): the fracture
+    history's too."""
+    out = tmp_path / "out"
+    scene = tmp_path / "history.toml"
+    scene.write_text("[effects]\nwant = ['fracture-history', 'checkpoints']\nhistory_every = 1.0\n")
+    first = CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--scene", str(scene), "--out", str(out)])
+    assert first.exit_code == 0, first.output
+    assert (out / "fracture.csv").exists()
+    again = CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--overwrite", "--out", str(out)])
+    assert again.exit_code == 0, again.output
+    assert not (out / "fracture.csv").exists() and not (out / "fracture.png").exists()
+
+
+def test_every_file_a_run_writes_is_one_a_fresh_run_removes(tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(REPO_ROOT / "examples/scenes/everything.toml"),
+                                      "--n-bases", "300", "--until-time", "12", "--quiet", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in out.iterdir()} <= set(RUN_FILES)
+    assert {"fracture.csv", "tree.vtu", "development.gif", "graph.graphml"} <= {p.name for p in out.iterdir()}
+
+
+def test_analyze_leaves_no_picture_of_an_earlier_pattern(patterned, tmp_path):
+    toml, out = tmp_path / "published.toml", tmp_path / "analysis"
+    assert CliRunner().invoke(cli, ["analyze", str(patterned[0]), "--out", str(out)]).exit_code == 0
+    assert (out / "radial.png").exists()
+    toml.write_text("[pattern]\nn_patches = 10\nmean_orientation_deg = 90\nsd_orientation_deg = 20\n")
+    result = CliRunner().invoke(cli, ["analyze", str(toml), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in out.iterdir()} == {"statistics.json"}
+
+
+def test_compare_of_two_after_four_leaves_no_quartet_diagram(patterned, tmp_path):
+    runs = [str(run) for run in patterned]
+    out = tmp_path / "compare"
+    assert CliRunner().invoke(cli, ["compare", *runs, "--out", str(out)]).exit_code == 0
+    assert (out / "quartets.png").exists()
+    assert CliRunner().invoke(cli, ["compare", *runs[:2], "--out", str(out)]).exit_code == 0
+    assert {p.name for p in out.iterdir()} == {"comparison.json"}
+
+
+def test_a_full_disk_under_a_sweep_keeps_what_was_committed(tmp_path, monkeypatch):
+    """SQLite itself says the disk is full (its page limit, set after the first row): one line, exit
+    1, the committed row kept, and the same command goes on to the end once there is room."""
+    from bark.studies import sweep
+
+    out = tmp_path / "sweep"
+    args = ["sweep", "--grid", "growth.G=0.04,0.05,0.06", "--set", "lattice.n_bases=300", "--set", "run.until_time=6",
+            "--quiet", "--out", str(out)]
+    real = sweep.SweepTable._insert
+
+    def full_after_one(self, *a):
+        real(self, *a)
+        pages = self.con.execute("PRAGMA page_count").fetchone()[0]
+        self.con.execute(f"PRAGMA max_page_count = {pages}")  # no room for another row's pattern
+
+    monkeypatch.setattr(sweep.SweepTable, "_insert", full_after_one)
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1, result.output
+    assert_clean_outcome(result)
+    assert "could not be written (database or disk is full)" in result.stderr
+    monkeypatch.undo()
+    with sweep.SweepTable(out / "sweep.sqlite") as table:
+        assert len(table.done()) == 1
+    again = CliRunner().invoke(cli, args)
+    assert again.exit_code == 0, again.output
+    with sweep.SweepTable(out / "sweep.sqlite") as table:
+        assert len(table.done()) == 3
