@@ -220,6 +220,12 @@ class _Lazy:
         return self.made
 
 
+def _typed(option: click.Parameter) -> str:
+    """An option as a user types it: its long form (``--scene``, ``--set``), or its short one if it
+    has no other (``-G`` has both: ``-G``, the one the help shows first)."""
+    return option.opts[0] if option.opts else option.name
+
+
 def _warn(message: str) -> None:
     click.echo(f"bark: warning: {message}", err=True)
 
@@ -299,8 +305,9 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
                  if ctx.get_parameter_source(p) == click.core.ParameterSource.COMMANDLINE
                  and p not in ("resume", "quiet", "checkpoint_every")]
         if given:
-            name = given[0].split("__")[-1].replace("_", "-")
-            raise BarkError(f"--resume goes on with the settings in its checkpoint: --{name} cannot be given with it")
+            option = next(p for p in ctx.command.params if p.name == given[0])
+            raise BarkError(f"--resume goes on with the settings in its checkpoint: {_typed(option)} cannot be given "
+                            "with it")
     else:
         scene = scene_of(ctx.params)
     bar = None

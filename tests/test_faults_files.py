@@ -132,6 +132,8 @@ DAMAGE = {
     "time not a number": lambda p: _rewrite(p, lambda a, m: m.__setitem__("t", "soon")),
     "scene invalid": lambda p: _rewrite(p, lambda a, m: m["scene"]["mechanics"].__setitem__("k", -1)),
     "springs of another scene": lambda p: _rewrite(p, lambda a, m: m["scene"]["lattice"].__setitem__("offsets", [13, 21])),
+    "claims 2,000,000 bases": lambda p: _rewrite(p, lambda a, m: m["scene"]["lattice"].__setitem__("n_bases", 2_000_000)),
+    "claims fewer bases": lambda p: _rewrite(p, lambda a, m: m["scene"]["lattice"].__setitem__("n_bases", 200)),
     "unknown reason": lambda p: _rewrite(p, lambda a, m: m.__setitem__("reason", "holiday")),
     "a directory": lambda p: (p.unlink(), p.mkdir()),
 }

@@ -17,7 +17,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 CORE = ROOT / "bark"
 
-BASE = {"bark.errors", "bark.units", "bark.validators", "bark.version"}
+BASE = {"bark.errors", "bark.paths", "bark.units", "bark.validators", "bark.version"}
 """Modules every layer may import."""
 LAYERS = {  # a layer -> the layers it may import (besides itself and BASE)
     "model": set(),

@@ -28,6 +28,7 @@ run's.  Any error is named by its line.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import tomllib
 from pathlib import Path
@@ -37,6 +38,7 @@ import numpy as np
 
 from bark.analysis.circular import axial_difference, axial_mean, axial_sd, axial_se
 from bark.errors import BarkError
+from bark.paths import is_zip, open_regular
 
 __all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
            "PALETTE", "FRAGMENT_GREY", "simulation_colours"]
@@ -95,11 +97,14 @@ class Pattern:
         """A run's ``state.npz`` (positions ``x`` and patch ``labels``)."""
         path = Path(path)
         try:
-            with path.open("rb") as fh, np.load(fh, allow_pickle=False) as data:
-                missing = [k for k in ("x", "labels") if k not in data.files]
-                if missing:
-                    raise BarkError(f"{path}: not a bark state file (no {' or '.join(missing)} in it)")
-                x, labels = data["x"], data["labels"]
+            with open_regular(path) as fh:
+                if not is_zip(fh):
+                    raise BarkError(f"{path}: not a bark state file (not an .npz archive)")
+                with np.load(fh, allow_pickle=False) as data:
+                    missing = [k for k in ("x", "labels") if k not in data.files]
+                    if missing:
+                        raise BarkError(f"{path}: not a bark state file (no {' or '.join(missing)} in it)")
+                    x, labels = data["x"], data["labels"]
         except BarkError:
             raise
         except OSError as err:
@@ -116,7 +121,7 @@ class Pattern:
         path = Path(path)
         scale = None
         try:
-            with path.open(newline="", encoding="utf-8") as fh:
+            with io.TextIOWrapper(open_regular(path), encoding="utf-8-sig", newline="") as fh:  # a BOM is no column
                 lines = list(enumerate(fh, start=1))
         except OSError as err:
             raise BarkError(f"{path}: cannot be read ({err.strerror or err})") from None
@@ -407,7 +412,7 @@ _SUMMARY_KEYS = {"name": str, "n_patches": int, "mean_orientation_deg": float, "
 def _summary_file(path: Path) -> PatternStatistics:
     """A published pattern's summary from a TOML file's ``[pattern]`` table."""
     try:
-        with path.open("rb") as fh:
+        with open_regular(path) as fh:
             table = tomllib.load(fh)
     except OSError as err:
         raise BarkError(f"{path}: cannot be read ({err.strerror or err})") from None

@@ -31,6 +31,7 @@ import numpy as np
 from bark.model import effects
 from bark.contract import registry
 from bark.validators import construct, positive
+from bark.paths import NotARegularFile, open_regular
 from bark.errors import BarkError, Ref
 from bark.model.forces import Mechanics
 from bark.model.lattice import Lattice
@@ -398,12 +399,14 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     """Parse a scene file; a missing or malformed file gives one line naming it."""
     path = Path(path)
     try:
-        with path.open("rb") as fh:
+        with open_regular(path) as fh:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise BarkError(f"scene file {str(path)!r} does not exist") from None
-    except IsADirectoryError:
-        raise BarkError(f"scene file {str(path)!r} is a directory") from None
+    except NotARegularFile as err:
+        raise BarkError(f"scene file {str(path)!r}: {err}") from None
+    except OSError as err:
+        raise BarkError(f"scene file {str(path)!r} cannot be read ({err.strerror or err})") from None
     except tomllib.TOMLDecodeError as err:
         raise BarkError(f"scene file {str(path)!r} is not valid TOML: {err}") from None
     except UnicodeDecodeError:

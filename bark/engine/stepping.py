@@ -42,8 +42,9 @@ SAFETY = 0.9
 """Automatic stepping keeps sub-steps at or below this fraction of the stability limit."""
 CHUNK = 128
 """Most steps in one kernel call (progress, signals and periodic checkpoints are seen between calls)."""
-CHUNK_WORK = 20_000_000
-"""Most base-steps in one call (about 0.2 s), so that a very large scene still answers promptly."""
+CHUNK_WORK = 60_000_000
+"""Most base- and spring-steps in one call (a base and a spring cost about as much a step: about
+0.2 s), so that a very large or very dense scene still answers a signal promptly."""
 
 
 @attrs.frozen(kw_only=True)
@@ -212,7 +213,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     breaks = "python" if part is None or not compiled else "kernel" if part.decides else "candidates"
     n = 1
     if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
-        n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases, 1), most or CHUNK))
+        n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases + sim.state.n_springs, 1), most or CHUNK))
     times = clock.times(n)
     n = _bounded(sim, stop, times, n) if n > 1 else n
     ends = clock.ticks + (np.arange(n) + 1) * clock.size  # ticks at the end of each step

@@ -43,6 +43,7 @@ import numpy as np
 from bark.engine.simulation import Snapshot
 from bark.errors import BarkError
 from bark.io.files import write_npz
+from bark.paths import is_zip, open_regular
 from bark.model.state import BASE_FIELDS, SPRING_FIELDS
 
 __all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "load", "read", "read_meta", "Damaged"]
@@ -97,7 +98,7 @@ def read_meta(path: str | Path) -> dict:
     """Only the meta record of a checkpoint (cheap: the arrays are not read); :class:`Damaged` if unreadable."""
     path = Path(path)
     try:
-        with zipfile.ZipFile(path) as zf, zf.open("meta.npy") as fh:
+        with open_regular(path) as raw, zipfile.ZipFile(raw) as zf, zf.open("meta.npy") as fh:
             meta = json.loads(str(np.lib.format.read_array(fh, allow_pickle=False)))
     except FileNotFoundError:
         raise
@@ -125,9 +126,12 @@ def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         return Damaged(f"{where} is damaged: {problem}")
 
     try:
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as data:  # our handle: numpy's own
-            arrays = {k: data[k] for k in data.files}                           # is left open on a bad zip
-    except FileNotFoundError:
+        with open_regular(path) as fh:  # our handle (numpy's own is left open on a bad zip); never a FIFO
+            if not is_zip(fh):
+                raise Damaged(f"{where} is damaged: it is not an .npz archive")
+            with np.load(fh, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+    except (FileNotFoundError, Damaged):
         raise
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
         raise bad(f"it cannot be read ({_why(err)})") from None
@@ -265,8 +269,11 @@ def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
     except (BarkError, TypeError) as err:
         raise Damaged(f"checkpoint {str(path)!r} is damaged: its scene is not valid ({err})") from None
     lattice, pairs = scene.lattice, arrays["pairs"].astype(np.int64)
-    if arrays["x"].shape[0] > lattice.n_bases or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():
-        raise Damaged(f"checkpoint {str(path)!r} is damaged: its bases and springs do not fit its scene's lattice")
+    n, due = arrays["x"].shape[0], lattice.bases_at(float(meta["t"]))
+    if n != due or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():
+        what = f"it holds {n} bases, its scene's lattice {due} at t = {meta['t']:.6g}" if n != due else \
+            "its springs do not fit its scene's lattice"
+        raise Damaged(f"checkpoint {str(path)!r} is damaged: {what}")
     state = {k: a for k, a in arrays.items() if not k.startswith("rec_")}
     sim = scene.simulation().restore(Snapshot(state, meta))  # built from the checkpoint's state, not the scene's lattice
     recorded: dict[str, dict[str, np.ndarray]] = {}

@@ -19,6 +19,7 @@ Opening a folder for a run, before the simulation takes its first step:
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -70,10 +71,7 @@ class OutputFolder:
         created = []
         if fresh:
             missing = [p for p in (path, *path.parents) if not p.exists()]
-            try:
-                path.mkdir(parents=True, exist_ok=True)
-            except OSError as err:
-                raise fail(f"cannot create it ({err.strerror or err})") from None
+            _make_folder(path, fail)
             created = missing
         if not path.exists():
             raise fail("no such folder")
@@ -109,6 +107,27 @@ class OutputFolder:
         self.close()
 
 
+def _make_folder(path: Path, fail) -> None:
+    """``path`` made a folder (with its parents), or ``fail`` saying in the user's terms why it
+    cannot be one: a file, a symbolic link that loops, leads nowhere or to a file."""
+    if path.is_symlink():
+        try:
+            os.stat(path)
+        except OSError as err:
+            target = os.readlink(path)
+            if err.errno == errno.ELOOP:
+                raise fail(f"is a symbolic link that loops ({target!r})") from None
+            raise fail(f"is a symbolic link to {target!r}, which does not exist") from None
+    if path.exists() and not path.is_dir():
+        raise fail(("is a symbolic link to a file" if path.is_symlink() else "is a file") + ", not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise fail("is not a folder") from None
+    except OSError as err:
+        raise fail(f"cannot create it ({err.strerror or err})") from None
+
+
 def writable_folder(path: str | Path, key: str = "out") -> Path:
     """``path`` checked, created if missing and probed for writing, for outputs that are not a run's
     (benchmarks): no lock, nothing removed.  One-line :class:`BarkError` naming ``key`` if unusable."""
@@ -119,10 +138,7 @@ def writable_folder(path: str | Path, key: str = "out") -> Path:
         return BarkError("{0}: " + problem, ref)
 
     _check_name(path, fail)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise fail(f"cannot create it ({err.strerror or err})") from None
+    _make_folder(path, fail)
     if not path.is_dir():
         raise fail("exists and is not a folder")
     _probe(path, fail)

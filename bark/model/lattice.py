@@ -42,9 +42,23 @@ def _distinct_offsets(value, count: int | None = None) -> bool:
             and len(set(value)) == len(value))
 
 
+MAX_OFFSETS = 16
+"""Most spring offsets a lattice may have: each is two neighbours a base (the paper's lattice: two
+offsets, four neighbours); more make a dense network whose steps and pictures grow with the square
+of the bases, not a bark."""
+
+
 def _check_offsets(instance, attribute, value) -> None:
     if not _distinct_offsets(value):
         raise BarkError("{0}: must be distinct integers >= 1 (e.g. 21 and 34)", Ref(None, attribute.name, value))
+    if len(value) > MAX_OFFSETS:
+        raise BarkError(f"{{0}}: {len(value)} offsets; at most {MAX_OFFSETS} (each joins a base to two neighbours; "
+                        "Table 2 has two)", Ref(None, attribute.name, _shown(value)))
+
+
+def _shown(value: tuple) -> list | str:
+    """A long list of offsets as its head and length (a message is one line)."""
+    return list(value) if len(value) <= 8 else f"[{', '.join(map(str, value[:4]))}, ... ({len(value)} in all)]"
 
 
 def _check_partition(instance, attribute, value) -> None:
@@ -105,6 +119,9 @@ class Lattice:
         if present >= self.n_bases:
             return None
         k = math.floor(t / self.join_every + 1e-9) + 1
+        # the first k with initial + floor(rate · k · join_every) > present, in closed form (a loop
+        # over k would take ~1e11 turns at join_every = 1e-12), then made exact by bases_at itself
+        k = max(k, math.floor((present + 1 - self.initial - 1e-9) / (self.join_rate * self.join_every)) - 1)
         while self.bases_at(k * self.join_every) <= present:
             k += 1
         return k * self.join_every
