@@ -176,30 +176,20 @@ def _pictures(signals: Signals, painter) -> dict:
     imported only when a scene asks for a picture, and then beside the run, not after it).  Each
     hands its picture's data to the painter and returns the wait for it (``runner``: the data are
     written meanwhile); a signal while waiting stops the drawing at once."""
-    from bark_cli.pictures import PatternData, TreeData
+    from bark_cli.pictures import PICTURES
 
-    def submitted(kind, data, path, scene):
-        wait, before = painter().submit(kind, data, path, scene.run.min_patch_size), signals.count
+    def submitted(kind, data_of):
+        def draw(sim, scene, recorded, path):
+            wait, before = painter().submit(kind, data_of(sim, scene, recorded), path, scene.run.min_patch_size), \
+                signals.count
 
-        def waited():  # a signal since it was handed over came while it was drawn: stop it now
-            with signals.draw():
-                wait(stop=signals.count > before)
-        return waited
+            def waited():  # a signal since it was handed over came while it was drawn: stop it now
+                with signals.draw():
+                    wait(stop=signals.count > before)
+            return waited
+        return draw
 
-    def pattern(sim, scene, recorded, path):
-        return submitted("pattern", PatternData.of(sim, scene.run.min_patch_size), path, scene)
-
-    def animation(sim, scene, recorded, path):
-        return submitted("animation", recorded["frames"], path, scene)
-
-    def tree(sim, scene, recorded, path):
-        return submitted("tree", TreeData.of(sim, scene.run.min_patch_size, scene.dome), path, scene)
-
-    def fracture(sim, scene, recorded, path):
-        return submitted("fracture", recorded["dissipation"].result, path, scene)
-
-    return {"pattern-image": ("pattern.png", pattern), "animation": ("development.gif", animation),
-            "tree-image": ("tree.png", tree), "fracture-history": ("fracture.png", fracture)}
+    return {effect: (name, submitted(kind, data_of)) for effect, (name, kind, data_of) in PICTURES.items()}
 
 
 def _painter():

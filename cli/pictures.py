@@ -103,6 +103,27 @@ class TreeData:
                    t=sim.state.t, n_bases=sim.state.n_bases, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
 
 
+PICTURES = {
+    "pattern-image": ("pattern.png", "pattern", lambda sim, scene, recorded: PatternData.of(sim, scene.run.min_patch_size)),
+    "animation": ("development.gif", "animation", lambda sim, scene, recorded: recorded["frames"]),
+    "tree-image": ("tree.png", "tree", lambda sim, scene, recorded: TreeData.of(sim, scene.run.min_patch_size, scene.dome)),
+    "fracture-history": ("fracture.png", "fracture", lambda sim, scene, recorded: recorded["dissipation"].result),
+}
+"""Per effect: its picture's file, the kind of drawing, and the data it is drawn from."""
+
+
+def writers() -> dict:
+    """The pictures as ``bark.studies.runner`` takes them, drawn in this process when asked for (the
+    ``bark.pictures`` entry point: what a library run draws; ``bark simulate`` draws the same
+    pictures beside the run, in a ``Painter``'s processes)."""
+    def writer(kind, data_of):
+        def draw(sim, scene, recorded, path):
+            _draw(kind, data_of(sim, scene, recorded), str(path), scene.run.min_patch_size)
+        return draw
+
+    return {effect: (name, writer(kind, data_of)) for effect, (name, kind, data_of) in PICTURES.items()}
+
+
 def _draw(kind: str, data, path: str, min_size: int) -> None:
     if kind == "pattern":
         from bark_cli.plot import plot_pattern

@@ -58,6 +58,36 @@ def test_image_asked_imports_matplotlib_and_draws(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["pattern.png", "summary.json"]
 
 
+def test_the_library_draws_what_the_scene_asks_as_the_command_does(tmp_path):
+    """``runner.run`` is the same run as ``bark simulate``: the same files, pictures included."""
+    from bark.engine.scene import read_toml
+    from bark.studies import runner
+
+    path = tmp_path / "scene.toml"
+    path.write_text("[lattice]\nn_bases = 400\n[growth]\nG = 0.05\n[run]\nuntil_time = 6.0\n[effects]\n"
+                    "want = ['pattern-image', 'tree-image', 'animation', 'fracture-history', 'break-log']\n"
+                    "frame_every = 2.0\nhistory_every = 2.0\n")
+    outcome = runner.run(Scene.from_dict(read_toml(path)), tmp_path / "library")
+    assert outcome.failed == []
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(path), "--quiet", "--out", str(tmp_path / "command")])
+    assert result.exit_code == 0, result.output
+    names = sorted(p.name for p in (tmp_path / "library").iterdir())
+    assert names == sorted(p.name for p in (tmp_path / "command").iterdir())
+    assert {"pattern.png", "tree.png", "development.gif", "fracture.png"} <= set(names)
+
+
+def test_a_picture_nothing_can_draw_is_reported_not_drawn(tmp_path, monkeypatch):
+    from bark.contract import registry
+    from bark.studies import runner
+
+    monkeypatch.setattr(registry, "picture_writers", lambda: None)  # the core alone: no bark_cli installed
+    outcome = runner.run(_scene(["pattern-image", "tree-image", "break-log"]), tmp_path / "out")
+    assert sorted(outcome.failed) == [f"{name}: not drawn (nothing installed draws {effect!r} (bark_cli's "
+                                      "bark.pictures entry point))" for name, effect in
+                                      (("pattern.png", "pattern-image"), ("tree.png", "tree-image"))]
+    assert (tmp_path / "out" / "breaks.csv").exists()
+
+
 def test_bulges_configured_but_not_asked_never_run(monkeypatch):
     from bark_plugins.growth import BulgeGrowth
 

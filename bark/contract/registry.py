@@ -26,9 +26,13 @@ from bark.validators import construct
 from bark.errors import BarkError, Ref
 from bark.contract.strategies import KINDS, Strategy
 
-__all__ = ["GROUPS", "available", "load", "create", "name_of", "import_path"]
+__all__ = ["GROUPS", "PICTURES", "available", "load", "create", "name_of", "import_path", "picture_writers"]
 
 GROUPS: dict[str, str] = {kind: f"bark.{kind}" for kind in KINDS}
+PICTURES = "bark.pictures"
+"""The entry-point group of what draws a run's pictures: a callable returning, per effect, the file
+name and a writer ``draw(sim, scene, recorded, path)`` (bark's own: ``bark_cli.pictures:writers``,
+the same pictures ``bark simulate`` draws, drawn in the calling process)."""
 
 
 def _check_kind(kind: str) -> None:
@@ -121,3 +125,10 @@ def find(test: Callable[[type], bool]) -> list[tuple[str, str]]:
 def providers(effect: str) -> list[tuple[str, str]]:
     """``(kind, name)`` of every installed strategy that provides the effect ``effect`` (``Strategy.provides``)."""
     return find(lambda cls: any(e.name == effect for e in cls.provides))
+
+
+def picture_writers() -> dict | None:
+    """The picture writers installed (the ``bark.pictures`` entry point first by name), or ``None``
+    where none is: the core itself draws nothing and imports no plotting library."""
+    eps = sorted(entry_points(group=PICTURES), key=lambda e: e.name)
+    return eps[0].load()() if eps else None

@@ -30,6 +30,9 @@ class Effect:
     needs: tuple[str, ...] = ()
     files: tuple[str, ...] = ()
     """The files of a run's folder it writes (a fresh run removes every effect's, and only those)."""
+    drawn: tuple[str, ...] = ()
+    """Those of its files that are pictures, drawn by what is installed to draw (``bark.pictures``),
+    not by the core."""
 
 
 EFFECTS: dict[str, Effect] = {
@@ -43,19 +46,20 @@ EFFECTS: dict[str, Effect] = {
                ("fracture",), ("patches.csv",)),
         Effect("statistics-series", "the patch statistics along the way, every series_every: statistics.csv",
                ("patch-statistics",), ("statistics.csv",)),
-        Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",), ("pattern.png",)),
+        Effect("pattern-image", "the unwrapped pattern at the end: pattern.png", ("fracture",), ("pattern.png",),
+               ("pattern.png",)),
         Effect("break-log", "every break recorded as it happens: breaks.csv", ("fracture",), ("breaks.csv",)),
         Effect("fracture-history", "broken springs, cracks, patches and the damping's power against time, every "
                "history_every: fracture.csv, fracture.png, summary.json's initial fractures", ("break-log",),
-               ("fracture.csv", "fracture.png")),
+               ("fracture.csv", "fracture.png"), ("fracture.png",)),
         Effect("state-snapshot", "the mechanical state at the end: state.npz", (), ("state.npz",)),
         Effect("checkpoints", "checkpoint.npz: periodic, on Ctrl-C and at the end (for --resume)", (),
                ("checkpoint.npz", "checkpoint.prev.npz")),
         Effect("graphml", "the leaf-base graph of intact springs at the end: graph.graphml", (), ("graph.graphml",)),
         Effect("animation", "frames of the pattern along the way: development.gif", ("fracture",),
-               ("development.gif",)),
+               ("development.gif",), ("development.gif",)),
         Effect("tree-image", "the trunk seen from the side at the end, leaf bases coloured by patch: tree.png",
-               ("fracture",), ("tree.png",)),
+               ("fracture",), ("tree.png",), ("tree.png",)),
         Effect("mesh", "the trunk's leaf bases as a 3-D mesh coloured by patch at the end: tree.vtu (ParaView), "
                "tree.ply (Blender)", ("fracture",), ("tree.vtu", "tree.ply")),
     ]

@@ -16,13 +16,16 @@ A run, in order:
 3. **The end, in an order that loses nothing**: the stale summary is removed, the checkpoint is
    written (``end``, or ``interrupted``: resumable), then the data files, then ``summary.json``
    (whose presence says the outputs are complete and match the checkpoint), then the pictures.  A
-   picture that cannot be drawn is reported, and every other output stays.  A run killed in the
+   picture that cannot be drawn, or a file the file system refuses, is reported, and every other
+   output stays (``summary.json`` is then not written: ``resume`` writes what is missing).  A run killed in the
    middle of these writes is finished by ``resume``, which writes the missing outputs from the
    checkpoint.
 
 Drawing is not the core's: ``pictures`` maps an effect (``pattern-image``, ``animation``) to the
-file it writes and a function ``draw(sim, scene, recorded, path)``; ``bark_cli`` supplies
-matplotlib's.  The caller owns signals: ``interrupted()`` returns the reason to stop (e.g.
+file it writes and a function ``draw(sim, scene, recorded, path)``.  Left out, the writers are those
+installed under the ``bark.pictures`` entry point (``bark_cli``'s matplotlib drawings, in this
+process), so a library run draws what ``bark simulate`` draws; a picture nothing installed can
+draw is reported as not drawn.  The caller owns signals: ``interrupted()`` returns the reason to stop (e.g.
 ``"interrupted"``) or ``None``.  ``observe(sim, stop)`` is called after every advance (a progress bar).
 """
 
@@ -34,6 +37,7 @@ from typing import Callable
 
 import attrs
 
+from bark.contract import registry
 from bark.io import checkpoint
 from bark.errors import BarkError, NonFiniteStateError, one_line
 from bark.io.files import attempt
@@ -204,8 +208,17 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
 def _pictures_begun(pictures: dict | None, sim, scene, recorded: dict, out: Path) -> list:
     """Start the scene's pictures: ``[(file name, wait)]``.  A picture writer may return a ``wait()``
     that ends when its file is written (it draws in another process meanwhile), or draw at once and
-    return ``None``; what it raised is kept, to be reported in its turn."""
+    return ``None``; what it raised is kept, to be reported in its turn.  ``pictures=None``: the
+    installed writers (``registry.picture_writers``, looked up only when the scene asks for a
+    picture); a picture the scene asks for that nothing draws is reported as not drawn."""
+    drawn_by = {effect: e.drawn for effect, e in scene.known_effects.items() if e.drawn and scene.has(effect)}
+    if pictures is None and drawn_by:
+        pictures = registry.picture_writers() or {}
     begun = []
+    for effect, files in drawn_by.items():
+        if effect not in (pictures or {}):
+            for name in files:
+                begun.append((name, BarkError(f"nothing installed draws {effect!r} (bark_cli's bark.pictures entry point)")))
     for effect, (name, draw) in (pictures or {}).items():
         if not scene.has(effect):
             continue
@@ -251,6 +264,8 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
             outcome.drawing_stopped = True
         except OSError as err:  # a full disk, a file-size limit: as for the data files
             outcome.failed.append(f"{name}: could not be written ({err.strerror or err})")
+        except BarkError as err:  # nothing to draw it with
+            outcome.failed.append(f"{name}: not drawn ({err})")
         except Exception as err:  # a picture never costs the data: say what failed, keep the rest
             outcome.failed.append(f"{name}: could not be drawn ({one_line(err)})")
     return outcome
