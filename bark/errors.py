@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import attrs
 
-__all__ = ["Ref", "BarkError", "BarkWarning", "NonFiniteStateError", "show", "one_line"]
+__all__ = ["Ref", "BarkError", "BarkWarning", "NonFiniteStateError", "StepFailedError", "show", "one_line"]
 
 
 def show(value: Any) -> str:
@@ -98,3 +98,9 @@ class BarkError(ValueError):
 
 class NonFiniteStateError(FloatingPointError):
     """The mechanical state became NaN or infinite; the run stops rather than go on silently."""
+
+
+class StepFailedError(NonFiniteStateError):
+    """A step could not be computed to its own tolerance (an iterative solve that did not converge
+    in its iterations): raised by a strategy before it changes the state, so the run stops at the
+    last good one, as for a non-finite state, rather than go on with a wrong step."""

@@ -109,11 +109,29 @@ def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kw
         if given is not None and given != table["name"]:
             raise BarkError(f"--{section} {table['name']} and --set {section}.name={given} name two different strategies")
     data = prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {}
+    options = overrides_from(kwargs)
+    set_stops = _command_line_stops(sets, options)
     for source, layer in (("option", names), ("--set", sets),
                           ("option", {"growth": {k: v for k, v in shortcuts.items() if v is not None}}),
-                          ("option", overrides_from(kwargs))):
+                          ("option", options)):
         data = merge(data, prov.add(source, layer))
+    data.setdefault("run", {}).update(set_stops)  # beside the options' stop conditions, not replaced by them
     return Scene.from_dict(data)
+
+
+def _command_line_stops(sets: dict, options: dict) -> dict:
+    """The stop conditions ``--set run.until_*`` gives that an ``--until-*`` option on the same line
+    would otherwise replace (stop conditions on the command line replace the scene file's, and are
+    one set); the same one given both ways with two values is refused."""
+    from bark.engine.scene import STOP_KEYS
+
+    given = {k: v for k, v in options.get("run", {}).items() if k in STOP_KEYS}
+    by_set = {k: v for k, v in sets.get("run", {}).items() if k in STOP_KEYS}
+    for key in given.keys() & by_set.keys():
+        if given[key] != by_set[key]:
+            raise BarkError(f"--{key.replace('_', '-')} {given[key]} and --set run.{key}={by_set[key]} give two values "
+                            "for one stop condition: give one")
+    return {k: v for k, v in by_set.items() if k not in given} if given else {}
 
 
 class StoppedBeforeStart(Exception):

@@ -8,7 +8,7 @@ import attrs
 import numpy as np
 
 from bark.validators import one_of, positive, positive_int
-from bark.errors import BarkError, Ref
+from bark.errors import BarkError, Ref, StepFailedError
 from bark.model.stability import euler_cromer_h_max
 from bark.contract.parts import IntegratorPart
 from bark.contract.strategies import Integrator
@@ -107,7 +107,12 @@ class ImplicitOverdamped(Integrator):
         rhs = tangential(dt * np.ascontiguousarray(forces.elastic(state)).ravel())
         scale = float(np.max(np.abs(rhs)))  # solve for rhs/scale: tiny forces must not underflow in CG
         if scale > 0.0:
-            dx, _ = cg(a, rhs / scale, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)
+            dx, info = cg(a, rhs / scale, rtol=self.rtol, atol=0.0, maxiter=self.maxiter, M=m)
+            if info != 0:  # before the state changes: the run stops at the last good one
+                raise StepFailedError(
+                    f"the implicit-overdamped step from t = {state.t:.6g} did not reach rtol = {self.rtol:g} in "
+                    f"maxiter = {self.maxiter} conjugate-gradient iterations: raise the integrator's maxiter or "
+                    "rtol, or lower dt")
             dx = tangential(dx * scale).reshape(state.x.shape)
         else:
             dx = np.zeros_like(state.x)

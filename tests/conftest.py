@@ -124,8 +124,8 @@ def assert_clean_outcome(result, out: Path | None = None) -> None:
     elif code == 0:
         assert not any(line.startswith("bark: error") for line in lines), err
     elif code == 1:
-        assert any("NaN or infinite" in line or "could not be drawn" in line or "could not be written" in line
-                   for line in lines), err
+        assert any("NaN or infinite" in line or "that state is written to" in line or "could not be drawn" in line
+                   or "could not be written" in line for line in lines), err
     elif code in (128 + signal.SIGTERM, 128 + signal.SIGINT):
         assert "go on with: bark simulate --resume" in err or "not drawn" in err or "before the run began" in err, err
     else:

@@ -162,3 +162,78 @@ def test_an_out_that_cannot_be_a_folder_says_what_it_is(make, says, tmp_path):
         assert result.exit_code == 2, result.output
         assert_clean_outcome(result)
         assert says in result.stderr or "is a file" in result.stderr, result.stderr
+
+
+# -- one run, one truth ------------------------------------------------------------------------
+
+
+def test_one_patch_size_for_the_stop_the_pictures_and_the_statistics(tmp_path):
+    import json
+
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["simulate", "--n-bases", "800", "--until-time", "200", "--min-patch-size", "50",
+                                      "--quiet", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    summary = json.loads((out / "summary.json").read_text())
+    with np.load(out / "state.npz") as state:
+        labels = state["labels"]
+    sizes = np.bincount(labels)
+    assert summary["n_patches"] == int(np.count_nonzero(sizes >= 50)) < int(np.count_nonzero(sizes >= 7))
+    assert summary["settings"]["analyzer"]["min_size"] == 50
+
+
+def _refused(tmp_path: Path, text: str) -> tuple[Path, str]:
+    """A scene of ``text`` run by ``bark simulate``: refused in one line, nothing written; the scene
+    file and the line."""
+    scene = tmp_path / "scene.toml"
+    scene.write_text(text)
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(scene), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert_clean_outcome(result, tmp_path / "out")
+    return scene, result.stderr
+
+
+def test_a_patch_size_given_twice_with_two_values_is_refused(tmp_path):
+    scene, err = _refused(tmp_path, "[run]\nmin_patch_size = 9\n[analyzer]\nmin_size = 5\n")
+    assert "min_patch_size" in err and "min_size" in err
+    scene.write_text("[analyzer]\nmin_size = 20\n")  # one of them: it sets the other
+    from bark.engine.scene import Scene, read_toml
+
+    assert Scene.from_dict(read_toml(scene)).run.min_patch_size == 20
+
+
+@pytest.mark.parametrize("sets, says", [
+    (["--until-time", "5", "--set", "run.until_patches=abc"], "--set run.until_patches=abc"),
+    (["--until-time", "5", "--set", "run.until_time=10"], "two values"),
+    (["--until-patches", "5", "--set", "run.until_time=nan"], "--set run.until_time=nan"),
+])
+def test_stop_conditions_on_one_command_line_are_one_set(sets, says, tmp_path):
+    result = CliRunner().invoke(cli, ["simulate", *sets, "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    assert_clean_outcome(result, tmp_path / "out")
+    assert says in result.stderr, result.stderr
+
+
+def test_a_set_stop_stays_beside_an_option_s(tmp_path):
+    import json
+
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--set", "run.until_patches=3", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "summary.json").read_text())["stop"]["until_patches"] == 3
+
+
+def test_dome_points_with_an_ellipse_are_refused_not_ignored(tmp_path):
+    _, err = _refused(tmp_path, "[dome]\nshape = 'ellipse'\npoints = [[1, 0], [0.5, 0.5], [0, 1]]\n")
+    assert "shape = 'points'" in err
+
+
+def test_an_unconverged_implicit_step_stops_the_run_at_the_last_good_state(tmp_path):
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["simulate", *SMALL, "--integrator", "implicit-overdamped",
+                                      "--set", "integrator.maxiter=1", "--out", str(out)])
+    assert result.exit_code == 1
+    assert_clean_outcome(result)
+    assert "did not reach rtol" in result.stderr and "maxiter = 1" in result.stderr
+    with np.load(out / "state.npz") as state:
+        assert np.isfinite(state["x"]).all()

@@ -266,6 +266,9 @@ class Scene:
             if not isinstance(name, str):
                 raise BarkError("{0}: must be a string naming a " + kind + " strategy", Ref(section, "name", name))
             strategies[section] = _place(section, lambda: registry.create(kind, name, **params))
+        strategies["analyzer"], run = _one_patch_size(strategies["analyzer"], run, "min_patch_size" in tables["run"],
+                                                      "min_size" in data.get("analyzer", {}))
+        parts["run"] = run
         known = _known(strategies)
         wanted = eff.want
         if wanted is None:  # no list: the default outputs, and the model the scene configures
@@ -351,6 +354,24 @@ class Scene:
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
                           "history_every": self.history_every, "window": self.window}
         return out
+
+
+def _one_patch_size(analyzer, run: RunSettings, run_given: bool, analyzer_given: bool):
+    """``(analyzer, run)`` agreeing on the smallest patch that counts, so that a run has one patch
+    size: the stop (``until_patches``), the pictures and the analyzer's statistics count the same
+    patches.  An analyzer that drops small patches declares it by a ``min_size`` field (the
+    contract's name for it); the one of ``[run] min_patch_size`` and ``[analyzer] min_size`` a scene
+    gives sets the other, and two that disagree are refused."""
+    if "min_size" not in attrs.fields_dict(type(analyzer)):
+        return analyzer, run
+    if run_given and analyzer_given and run.min_patch_size != analyzer.min_size:
+        raise BarkError("{0} and {1} disagree: a run counts one size of patch (give one of them)",
+                        Ref("run", "min_patch_size", run.min_patch_size), Ref("analyzer", "min_size", analyzer.min_size))
+    if analyzer_given and not run_given:
+        return analyzer, attrs.evolve(run, min_patch_size=analyzer.min_size)
+    if analyzer.min_size != run.min_patch_size:
+        return attrs.evolve(analyzer, min_size=run.min_patch_size), run
+    return analyzer, run
 
 
 def _known(strategies: dict[str, Any]) -> dict[str, effects.Effect]:

@@ -67,6 +67,9 @@ def _check_points(instance, attribute, value) -> None:
         if instance.shape == "points":
             raise bad("shape 'points' needs at least two points, from [1, 0] (the join) to [0, height] (the tip)")
         return
+    if instance.shape != "points":
+        raise bad(f"points draw the dome only with shape = 'points'; with shape = {instance.shape!r} they would be "
+                  "ignored: give shape = 'points', or leave the points out")
     if not isinstance(value, tuple) or not all(isinstance(p, tuple) and len(p) == 2 for p in value):
         raise bad("must be a list of [radius fraction, height] pairs, e.g. [[1, 0], [0.6, 0.8], [0, 1]]")
     arr = np.array(value, dtype=float)
