@@ -75,8 +75,15 @@ def test_an_unusable_numba_cache_dir_is_ignored_in_one_line(make, tmp_path, monk
     assert os.environ.get("NUMBA_CACHE_DIR") != given
 
 
+def _unset(monkeypatch, name: str) -> None:
+    """``name`` removed from the environment for this test, and whatever the code under test sets it
+    to undone afterwards (``delenv`` of a variable that is not set records nothing to undo)."""
+    monkeypatch.setenv(name, "")
+    monkeypatch.delenv(name)
+
+
 def test_with_nowhere_numba_would_cache_the_cache_moves_to_bark_s_folder(tmp_path, monkeypatch):
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    _unset(monkeypatch, "NUMBA_CACHE_DIR")
     monkeypatch.setenv("BARK_CACHE_DIR", str(tmp_path / "bark-cache"))
     monkeypatch.setattr(numba_env, "writable", lambda folder: str(folder).startswith(str(tmp_path)))
     with pytest.warns(BarkWarning, match="caching it in"):
@@ -182,7 +189,7 @@ def test_matplotlib_gets_a_writable_folder_in_one_line(tmp_path, monkeypatch):
 
     blocker = tmp_path / "a-file"
     blocker.write_text("not a folder")
-    monkeypatch.delenv("MPLCONFIGDIR", raising=False)
+    _unset(monkeypatch, "MPLCONFIGDIR")
     monkeypatch.setenv("XDG_CONFIG_HOME", str(blocker))
     with pytest.warns(BarkWarning, match="matplotlib"):
         matplotlib_folder()
