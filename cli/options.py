@@ -216,7 +216,8 @@ class Provenance:
             return str(ref)
         if not ref.given or ref.value is True:  # a missing setting, or a flag
             return option
-        return f"{option} {_cli_value(ref.value)}"
+        default = source is None and self.layers and ref.section is not None  # nobody gave it: the scene's default
+        return f"{option} {_cli_value(ref.value)}" + (" (the default)" if default else "")
 
 
 NAMER: contextvars.ContextVar = contextvars.ContextVar("namer", default=None)

@@ -3,6 +3,7 @@ SQLite table, with a montage of the patterns laid out like the paper's Fig. 9.""
 
 from __future__ import annotations
 
+import math
 import shlex
 import signal
 import sys
@@ -13,6 +14,13 @@ from bark.errors import BarkError
 from bark_cli.options import setting_value, split_setting, value_text
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
+MONTAGE_CELLS = 400
+"""Most grid points montage.png draws (a cell each: beyond, a sheet of unreadable specks that takes
+minutes to draw)."""
+DASK_TIMEOUT_S = 10
+"""Seconds a Dask scheduler has to answer --dask (and five more for what is not one)."""
+TABLE_ROWS = 200
+"""Most runs the closing table prints; the rest are in sweep.sqlite."""
 
 
 def parse_grid(items: tuple[str, ...]):
@@ -66,9 +74,9 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
-    from bark.io.folder import writable_folder
+    from bark.io.folder import held_folder
     from bark.engine.scene import merge, read_toml
-    from bark.studies.sweep import FIG9_AXES, Axis, Sweep, WorkerDied, run_sweep
+    from bark.studies.sweep import FIG9_AXES, Axis, Sweep
     from bark_cli.main import _parse_set
     from bark_cli.options import NAMER, Provenance
 
@@ -89,10 +97,15 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     plan = Sweep(base=base, axes=axes, seeds=range(seeds))
     plan.points()  # every point checked: a bad value is one line before anything is written
     client = _dask_client(dask_address) if dask_address is not None else None
-    folder = writable_folder(out)
-    bar = None if quiet or not sys.stdout.isatty() else _bar()
+    with held_folder(out) as held:  # one sweep at a time in a folder
+        _sweep(plan, held.path, workers, client, quiet)
+
+
+def _sweep(plan, folder, workers, client, quiet: bool) -> None:
+    from bark.studies.sweep import WorkerDied, run_sweep
     from bark_cli.main import Signals
 
+    bar = None if quiet or not sys.stdout.isatty() else _bar()
     with Signals() as signals:  # SIGTERM and SIGHUP stop a sweep as Ctrl-C does: a run is in the table whole or not at all
         try:
             counts = run_sweep(plan, folder / "sweep.sqlite", workers=workers or 1, client=client,
@@ -122,10 +135,29 @@ def _dask_client(address: str):
         from distributed import Client
     except ImportError:
         raise BarkError("--dask: Dask's distributed is not installed (pip install 'bark[dask]')") from None
+    import queue
+    import threading
+
+    # Client's own timeout does not hold against a server that answers in another protocol (an HTTP
+    # server: it waits forever, or reads a reply as a frame of 3 EiB): it is given a deadline here,
+    # in a daemon thread that a process leaving does not wait for
+    answer: queue.SimpleQueue = queue.SimpleQueue()
+
+    def connect() -> None:
+        try:
+            answer.put(Client(address, timeout=f"{DASK_TIMEOUT_S}s"))
+        except BaseException as err:  # noqa: BLE001 — whatever a foreign server makes the client raise
+            answer.put(err)
+
+    threading.Thread(target=connect, name="bark-dask-connect", daemon=True).start()
     try:
-        return Client(address, timeout="10s")
-    except (OSError, TimeoutError, ValueError) as err:
-        raise BarkError(f"--dask {address}: no Dask scheduler answers there ({type(err).__name__}: {err})") from None
+        got = answer.get(timeout=DASK_TIMEOUT_S + 5)
+    except queue.Empty:
+        raise BarkError(f"--dask {address}: nothing answered there as a Dask scheduler in {DASK_TIMEOUT_S + 5} s") from None
+    if isinstance(got, BaseException):
+        raise BarkError(f"--dask {address}: no Dask scheduler answers there ({type(got).__name__}: "
+                        f"{str(got).splitlines()[0][:120] if str(got) else ''})") from None
+    return got
 
 
 class _bar:
@@ -160,14 +192,14 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
         rows = table.rows([p.key for p in points])
         by_key = {r["key"]: r for r in rows}
         drawn = None
-        if len(plan.axes) <= 2:
+        if len(plan.axes) <= 2 and math.prod(plan.shape) <= MONTAGE_CELLS:
             def montage(path):  # nothing run yet: no sheet, and none of an earlier sweep's
                 if plot_montage(plan, points, by_key, table, path) is None:
                     path.unlink(missing_ok=True)
 
             write_owned(folder, ("montage.png",), {"montage.png": montage})
             drawn = folder / "montage.png" if (folder / "montage.png").exists() else None
-        else:  # no montage for more axes: none of an earlier sweep's is left to mislead
+        else:  # no montage for more axes or cells: none of an earlier sweep's is left to mislead
             write_owned(folder, ("montage.png",), {})
     if not quiet:
         from rich.console import Console
@@ -175,14 +207,16 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
 
         t = Table(*[a.key for a in plan.axes], "seed", "patches", "orientation (°)", "SD (°)", "anisotropy", "t", "wall (s)",
                   title=f"bark sweep: {counts['ran']} runs now, {counts['skipped']} already in the table")
-        for p in points:
+        for p in points[:TABLE_ROWS]:
             r = by_key[p.key]
             t.add_row(*[value_text(v) for v in p.settings.values()], str(p.seed),
                       str(r["n_patches"]), _g(r["mean_orientation_deg"]), _g(r["circular_sd_deg"]), _g(r["mean_anisotropy"]),
                       _g(r["t"]), _g(r["wall_s"]))
+        if len(points) > TABLE_ROWS:
+            t.caption = f"the first {TABLE_ROWS} of {len(points)} runs; every one is in sweep.sqlite"
         Console(width=150).print(t)
     click.echo(f"bark: {counts['total']} runs in {folder / 'sweep.sqlite'} ({counts['ran']} run now, "
-               f"{counts['skipped']} already there)" + (f"; montage in {drawn}" if drawn else "; no montage for more than two axes"))
+               f"{counts['skipped']} already there)" + (f"; montage in {drawn}" if drawn else f"; no montage for more than two axes or {MONTAGE_CELLS} points"))
 
 
 def _g(v) -> str:

@@ -190,7 +190,7 @@ def test_quoted_cases(tmp_path, args):
 @pytest.mark.parametrize("args, section, key, value", [
     (["--growth", "linear", "--set", "growth.G=0.05"], "growth", "G", 0.05),
     (["--breaker", "probabilistic", "--set", "breaker.nu=50"], "breaker", "nu", 50),
-    (["--integrator", "implicit-overdamped", "--set", "integrator.maxiter=1"], "integrator", "maxiter", 1),
+    (["--integrator", "implicit-overdamped", "--set", "integrator.maxiter=777"], "integrator", "maxiter", 777),
     (["--set", "growth.G=0.05", "--growth", "linear"], "growth", "G", 0.05),
 ])
 def test_a_strategy_named_on_the_command_line_keeps_its_set_values(tmp_path, args, section, key, value):

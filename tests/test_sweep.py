@@ -129,6 +129,117 @@ def test_a_table_of_an_earlier_bark_gets_the_columns_added_since(tmp_path):
     assert len(_rows(db)) == len(plan.points())
 
 
+def _made(tmp_path) -> Path:
+    """A sweep table of two finished runs."""
+    db = tmp_path / "s.sqlite"
+    run_sweep(Sweep(base=TINY, axes=(Axis("growth.G", (0.02, 0.03)),)), db)
+    return db
+
+
+def _edit(db: Path, sql: str, *args) -> None:
+    con = sqlite3.connect(db)
+    with con:
+        con.execute(sql, args)
+    con.close()
+
+
+@pytest.mark.parametrize("damage, says", [
+    (lambda db: _edit(db, "UPDATE runs SET n_patches = 'many'"), "its n_patches is 'many', not a number"),
+    (lambda db: _edit(db, "UPDATE runs SET mean_orientation_deg = 'north'"), "not a number"),
+    (lambda db: _edit(db, "UPDATE patterns SET uv = ?", b"short"), "pattern of run"),
+    (lambda db: _edit(db, "UPDATE patterns SET n = n + 1"), "pattern of run"),
+    (lambda db: _edit(db, "UPDATE patterns SET labels = 'text'"), "pattern of run"),
+])
+def test_a_table_edited_into_nonsense_is_one_line_when_read(damage, says, tmp_path):
+    db = _made(tmp_path)
+    damage(db)
+    with SweepTable(db) as table, pytest.raises(BarkError, match=says):
+        table.rows()
+        for key in table.done():
+            table.pattern(key)
+
+
+def test_a_damaged_page_is_one_line_and_the_command_says_it(tmp_path):
+    out = tmp_path / "s"
+    args = ["sweep", *TINY_SET, "--grid", "growth.G=0.02,0.03", "--out", str(out), "--quiet"]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    con = sqlite3.connect(out / "sweep.sqlite")
+    con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    con.close()
+    raw = bytearray((out / "sweep.sqlite").read_bytes())
+    raw[4096:8192] = os.urandom(4096)  # a page of the table's b-tree
+    (out / "sweep.sqlite").write_bytes(bytes(raw))
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code in (1, 2), r.output
+    assert "Traceback" not in r.output and r.stderr.count("\n") == 1 and "sweep.sqlite" in r.stderr, r.stderr
+
+
+def test_another_program_s_runs_table_is_refused_untouched(tmp_path):
+    db = tmp_path / "theirs.sqlite"
+    _edit(db, "CREATE TABLE runs (id INTEGER PRIMARY KEY, title TEXT)")
+    with pytest.raises(BarkError, match="another's"):
+        run_sweep(Sweep(base=TINY, axes=_grid(1)), db)
+    con = sqlite3.connect(db)
+    assert [r[1] for r in con.execute("PRAGMA table_info(runs)")] == ["id", "title"]
+    assert [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")] == ["runs"]
+    con.close()
+
+
+def test_ten_thousand_points_are_checked_at_once_and_a_hundred_million_refused():
+    """Every point's scene is checked before the first runs: ten thousand of them take a fraction of
+    what the entry-point scans per point took (6 ms each: a minute); a grid beyond MAX_RUNS is refused
+    before a point is made."""
+    from bark.contract import registry
+    from bark.studies.sweep import MAX_RUNS
+
+    registry.refresh()
+    scans = []
+    real = registry.entry_points
+    registry.entry_points = lambda **kw: (scans.append(kw), real(**kw))[1]
+    try:
+        points = Sweep(base=TINY, axes=(Axis("growth.G", tuple(0.01 + i * 1e-6 for i in range(10_000))),)).points()
+    finally:
+        registry.entry_points = real
+    assert len(points) == 10_000 and len(scans) <= len(registry.GROUPS) + 1  # once a group, not once a point
+    with pytest.raises(BarkError, match="100,000,000 runs"):
+        Sweep(base=TINY, axes=(Axis("growth.G", tuple(range(1, 10_001))), Axis("mechanics.f_max", tuple(range(1, 10_001)))))
+    assert MAX_RUNS < 10**8
+
+
+@pytest.mark.slow  # the deadline: 15 s
+def test_dask_pointed_at_a_web_server_is_one_line_within_its_deadline(tmp_path):
+    import http.server
+    import threading
+
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args) -> None:
+            pass
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        out = tmp_path / "s"
+        args = [sys.executable, "-m", "bark_cli", "sweep", *TINY_SET, "--grid", "growth.G=0.02", "--quiet",
+                "--dask", f"tcp://127.0.0.1:{server.server_address[1]}", "--out", str(out)]
+        proc = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("bark: error: --dask") and proc.stderr.count("\n") == 1, proc.stderr
+    assert not out.exists()
+
+
+def test_a_sweep_folder_holds_one_sweep_at_a_time(tmp_path):
+    from bark.io.folder import held_folder
+
+    out = tmp_path / "s"
+    with held_folder(out):  # a sweep writing there
+        r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--grid", "growth.G=0.02", "--out", str(out), "--quiet"])
+    assert r.exit_code == 2 and "another bark sweep is writing there" in r.stderr, r.output
+    assert not (out / "sweep.sqlite").exists()
+
+
 # -- the command ------------------------------------------------------------------------------------
 def test_sweep_command_writes_its_table_and_montage(tmp_path):
     out = tmp_path / "s"

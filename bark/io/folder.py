@@ -35,7 +35,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX: no locking
     fcntl = None
 
-__all__ = ["RUN_FILES", "OutputFolder", "writable_folder"]
+__all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
 
 RUN_FILES = ("summary.json", *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
 """Every file a run may write: summary.json and each effect's files (``Effect.files``).  A fresh run
@@ -145,6 +145,16 @@ def writable_folder(path: str | Path, key: str = "out") -> Path:
     return path
 
 
+def held_folder(path: str | Path, key: str = "out", what: str = "sweep") -> OutputFolder:
+    """:func:`writable_folder`, locked as a run's folder is (an exclusive ``flock`` on the folder,
+    released when the returned :class:`OutputFolder` closes): one ``what`` at a time writes there —
+    a second sweep into a sweep's folder is refused in one line instead of running every point
+    again beside the first."""
+    folder = writable_folder(path, key)
+    return OutputFolder(folder, _lock(folder, lambda problem: BarkError("{0}: " + problem, Ref(None, key, str(path))),
+                                      what))
+
+
 def _check_name(path: Path, fail) -> None:
     text = str(path)
     if "\0" in text:
@@ -166,7 +176,7 @@ def _check_name(path: Path, fail) -> None:
         raise fail(f"the path is {len(raw)} bytes long; this file system takes at most 4096")
 
 
-def _lock(path: Path, fail) -> int | None:
+def _lock(path: Path, fail, what: str = "run") -> int | None:
     if fcntl is None:  # pragma: no cover
         return None
     fd = os.open(path, os.O_RDONLY)
@@ -174,7 +184,7 @@ def _lock(path: Path, fail) -> int | None:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
-        raise fail("another bark run is writing there; wait for it to end, or choose another folder") from None
+        raise fail(f"another bark {what} is writing there; wait for it to end, or choose another folder") from None
     except OSError:  # a file system without flock: go on unlocked
         pass
     return fd

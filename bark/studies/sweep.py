@@ -50,6 +50,8 @@ __all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "r
 FIG9_AXES = (("growth.G", (0.007, 0.011, 0.014)), ("mechanics.f_max", (0.0028, 0.005, 0.008)))
 """The paper's Fig. 9 grid: G across (columns), f_max up (rows), Table 2's three values each."""
 
+IDENTITY = ("key", "point", "seed", "scene")
+"""The columns that make a ``runs`` table a sweep's (the others are added as bark grows)."""
 RESULT_COLUMNS = {
     "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
     "n_patches": "INTEGER", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL",
@@ -58,6 +60,11 @@ RESULT_COLUMNS = {
 """What the table holds of each run besides its identity, by SQLite type: the keys of the run's
 summary (summary.json) of these names, and of its ``fracture`` part (the ``fracture-history`` effect;
 else empty)."""
+
+
+MAX_RUNS = 1_000_000
+"""Most runs one sweep (one table) may hold: every point is checked before the first runs (about
+0.2 ms each), and a million runs of even a second are eleven days of one core."""
 
 
 class WorkerDied(RuntimeError):
@@ -102,6 +109,11 @@ class Point:
     key: str
 
 
+def _quoted(name: str) -> str:
+    """A column name as SQL takes it (``"growth.G"``)."""
+    return '"' + name.replace('"', '""') + '"'
+
+
 def _canonical(obj) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=True)
 
@@ -123,6 +135,11 @@ class Sweep:
             raise BarkError("sweep: seeds are not an axis; give them as the sweep's seeds")
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise BarkError("sweep: the seeds must be distinct, and at least one")
+        runs = math.prod(self.shape) * len(self.seeds)
+        if runs > MAX_RUNS:
+            raise BarkError(f"sweep: {runs:,} runs ({' × '.join(map(str, self.shape))} points × {len(self.seeds)} "
+                            f"seed{'s' if len(self.seeds) > 1 else ''}); at most {MAX_RUNS:,} in one table: split "
+                            "the grid into several sweeps")
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -196,6 +213,7 @@ class SweepTable:
             self.con = sqlite3.connect(self.path, timeout=60.0)
             self.con.execute("PRAGMA journal_mode=WAL")  # readers (pandas, a second look) never block a commit
             self.con.execute("PRAGMA synchronous=FULL")  # a committed run survives a power cut
+            self._check_ours()  # before anything is added to another program's tables
             with self.con:
                 self.con.execute(
                     "CREATE TABLE IF NOT EXISTS runs (key TEXT PRIMARY KEY, point TEXT NOT NULL, seed INTEGER NOT NULL, "
@@ -210,6 +228,24 @@ class SweepTable:
                     Path(f"{self.path}{part}").unlink(missing_ok=True)
             raise _table_error(self.path, err) from None
 
+    def _check_ours(self) -> None:
+        """Refuse, in one line and before changing it, a database whose ``runs`` or ``patterns`` table
+        is not a sweep's (another program's tables of those names)."""
+        for table, needed in (("runs", IDENTITY), ("patterns", ("key", "n", "uv", "labels", "colours"))):
+            have = {r[1] for r in self.con.execute(f"PRAGMA table_info({table})")}
+            if have and not set(needed) <= have:
+                lacking = ", ".join(c for c in needed if c not in have)
+                self.con.close()
+                raise BarkError(f"{self.path}: not a sweep database: its {table!r} table is another's (it has no "
+                                f"{lacking}); give the sweep a folder of its own")
+
+    def _read(self, sql: str, args: tuple = ()) -> list[tuple]:
+        """The rows of a query; a damaged file is one line (``_table_error``)."""
+        try:
+            return self.con.execute(sql, args).fetchall()
+        except sqlite3.DatabaseError as err:
+            raise _table_error(self.path, err) from None
+
     def close(self) -> None:
         self.con.close()
 
@@ -220,7 +256,7 @@ class SweepTable:
         self.close()
 
     def columns(self) -> list[str]:
-        return [r[1] for r in self.con.execute("PRAGMA table_info(runs)")]
+        return [r[1] for r in self._read("PRAGMA table_info(runs)")]
 
     def add_axes(self, axes: Iterable[Axis]) -> None:
         """A column per swept setting (``"growth.G"``), added to an older table as needed."""
@@ -235,7 +271,7 @@ class SweepTable:
                 self.con.execute(f'ALTER TABLE runs ADD COLUMN "{name}" {kind}')
 
     def done(self) -> set[str]:
-        return {k for (k,) in self.con.execute("SELECT key FROM runs")}
+        return {k for (k,) in self._read("SELECT key FROM runs")}
 
     def commit(self, point: Point, result: dict) -> None:
         """The run's row and its pattern, in one transaction: whole, or not at all."""
@@ -261,18 +297,30 @@ class SweepTable:
 
     def rows(self, keys: Sequence[str] | None = None) -> list[dict]:
         """The table's rows as dicts (those of ``keys`` in that order, else all, by key)."""
-        cur = self.con.execute("SELECT * FROM runs ORDER BY key")
-        names = [d[0] for d in cur.description]
-        rows = {r[0]: dict(zip(names, r)) for r in cur}
+        names = self.columns()
+        rows = {r[names.index("key")]: self._checked(dict(zip(names, r)))
+                for r in self._read(f"SELECT {', '.join(_quoted(n) for n in names)} FROM runs ORDER BY key")}
         return [rows[k] for k in keys if k in rows] if keys is not None else list(rows.values())
+
+    def _checked(self, row: dict) -> dict:
+        """A row whose result columns hold what bark writes there (numbers, or none), or one line
+        naming the first that does not: a table edited by hand or by another program."""
+        for name, kind in RESULT_COLUMNS.items():
+            value = row.get(name)
+            if kind in ("INTEGER", "REAL") and value is not None and (isinstance(value, (str, bytes)) or isinstance(value, bool)):
+                raise BarkError(f"{self.path}: run {row.get('key')!r} is damaged: its {name} is {value!r}, not a number")
+        return row
 
     def pattern(self, key: str) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """A run's final pattern: unwrapped positions (arc length, height; float32), patch labels and
         colours (RGB uint8, ``bark.analysis.pattern.patch_colours``)."""
-        got = self.con.execute("SELECT n, uv, labels, colours FROM patterns WHERE key = ?", (key,)).fetchone()
-        if got is None:
+        got = self._read("SELECT n, uv, labels, colours FROM patterns WHERE key = ?", (key,))
+        if not got:
             return None
-        n, uv, labels, colours = got
+        n, uv, labels, colours = got[0]
+        sizes = {"uv": (uv, 8), "labels": (labels, 4), "colours": (colours, 3)}
+        if not (isinstance(n, int) and n >= 0) or any(not isinstance(b, bytes) or len(b) != n * w for b, w in sizes.values()):
+            raise BarkError(f"{self.path}: the pattern of run {key!r} is damaged (its arrays are not of its {n!r} bases)")
         return (np.frombuffer(uv, np.float32).reshape(n, 2), np.frombuffer(labels, np.int32),
                 np.frombuffer(colours, np.uint8).reshape(n, 3))
 
