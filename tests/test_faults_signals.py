@@ -55,24 +55,40 @@ def uninterrupted(tmp_path_factory):
     return out
 
 
-# a few random points of the run (seeded: a failure names its point), after the first checkpoint
-POINTS = random.Random(20261122).sample([0.05 * k for k in range(1, 30)], 4)
+def _wait_for_time(out: Path, proc: subprocess.Popen, t: float, limit_s: float = 240.0) -> float:
+    """Wait until the run's checkpoint says it has reached simulated time ``t`` (an observable state
+    of the run, not a moment of the clock: the machine's speed does not matter); its time."""
+    deadline = time.monotonic() + limit_s
+    while True:
+        assert proc.poll() is None, "the run ended before time %g: %s" % (t, proc.stderr.read())
+        try:
+            reached = float(checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["t"])
+        except (FileNotFoundError, checkpoint.Damaged):
+            reached = -1.0
+        if reached >= t:
+            return reached
+        assert time.monotonic() < deadline, f"the run did not reach time {t:g}"
+        time.sleep(0.02)
+
+
+# a few random points of the run, as fractions of its simulated time (seeded: a failure names its
+# point); at most 0.7, so that a good part of the run is left when the signal comes
+POINTS = random.Random(20261122).sample([0.025 * k for k in range(1, 29)], 4)
 CASES = [(signal.SIGINT, POINTS[0]), (signal.SIGTERM, POINTS[1]), (signal.SIGKILL, POINTS[2]), (signal.SIGKILL, POINTS[3])]
 
 
 @pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
-@pytest.mark.parametrize("sig, delay", CASES, ids=[f"{signal.Signals(s).name}-{d:.2f}s" for s, d in CASES])
-def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted, sig, delay):
+@pytest.mark.parametrize("sig, at", CASES, ids=[f"{signal.Signals(s).name}-at-{a:.3f}" for s, a in CASES])
+def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted, sig, at):
     out = tmp_path / "out"
-    proc = _start(out, "--checkpoint-every", "0.2")
-    _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
-    time.sleep(delay)
+    end = json.loads((uninterrupted / "summary.json").read_text())["t"]
+    proc = _start(out, "--checkpoint-every", "0.05")
+    _wait_for_time(out, proc, at * end)
     proc.send_signal(sig)
     _, err = proc.communicate()
     code = proc.returncode
     assert "Traceback" not in err, err
-    if code == 0:
-        pytest.skip(f"the run ended before the signal at {delay:.2f} s")
+    assert code != 0, f"the run ended before the signal at {at:.3f} of its time"
     if sig == signal.SIGKILL:
         assert code == -signal.SIGKILL
     else:
@@ -93,17 +109,19 @@ def test_a_signal_mid_run_then_resume_is_byte_identical(tmp_path, uninterrupted,
 @pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 def test_stopped_twice_and_resumed_twice_is_byte_identical(tmp_path, uninterrupted):
     out = tmp_path / "out"
-    proc = _start(out, "--checkpoint-every", "0.2")
+    proc = _start(out, "--checkpoint-every", "0.05")
     _wait_for(out / checkpoint.CHECKPOINT_NAME, proc)
     proc.send_signal(signal.SIGTERM)
     proc.communicate()
-    assert proc.returncode in (0, 143)
+    assert proc.returncode == 143
+    stopped_at = float(checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["t"])
     again = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", "--resume", str(out), "--quiet",
-                              "--checkpoint-every", "0.2"], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
-    time.sleep(0.4)
+                              "--checkpoint-every", "0.05"], cwd=REPO_ROOT, stderr=subprocess.PIPE, text=True)
+    end = json.loads((uninterrupted / "summary.json").read_text())["t"]
+    _wait_for_time(out, again, stopped_at + 0.25 * (end - stopped_at))  # it has gone on: stop it again
     again.send_signal(signal.SIGINT)
     again.communicate()
-    assert again.returncode in (0, 130)
+    assert again.returncode == 130
     assert _resume(out).returncode in (0, 2)  # 2: it had already ended
     for name in COMPARED:
         assert (out / name).read_bytes() == (uninterrupted / name).read_bytes(), name
