@@ -25,6 +25,7 @@ def main() -> None:
     for sig in REASONS:  # kept until the command's own handlers take over (``bark_cli.main.Signals``)
         signal.signal(sig, stop)
     _closed_streams_to_devnull()
+    _few_threads_where_processes_are_few()
     try:
         from bark_cli.main import main as command
     except KeyboardInterrupt as err:
@@ -47,6 +48,31 @@ def _closed_streams_to_devnull() -> None:
     for name in ("stdout", "stderr"):
         if getattr(sys, name) is None:
             setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))
+
+
+def _few_threads_where_processes_are_few() -> None:
+    """Under a process limit (``ulimit -u``) that leaves little room, numpy's OpenBLAS cannot start
+    its threads when it loads, and then raises SIGINT in the middle of the import (a run that never
+    began would read "interrupted"): its thread pools are kept to one thread, unless the user set
+    them.  A thread counts against that limit as a process does."""
+    import os
+
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_NPROC)
+    except (ImportError, AttributeError, OSError, ValueError):
+        return
+    if soft == resource.RLIM_INFINITY:
+        return
+    uid = os.getuid()
+    try:  # the user's processes now (Linux: /proc), each counted against the limit
+        mine = sum(1 for p in os.listdir("/proc") if p.isdigit() and os.stat(f"/proc/{p}").st_uid == uid)
+    except OSError:
+        mine = 0
+    if soft - mine < (os.cpu_count() or 1) + 8:
+        for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(name, "1")
 
 
 def _leave(code) -> None:

@@ -246,7 +246,14 @@ class Painter:
             command_ends = tuple(end for _, ours in pipes for end in ours)
             self._proc = ctx.Process(target=_serve, args=(*pipes[0][0], command_ends, tuple(p[0] for p in pipes[1:])),
                                      daemon=True)
-            self._proc.start()
+            try:
+                self._proc.start()
+            except OSError:  # no process to spare (ulimit -u): the pictures are drawn here, after the data
+                self._proc = None
+                for pair in pipes:
+                    for end in (*pair[0], *pair[1]):
+                        end.close()
+                return
             for theirs, ours in pipes:
                 for end in theirs:
                     end.close()

@@ -4,6 +4,7 @@ and the run goes to its end; nothing ends in a traceback."""
 
 from __future__ import annotations
 
+import errno
 import os
 import pickle
 import shutil
@@ -213,3 +214,54 @@ def test_the_default_run_goes_to_its_end_with_a_home_that_cannot_be_written(tmp_
         assert all(line.startswith("bark: warning: ") for line in lines), proc.stderr
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+# -- a process limit (ulimit -u) that leaves no room ---------------------------------------------
+
+
+def test_a_sweep_that_cannot_start_its_workers_is_one_line(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    import concurrent.futures
+    from bark_cli.main import cli
+
+    def no_room(*args, **kwargs):
+        raise BlockingIOError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(concurrent.futures, "ProcessPoolExecutor", no_room)
+    result = CliRunner().invoke(cli, ["sweep", "--grid", "growth.G=0.03,0.04", "--set", "lattice.n_bases=300",
+                                      "--set", "run.until_time=5", "--workers", "2", "--quiet", "--out", str(tmp_path / "s")])
+    assert result.exit_code == 1, result.output
+    assert result.stderr.count("\n") == 1 and "ulimit -u" in result.stderr, result.stderr
+
+
+def test_a_run_that_cannot_fork_its_painter_draws_its_pictures_itself(tmp_path, monkeypatch):
+    import multiprocessing.process
+
+    from click.testing import CliRunner
+
+    from bark_cli.main import cli
+
+    def no_room(self):
+        raise BlockingIOError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", no_room)
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["simulate", "--n-bases", "300", "-G", "0.05", "--until-time", "6", "--quiet",
+                                      "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (out / "pattern.png").exists() and (out / "summary.json").exists()
+
+
+@pytest.mark.parametrize("soft, threads", [(1, "1"), (10_000_000, None)])
+def test_blas_threads_are_kept_to_one_where_processes_are_few(soft, threads, monkeypatch):
+    import resource
+
+    import bark_cli.__main__ as entry
+
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.setenv(name, "")
+        monkeypatch.delenv(name)
+    monkeypatch.setattr(resource, "getrlimit", lambda which: (soft, soft))
+    entry._few_threads_where_processes_are_few()
+    assert os.environ.get("OPENBLAS_NUM_THREADS") == threads

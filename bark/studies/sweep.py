@@ -361,10 +361,14 @@ def _local(todo: list[Point], workers: int):
 
     workers = min(workers, len(todo))
     numba_env.thread_count()  # a value numba would fail on is dropped here, once, not in every worker
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_start, initargs=(max(1, cores() // workers),))
     try:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=_worker_start, initargs=(max(1, cores() // workers),))
         pending = {pool.submit(run_point, p.scene, p.key) for p in todo}
+    except OSError as err:  # the process limit (ulimit -u), or memory for another process
+        raise OSError(err.errno, f"cannot start the sweep's worker processes ({err.strerror or err}): the "
+                      "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
+    try:
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             failed = None
