@@ -237,3 +237,23 @@ def test_an_unconverged_implicit_step_stops_the_run_at_the_last_good_state(tmp_p
     assert "did not reach rtol" in result.stderr and "maxiter = 1" in result.stderr
     with np.load(out / "state.npz") as state:
         assert np.isfinite(state["x"]).all()
+
+
+@pytest.mark.filterwarnings("always::bark.errors.BarkWarning")  # as the command shows it, not an error
+def test_a_bulge_that_meets_no_part_of_the_trunk_is_said(tmp_path):
+    scene = tmp_path / "far.toml"
+    scene.write_text("[growth]\nname = 'bulge'\nbulges = [{ z = 1e6, half_width = 0.3, magnitude = 0.02, decay = 0.005 }]\n")
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(scene), "--n-bases", "300", "--until-time", "3",
+                                      "--quiet", "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert_clean_outcome(result)
+    said = [line for line in result.stderr.splitlines() if "changes nothing on this trunk" in line]
+    assert len(said) == 1 and said[0].startswith("bark: warning: ") and "'bulges'" in said[0], result.stderr
+
+
+def test_a_quoted_field_over_two_lines_keeps_the_line_numbers_right(tmp_path):
+    path = tmp_path / "p.csv"
+    path.write_text('x,y,patch\n1,2,0\n"3\n",4,0\n5,abc,0\n')
+    result = CliRunner().invoke(cli, ["analyze", str(path), "--out", str(tmp_path / "a")])
+    assert result.exit_code == 2
+    assert "line 5: y = 'abc'" in result.stderr, result.stderr

@@ -142,9 +142,9 @@ class Pattern:
                 body.append((number, line))
         if not body:
             raise BarkError(f"{path}: no header and no rows (a header x,y,patch and a row per leaf base)")
-        rows = csv.reader([line for _, line in body])
-        numbers = [n for n, _ in body]
-        header = [h.strip().lower() for h in next(rows)]
+        records = list(_records(body, path))
+        numbers = [n for n, _ in records]
+        header = [h.strip().lower() for h in records[0][1]]
         three = "z" in header
         need = ["x", "y", "z", "patch"] if three else ["x", "y", "patch"]
         missing = [c for c in need if c not in header]
@@ -155,7 +155,7 @@ class Pattern:
             raise BarkError(f"{path} line {numbers[0]}: a column is named twice ({', '.join(header)})")
         at = [header.index(c) for c in need]
         coords, ids = [], []
-        for number, row in zip(numbers[1:], rows):
+        for number, row in records[1:]:
             if len(row) != len(header):
                 raise BarkError(f"{path} line {number}: {len(row)} values, the header names {len(header)}")
             values = [row[i].strip() for i in at]
@@ -403,6 +403,28 @@ class PatternStatistics:
                 "mean_anisotropy": None if a is None else a.mean, "anisotropy_sd": None if a is None else a.sd,
                 "anisotropy_se": None if a is None else a.se, "fraction_within_45_deg": self.fraction_within_45,
                 "source": self.source}
+
+
+def _records(body: list[tuple[int, str]], path: Path):
+    """``(line number, fields)`` of each CSV record in ``body`` (its ``(line number, line)`` pairs):
+    a record's number is that of the line it begins on, though a quoted field may run over several."""
+    at = [0]
+
+    def lines():
+        while at[0] < len(body):
+            at[0] += 1
+            yield body[at[0] - 1][1]
+
+    reader = csv.reader(lines())
+    while True:
+        start = at[0]
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as err:
+            raise BarkError(f"{path} line {body[start][0]}: not CSV ({err})") from None
+        yield body[start][0], row
 
 
 _SUMMARY_KEYS = {"name": str, "n_patches": int, "mean_orientation_deg": float, "sd_orientation_deg": float,

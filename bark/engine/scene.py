@@ -21,6 +21,7 @@ with one line naming the key and what is allowed.  Nothing here writes files or 
 from __future__ import annotations
 
 import copy
+import warnings
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,7 @@ from bark.model import effects
 from bark.contract import registry
 from bark.validators import construct, positive
 from bark.paths import NotARegularFile, open_regular
-from bark.errors import BarkError, Ref
+from bark.errors import BarkError, BarkWarning, Ref
 from bark.model.forces import Mechanics
 from bark.model.lattice import Lattice
 from bark.model.tree import Dome
@@ -157,6 +158,7 @@ def _check_feasible(lattice: Lattice, run: RunSettings, growth, resolved: dict) 
                         "(ask for fewer patches, or smaller ones)",
                         Ref("run", "until_patches", run.until_patches), Ref("run", "min_patch_size", run.min_patch_size),
                         Ref("lattice", "n_bases", lattice.n_bases))
+    _check_effects_act(lattice, growth, resolved)
     if run.until_radius is not None:
         z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
         mean_radius = lambda t: growth.mean_radius(t, z)  # noqa: E731
@@ -167,6 +169,26 @@ def _check_feasible(lattice: Lattice, run: RunSettings, growth, resolved: dict) 
         if run.until_time is None and not mean_radius(FAR_FUTURE) >= run.until_radius:
             raise BarkError(f"{{0}} is never reached (at t = {FAR_FUTURE:g} the mean radius is {mean_radius(FAR_FUTURE):.6g}) "
                             "and no time bound is given: this stop can never hold", Ref("run", "until_radius", run.until_radius))
+
+
+def _check_effects_act(lattice: Lattice, growth, resolved: dict) -> None:
+    """Say, in one line, that an effect of the growth law changes nothing on this trunk (a bulge
+    placed far above it, or a trunk shortened below its bulges): the law and the law without it
+    (``without``) give the same radius and thresholds at every height of the trunk, now and later.
+    The run goes on (it is the run without the effect)."""
+    z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
+    fmax = np.ones_like(z)
+    for effect in growth.provides:
+        if effect.name not in resolved:
+            continue
+        plain = growth.without(effect.name)
+        same = np.array_equal(growth.adjust_thresholds(z, fmax), plain.adjust_thresholds(z, fmax)) and all(
+            np.array_equal(np.broadcast_to(growth.radius(t, z), z.shape), np.broadcast_to(plain.radius(t, z), z.shape))
+            for t in (0.0, 1.0, 100.0))
+        if same:
+            warnings.warn(f"the effect {effect.name!r} of the growth law {registry.name_of(growth)!r} changes nothing on "
+                          f"this trunk (its heights run from 0 to {z[-1]:.6g}): the run is the run without it",
+                          BarkWarning, stacklevel=4)
 
 
 def merge(base: dict, overrides: dict) -> dict:
