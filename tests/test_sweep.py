@@ -230,6 +230,25 @@ def test_dask_pointed_at_a_web_server_is_one_line_within_its_deadline(tmp_path):
     assert not out.exists()
 
 
+def test_a_stop_in_the_middle_of_a_commit_ends_the_workers_at_once(tmp_path):
+    """A signal that lands while a result is committed (in the caller, not in the wait for workers)
+    closes the local workers then, not at the interpreter's exit, which would wait for them."""
+    import multiprocessing
+
+    def stop_after_the_first(done, total, point):
+        if point is not None:
+            raise KeyboardInterrupt
+
+    plan = Sweep(base=TINY, axes=(Axis("growth.G", tuple(0.01 + 0.001 * i for i in range(40))),))
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(plan, tmp_path / "s.sqlite", workers=2, progress=stop_after_the_first)
+    deadline = time.monotonic() + 60
+    while multiprocessing.active_children():  # the workers end (terminated): an observable state, not a wait
+        assert time.monotonic() < deadline, multiprocessing.active_children()
+        time.sleep(0.02)
+    assert len(_rows(tmp_path / "s.sqlite")) >= 1
+
+
 def test_a_sweep_folder_holds_one_sweep_at_a_time(tmp_path):
     from bark.io.folder import held_folder
 

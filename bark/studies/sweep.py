@@ -25,6 +25,7 @@ comes back).  A run is a pure function of its scene and seed, so both give the s
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import hashlib
@@ -342,11 +343,14 @@ def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=No
         if progress:
             progress(counts["skipped"], len(points), None)
         by_key = {p.key: p for p in todo}
-        for result in (_on_dask(client, todo) if client is not None else _local(todo, workers)):
-            table.commit(by_key[result["key"]], result)
-            counts["ran"] += 1
-            if progress:
-                progress(counts["skipped"] + counts["ran"], len(points), by_key[result["key"]])
+        # closing: a stop in the middle of a commit closes the runs' source at once (its workers end),
+        # not when it is collected at the interpreter's exit, which would wait for them
+        with contextlib.closing(_on_dask(client, todo) if client is not None else _local(todo, workers)) as results:
+            for result in results:
+                table.commit(by_key[result["key"]], result)
+                counts["ran"] += 1
+                if progress:
+                    progress(counts["skipped"] + counts["ran"], len(points), by_key[result["key"]])
     return counts
 
 
@@ -382,6 +386,10 @@ def _local(todo: list[Point], workers: int):
                                  "the table; the same sweep run again goes on from there")
             if failed is not None:
                 raise failed
+    except BaseException:  # stopped (a signal, the caller closing this generator) or failed: the runs in
+        for worker in list((getattr(pool, "_processes", None) or {}).values()):  # flight are lost either way,
+            worker.terminate()                                                    # and are not waited for
+        raise
     finally:
         pool.shutdown(wait=False, cancel_futures=True)
 
