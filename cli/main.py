@@ -36,8 +36,13 @@ class BarkGroup(click.Group):
     """A click group whose failures are one line on stderr, never a traceback or a usage dump."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        with warnings.catch_warnings():  # the command shows the library's warnings its way, whatever the
+            warnings.simplefilter("default", BarkWarning)  # caller's filters (-W error): one line each, once
+            warnings.showwarning = _show_warning
+            return self._main(args, prog_name, complete_var, **extra)
+
+    def _main(self, args, prog_name, complete_var, **extra):
         token = NAMER.set(None)
-        warnings.showwarning = _show_warning
         _listen_to_the_library()
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)

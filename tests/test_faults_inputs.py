@@ -239,7 +239,6 @@ def test_an_unconverged_implicit_step_stops_the_run_at_the_last_good_state(tmp_p
         assert np.isfinite(state["x"]).all()
 
 
-@pytest.mark.filterwarnings("always::bark.errors.BarkWarning")  # as the command shows it, not an error
 def test_a_bulge_that_meets_no_part_of_the_trunk_is_said(tmp_path):
     scene = tmp_path / "far.toml"
     scene.write_text("[growth]\nname = 'bulge'\nbulges = [{ z = 1e6, half_width = 0.3, magnitude = 0.02, decay = 0.005 }]\n")
