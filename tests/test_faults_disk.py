@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -240,3 +241,33 @@ def test_a_full_disk_under_a_sweep_keeps_what_was_committed(tmp_path, monkeypatc
     assert again.exit_code == 0, again.output
     with sweep.SweepTable(out / "sweep.sqlite") as table:
         assert len(table.done()) == 3
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A file system of 400 kB (tmpfs), mounted for the test where this process may mount one (root
+    with the right to): a real full disk, ENOSPC from the kernel; skipped elsewhere."""
+    import shutil
+
+    where = tmp_path / "disk"
+    where.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("mounting a small file system needs root")
+    made = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=400k", "tmpfs", str(where)], capture_output=True)
+    if made.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here: {made.stderr.decode().strip()}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", str(where)], check=True)
+
+
+def test_a_full_disk_costs_only_the_files_it_refuses(small_disk):
+    out = small_disk / "run"
+    proc = _bark("simulate", "--quiet", "--out", str(out))  # the default scene: its checkpoint alone is 300 kB
+    lines = _lines(proc.stderr)
+    refused = {line.split(": ")[2] for line in lines if "could not be written (No space left on device)" in line}
+    assert proc.returncode == 1 and refused, proc.stderr
+    present = {p.name for p in out.iterdir()}
+    assert not refused & present and present <= set(RUN_FILES) and "summary.json" not in present
+    _no_temporaries(out)
