@@ -76,7 +76,7 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     Killed or stopped, the same command goes on without running a finished point again."""
     from bark.io.folder import held_folder
     from bark.engine.scene import merge, read_toml
-    from bark.studies.sweep import FIG9_AXES, Axis, Sweep
+    from bark.studies.sweep import FIG9_AXES, Axis, Sweep, check_fits
     from bark_cli.main import _parse_set
     from bark_cli.options import NAMER, Provenance
 
@@ -96,6 +96,8 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     prov.add("--grid", layer)
     plan = Sweep(base=base, axes=axes, seeds=range(seeds))
     plan.points()  # every point checked: a bad value is one line before anything is written
+    if dask_address is None:  # and on this machine, that it fits in memory, so many at once
+        check_fits(plan, workers or 1)
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:  # one sweep at a time in a folder
         _sweep(plan, held.path, workers, client, quiet)

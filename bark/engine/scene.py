@@ -357,11 +357,19 @@ class Scene:
     def simulation(self) -> Simulation:
         """A fresh simulation composed of exactly this scene's effects (:meth:`components`).  A run
         whose estimated peak memory exceeds what this machine has available is refused first."""
-        need, have = self.memory_estimate(), available_memory()
-        if have is not None and need > have:
-            raise BarkError(f"{{0}}: a run this size needs about {need / 2**30:.3g} GiB of memory, and this machine "
-                            f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", self.lattice.n_bases))
+        self.check_memory()
         return Simulation(**self.components())
+
+    def check_memory(self, have: int | None = -1, runs: int = 1) -> None:
+        """Refuse, in one line, ``runs`` runs of this scene at once (a sweep's workers) whose
+        estimated peak memory exceeds ``have`` bytes (default: what this machine has available now;
+        ``None``: not known, nothing refused)."""
+        have = available_memory() if have == -1 else have
+        need = self.memory_estimate() * runs
+        if have is not None and need > have:
+            at_once = f"{runs} runs this size at once need" if runs > 1 else "a run this size needs"
+            raise BarkError(f"{{0}}: {at_once} about {need / 2**30:.3g} GiB of memory, and this machine "
+                            f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", self.lattice.n_bases))
 
     def stop(self) -> Stop:
         return self.run.stop()

@@ -46,7 +46,7 @@ from bark.io.output import PATTERN_KEYS
 from bark.engine.stepping import cores
 from bark.engine.kernels import numba_env
 
-__all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "FIG9_AXES", "RESULT_COLUMNS"]
+__all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "check_fits", "FIG9_AXES", "RESULT_COLUMNS"]
 
 FIG9_AXES = (("growth.G", (0.007, 0.011, 0.014)), ("mechanics.f_max", (0.0028, 0.005, 0.008)))
 """The paper's Fig. 9 grid: G across (columns), f_max up (rows), Table 2's three values each."""
@@ -335,6 +335,8 @@ def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=No
     points = sweep.points()
     if workers < 1:
         raise BarkError("{0}: must be at least 1", Ref(None, "workers", workers))
+    if client is None:  # this machine runs them, so many at once: each point fits, before anything is written
+        check_fits(sweep, workers)
     with SweepTable(database) as table:
         table.add_axes(sweep.axes)
         done = table.done()
@@ -352,6 +354,20 @@ def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=No
                 if progress:
                     progress(counts["skipped"] + counts["ran"], len(points), by_key[result["key"]])
     return counts
+
+
+def check_fits(sweep: Sweep, workers: int) -> None:
+    """Refuse, in one line, a sweep run here by ``workers`` local processes with a point whose runs
+    side by side need more memory than this machine has available (``Scene.check_memory``): before
+    any point runs, as every point's settings are checked (``Sweep.points``)."""
+    from bark.engine.scene import Scene, available_memory
+
+    have = available_memory()
+    points = sweep.points()
+    if have is None or not points:
+        return
+    for p in points:
+        Scene.from_dict(p.scene).check_memory(have, min(workers, len(points)))
 
 
 def _local(todo: list[Point], workers: int):
