@@ -42,12 +42,50 @@ def main() -> None:
 
 def _closed_streams_to_devnull() -> None:
     """A standard stream the caller closed (``bark ... >&-``: Python then has ``None`` for it) writes
-    to ``/dev/null``: what would be said there is lost, the run and its exit status are not."""
+    to ``/dev/null``; standard output that the system refuses to write (``> /dev/full``, a full disk,
+    a closed pipe) stops being written, said once (``_Guarded``).  What would be said there is lost,
+    the command's files and its exit status are not."""
     import os
 
     for name in ("stdout", "stderr"):
         if getattr(sys, name) is None:
             setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))
+    sys.stdout = _Guarded(sys.stdout)
+
+
+class _Guarded:
+    """Standard output whose writes stop, said once on stderr, when the system refuses them."""
+
+    def __init__(self, stream) -> None:
+        self._stream, self._failed = stream, False
+        self.refused = False
+        """Whether the system refused a write (a full disk; not a reader that stopped reading):
+        the command then ends with status 1, as for any output it could not write."""
+
+    def write(self, text: str) -> int:
+        if not self._failed:
+            try:
+                return self._stream.write(text)
+            except OSError as err:
+                self._fail(err)
+        return len(text)
+
+    def flush(self) -> None:
+        if not self._failed:
+            try:
+                self._stream.flush()
+            except OSError as err:
+                self._fail(err)
+
+    def _fail(self, err: OSError) -> None:
+        self._failed = True
+        if not isinstance(err, BrokenPipeError):  # a reader that stopped reading (| head) wants no more
+            self.refused = True
+            sys.stderr.write(f"bark: warning: the command's output could not be written ({err.strerror or err}); "
+                             "its files are written all the same\n")
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
 
 
 def _few_threads_where_processes_are_few() -> None:
@@ -95,6 +133,8 @@ def _leave(code) -> None:
             stream.flush()
         except (OSError, ValueError):  # a closed pipe (bark ... | head): nothing more can be said
             pass
+    if not code and getattr(sys.stdout, "refused", False):  # its output is one of a command's outputs
+        code = 1
     os._exit(code or 0)
 
 

@@ -142,14 +142,28 @@ def test_a_refused_end_checkpoint_keeps_the_last_good_one(tmp_path, monkeypatch)
     assert {"state.npz", "breaks.csv", "summary.json"} <= {p.name for p in out.iterdir()}
 
 
-def test_a_full_standard_output_costs_nothing_of_the_run(tmp_path):
-    out = tmp_path / "run"
+@pytest.mark.parametrize("command", ["simulate", "analyze", "compare", "sweep", "strategies"])
+def test_a_full_standard_output_costs_nothing_of_the_run(command, tmp_path):
+    """The output a command prints is one of its outputs: refused, it is one line and status 1;
+    the files are written all the same."""
+    out, run = tmp_path / "out", tmp_path / "run"
+    if command in ("analyze", "compare"):
+        assert CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--out", str(run)]).exit_code == 0
+    args = {"simulate": ["simulate", *SMALL, "--out", str(out)], "analyze": ["analyze", str(run), "--out", str(out)],
+            "compare": ["compare", str(run), str(run), "--out", str(out)],
+            "sweep": ["sweep", "--grid", "growth.G=0.05", "--set", "lattice.n_bases=300", "--set", "run.until_time=6",
+                      "--out", str(out)], "strategies": ["strategies"]}[command]
     with open("/dev/full", "w") as full:
-        proc = _bark("simulate", *SMALL, "--out", str(out), stdout=full)
+        proc = _bark(*args, stdout=full)
     lines = _lines(proc.stderr)
-    assert proc.returncode == 0, proc.stderr
-    assert any("the summary could not be printed" in line for line in lines), proc.stderr
-    assert json.loads((out / "summary.json").read_text())["steps"] > 0
+    assert proc.returncode == 1, proc.stderr
+    assert [line for line in lines if "could not be written" in line] == [
+        "bark: warning: the command's output could not be written (No space left on device); its files are written "
+        "all the same"], proc.stderr
+    if command != "strategies":
+        assert any(out.iterdir())
+    if command == "simulate":
+        assert json.loads((out / "summary.json").read_text())["steps"] > 0
 
 
 @pytest.mark.parametrize("closed", ["1>&-", "2>&-", "1>&- 2>&-"])
