@@ -371,8 +371,9 @@ def _report(outcome, quiet: bool, signum: int | None = None) -> int:
         code = code or (128 + signum if outcome.drawing_stopped and signum is not None else 1)
     unwritten = [p for p in outcome.failed if "could not be written" in p]
     if unwritten and (out / "checkpoint.npz").exists():
-        click.echo(f"bark: once there is room, bark simulate --resume {shlex.quote(str(out))} writes what is missing",
-                   err=True)
+        how = "goes on from the last checkpoint written" if any(p.startswith("checkpoint.npz") for p in unwritten) \
+            else "writes what is missing"
+        click.echo(f"bark: once there is room, bark simulate --resume {shlex.quote(str(out))} {how}", err=True)
     if not quiet:
         from bark_cli.progress import print_summary
 

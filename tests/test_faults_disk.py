@@ -285,3 +285,26 @@ def test_a_full_disk_costs_only_the_files_it_refuses(small_disk):
     present = {p.name for p in out.iterdir()}
     assert not refused & present and present <= set(RUN_FILES) and "summary.json" not in present
     _no_temporaries(out)
+
+
+def test_a_resume_onto_a_size_limit_leaves_no_output_of_the_earlier_state(tmp_path):
+    """Stopped at t = 3 of 6, then resumed under ``ulimit -f``: the outputs refused are gone (not
+    the stopped state's left beside the end's), the last checkpoint is kept, and a resume with room
+    ends as the run that was never stopped."""
+    from bark.engine.scene import Scene
+    from bark.studies import runner
+
+    scene = Scene.from_dict({"lattice": {"n_bases": 300}, "growth": {"G": 0.05}, "run": {"until_time": 6.0}})
+    whole, out, seen = tmp_path / "whole", tmp_path / "out", []
+    runner.run(scene, whole)
+    runner.run(scene, out, observe=lambda sim, stop: seen.append(sim.state.t), checkpoint_every=1e-9,
+               interrupted=lambda: "interrupted" if seen and seen[-1] >= 3.0 else None)
+    proc = _bark("simulate", "--resume", str(out), "--quiet", limit=20_000)
+    refused = {line.split(": ")[2] for line in _lines(proc.stderr) if "could not be written" in line}
+    assert proc.returncode == 1 and "state.npz" in refused, proc.stderr
+    assert not refused - {"checkpoint.npz"} & {p.name for p in out.iterdir()}
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] in ("interrupted", "end")
+    again = _bark("simulate", "--resume", str(out), "--quiet")
+    assert again.returncode == 0, again.stderr
+    for name in ("breaks.csv", "state.npz", "patches.csv"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name

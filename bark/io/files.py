@@ -74,11 +74,12 @@ def atomic_write(path: str | Path, write: Callable[[io.BufferedWriter], None], *
     return path
 
 
-def attempt(name: str, write: Callable[[], Any], failed: list[str] | None) -> bool:
+def attempt(name: str, write: Callable[[], Any], failed: list[str] | None, stale: tuple[Path, ...] = ()) -> bool:
     """Write one output with ``write()``.  With ``failed`` given, a file system that refuses it (a
     full disk or quota, a file-size limit, a read-only folder) is said as ``"name: could not be
-    written (why)"`` in ``failed`` and the caller goes on with its other outputs; the file is then as
-    it was (``atomic_write``).  Returns whether it was written."""
+    written (why)"`` in ``failed`` and the caller goes on with its other outputs; nothing of the
+    refused file is written (``atomic_write``), and its earlier versions ``stale`` are removed, so a
+    folder never holds an output of another state beside this one's.  Returns whether it was written."""
     if failed is None:
         write()
         return True
@@ -87,6 +88,11 @@ def attempt(name: str, write: Callable[[], Any], failed: list[str] | None) -> bo
         return True
     except OSError as err:
         failed.append(f"{name}: could not be written ({err.strerror or err})")
+        for path in stale:
+            try:
+                Path(path).unlink(missing_ok=True)
+            except OSError:
+                pass
         return False
 
 

@@ -148,22 +148,25 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
     if scene.has("patch-statistics"):
         measured = pattern_of(analyses.values())
         rows = measured.patches if measured is not None else []
-        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows)), failed)
+        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows)), failed,
+                (out / "patches.csv",))
     if scene.has("break-log"):
-        attempt("breaks.csv", lambda: write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()}), failed)
+        attempt("breaks.csv", lambda: write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()}),
+                failed, (out / "breaks.csv",))
     s = sim.state
     if scene.has("state-snapshot"):
         attempt("state.npz", lambda: write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases
             out / "state.npz", compress=False,
             x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs.astype(np.int64), rest=s.rest, fmax=s.fmax, intact=s.intact,
             labels=sim.patch_labels(), t=np.float64(s.t),
-        ), failed)
+        ), failed, (out / "state.npz",))
     if scene.has("graphml"):
-        attempt("graph.graphml", lambda: write_graphml(out / "graph.graphml", sim), failed)
+        attempt("graph.graphml", lambda: write_graphml(out / "graph.graphml", sim), failed, (out / "graph.graphml",))
     if scene.has("mesh"):
         from bark.io.mesh import write_mesh
 
-        attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size), failed)
+        attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size), failed,
+                (out / "tree.vtu", out / "tree.ply"))
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
     if not failed:
         attempt("summary.json", lambda: write_json(out / "summary.json", summary), failed)

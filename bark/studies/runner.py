@@ -246,7 +246,7 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
     failed: list[str] = []                         # the uninterrupted run would
     for rec in recorders:
         if rec.file is not None:
-            attempt(rec.file, lambda: rec.write(out / rec.file), failed)
+            attempt(rec.file, lambda: rec.write(out / rec.file), failed, (out / rec.file,))
     waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
     summary = write_run(sim, scene, out, reason, wall, _extra(by_name), failed)
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error,
@@ -264,6 +264,7 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
             outcome.drawing_stopped = True
         except OSError as err:  # a full disk, a file-size limit: as for the data files
             outcome.failed.append(f"{name}: could not be written ({err.strerror or err})")
+            (out / name).unlink(missing_ok=True)  # an earlier state's picture is not left beside this one's
         except BarkError as err:  # nothing to draw it with
             outcome.failed.append(f"{name}: not drawn ({err})")
         except Exception as err:  # a picture never costs the data: say what failed, keep the rest
