@@ -402,9 +402,9 @@ def _local(todo: list[Point], workers: int):
                                  "the table; the same sweep run again goes on from there")
             if failed is not None:
                 raise failed
-    except BaseException:  # stopped (a signal, the caller closing this generator) or failed: the runs in
-        for worker in list((getattr(pool, "_processes", None) or {}).values()):  # flight are lost either way,
-            worker.terminate()                                                    # and are not waited for
+    except (KeyboardInterrupt, GeneratorExit):  # stopped (a signal, the caller closing this generator): the
+        for worker in list((getattr(pool, "_processes", None) or {}).values()):  # runs in flight are lost
+            worker.terminate()                                                    # either way, not waited for
         raise
     finally:
         pool.shutdown(wait=False, cancel_futures=True)
