@@ -108,6 +108,8 @@ class Point:
     seed: int
     scene: dict
     key: str
+    checked: object = attrs.field(default=None, eq=False, repr=False)
+    """The scene, validated (``Scene.from_dict``) when the point was made: what its checks ask."""
 
 
 def _quoted(name: str) -> str:
@@ -164,9 +166,9 @@ class Sweep:
                 overrides.setdefault(a.section, {})[a.name] = a.values[i]
             for seed in self.seeds:
                 scene = merge(merge(self.base, overrides), {"run": {"seed": seed}})
-                Scene.from_dict(scene)  # a bad value: one line, before anything runs
+                checked = Scene.from_dict(scene)  # a bad value: one line, before anything runs
                 key = hashlib.sha256(_canonical({"scene": scene, "seed": seed}).encode()).hexdigest()[:20]
-                out.append(Point(index=index, settings=settings, seed=seed, scene=scene, key=key))
+                out.append(Point(index=index, settings=settings, seed=seed, scene=scene, key=key, checked=checked))
         return tuple(out)
 
 
@@ -360,14 +362,14 @@ def check_fits(sweep: Sweep, workers: int) -> None:
     """Refuse, in one line, a sweep run here by ``workers`` local processes with a point whose runs
     side by side need more memory than this machine has available (``Scene.check_memory``): before
     any point runs, as every point's settings are checked (``Sweep.points``)."""
-    from bark.engine.scene import Scene, available_memory
+    from bark.engine.scene import available_memory
 
     have = available_memory()
     points = sweep.points()
     if have is None or not points:
         return
-    for p in points:
-        Scene.from_dict(p.scene).check_memory(have, min(workers, len(points)))
+    for p in points:  # the scenes validated when the points were made, not built again
+        p.checked.check_memory(have, min(workers, len(points)))
 
 
 def _local(todo: list[Point], workers: int):

@@ -799,9 +799,8 @@ def _cache_folders(source: Path) -> list[Path]:
     """The folders numba may cache the compiled functions of ``source`` in (its locators': under
     ``NUMBA_CACHE_DIR``, beside the source, in the user's cache)."""
     sub = numba.core.caching._CacheLocator.get_suitable_cache_subpath(str(source))
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     given = [Path(os.environ["NUMBA_CACHE_DIR"]) / sub] if os.environ.get("NUMBA_CACHE_DIR") else []
-    return [*given, source.parent / "__pycache__", Path(home) / "numba" / sub]
+    return [*given, source.parent / "__pycache__", numba_env.user_cache() / "numba" / sub]
 
 
 def _holds(path: Path, text: str) -> bool:

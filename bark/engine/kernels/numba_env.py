@@ -19,7 +19,7 @@ from pathlib import Path
 
 from bark.errors import BarkWarning
 
-__all__ = ["settle", "thread_count", "cache_dir", "writable"]
+__all__ = ["settle", "thread_count", "cache_dir", "user_cache", "writable"]
 
 _SETTLED = False
 
@@ -53,12 +53,16 @@ def writable(folder: Path) -> bool:
         return False
 
 
+def user_cache() -> Path:
+    """The user's cache folder: ``$XDG_CACHE_HOME``, else ``~/.cache`` (numba's and bark's live in it)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"))
+
+
 def cache_dir() -> Path:
     """bark's cache folder: ``$BARK_CACHE_DIR``, else ``$XDG_CACHE_HOME/bark``, else
     ``~/.cache/bark`` (generated kernels, and numba's compiled code where it has nowhere else)."""
-    base = os.environ.get("BARK_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "bark")
-    return Path(base)
+    given = os.environ.get("BARK_CACHE_DIR")
+    return Path(given) if given else user_cache() / "bark"
 
 
 def _numba_cache() -> None:
@@ -69,14 +73,14 @@ def _numba_cache() -> None:
             return
         del os.environ["NUMBA_CACHE_DIR"]
         warnings.warn(f"NUMBA_CACHE_DIR={given!r} cannot be written: ignored", BarkWarning, stacklevel=3)
-    home_cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    if writable(Path(__file__).parent / "__pycache__") or writable(Path(home_cache) / "numba"):
+    home_cache = user_cache()
+    if writable(Path(__file__).parent / "__pycache__") or writable(home_cache / "numba"):
         return  # numba's own choice works
     temp = Path(tempfile.gettempdir()) / f"bark-numba-{os.getuid() if hasattr(os, 'getuid') else 0}"
     for folder in (cache_dir() / "numba", temp):
         if writable(folder):
             os.environ["NUMBA_CACHE_DIR"] = str(folder)
-            warnings.warn(f"numba cannot cache compiled code beside bark or in {home_cache!r}: caching it in "
+            warnings.warn(f"numba cannot cache compiled code beside bark or in {str(home_cache)!r}: caching it in "
                           f"{str(folder)!r}", BarkWarning, stacklevel=3)
             return
     warnings.warn("no folder can be written to cache compiled code in: the numba backend is unavailable",
