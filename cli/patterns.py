@@ -53,11 +53,12 @@ def _fmt(value, digits: int = 3) -> str:
 def _statistics_table(stats):
     from rich.table import Table
 
-    table = Table("pattern", "patches", "orientation mean (°)", "SD (°)", "SE (°)", "within 45°",
-                  "anisotropy mean", "SD", "SE", title="patterns (orientation: 0° horizontal, 90° up the trunk)")
+    table = Table("pattern", "spiral", "patches", "orientation mean (°)", "SD (°)", "SE (°)", "within 45°",
+                  "anisotropy mean", "SD", "SE", title="patterns (orientation: 0° horizontal, 90° up the trunk; "
+                  "spiral: the lattice's handedness, — where not known)")
     for s in stats:
         a = s.anisotropy
-        table.add_row(s.name, str(s.n_patches), _fmt(s.orientation.mean_deg, 4), _fmt(s.orientation.sd_deg),
+        table.add_row(s.name, s.handedness or "—", str(s.n_patches), _fmt(s.orientation.mean_deg, 4), _fmt(s.orientation.sd_deg),
                       _fmt(s.orientation.se_deg), _fmt(s.fraction_within_45, 2), *(
                           ("—", "—", "—") if a is None else (_fmt(a.mean), _fmt(a.sd), _fmt(a.se))))
     return table
@@ -130,6 +131,10 @@ def compare(patterns, min_size, mirror, out):
     folder = writable_folder(out)
     console = Console(width=150)
     console.print(_statistics_table(stats))
+    hands = {s.handedness for s in stats} - {None}
+    if len(hands) > 1:
+        console.print("  these patterns grew on lattices of both handedness (spiral): --mirror N compares the N-th "
+                      "in a mirror, as if its spiral turned the other way")
     report = {"patterns": [s.as_dict() for s in stats]}
     for quantity in QUANTITIES:
         h, dp = result.hellinger[quantity], result.d_p[quantity]

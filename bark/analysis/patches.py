@@ -52,4 +52,4 @@ def pattern_summary(rows: list[dict]) -> dict:
     anisotropy, and the share of patches whose orientation lies within 45° of the mean axis (NaN
     where there are no patches)."""
     stats = PatternStatistics.of_values([r["orientation_deg"] for r in rows], [r["anisotropy"] for r in rows])
-    return {k: v for k, v in stats.as_dict().items() if k not in ("name", "source")}
+    return {k: v for k, v in stats.as_dict().items() if k not in ("name", "source", "handedness")}

@@ -41,7 +41,7 @@ from bark.errors import BarkError
 from bark.paths import is_zip, open_regular
 
 __all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
-           "PALETTE", "FRAGMENT_GREY", "simulation_colours"]
+           "PALETTE", "FRAGMENT_GREY", "simulation_colours", "spiral_handedness"]
 
 MIN_PATCH_SIZE = 7
 """Patches with fewer leaf bases are fragments, left out of the statistics (the paper: 7)."""
@@ -70,6 +70,9 @@ class Pattern:
     name: str = ""
     units: str = "length units"
     """What a length is: ``"length units"`` (bark's, 1 = 0.3 m), ``"m"`` or ``"px"``."""
+    handedness: str | None = None
+    """Which way the phyllotactic spiral of the lattice that grew it turns (``"right"`` or ``"left"``,
+    ``bark.model.lattice.Lattice.handedness``); ``None`` where it is not known (a photograph)."""
 
     def __attrs_post_init__(self) -> None:
         n, dim = self.points.shape
@@ -90,11 +93,12 @@ class Pattern:
     def of_simulation(cls, sim, name: str = "") -> "Pattern":
         """The pattern of a simulation now: its bases' positions, patches = connected components of
         the intact springs."""
-        return cls(points=sim.state.x, patches=sim.patch_labels(), name=name)
+        return cls(points=sim.state.x, patches=sim.patch_labels(), name=name, handedness=sim.lattice.handedness)
 
     @classmethod
     def from_state(cls, path: str | Path, name: str | None = None) -> "Pattern":
-        """A run's ``state.npz`` (positions ``x`` and patch ``labels``)."""
+        """A run's ``state.npz`` (positions ``x`` and patch ``labels``); its handedness read off the
+        positions, which are in lattice order (:func:`spiral_handedness`)."""
         path = Path(path)
         try:
             with open_regular(path) as fh:
@@ -113,7 +117,8 @@ class Pattern:
             raise BarkError(f"{path}: not a readable state file ({type(err).__name__}: {err})") from None
         if x.ndim != 2 or x.shape[1] != 3 or labels.shape != (x.shape[0],):
             raise BarkError(f"{path}: x must be n × 3 and labels n long (they are {x.shape} and {labels.shape})")
-        return cls(points=x, patches=labels, name=path.parent.name if name is None else name)
+        return cls(points=x, patches=labels, name=path.parent.name if name is None else name,
+                   handedness=spiral_handedness(x))
 
     @classmethod
     def from_csv(cls, path: str | Path, name: str | None = None) -> "Pattern":
@@ -179,7 +184,8 @@ class Pattern:
         """The pattern seen in a mirror held along the trunk: left and right swapped (θ → −θ on the
         trunk, x → −x in a plane), so every orientation ``o`` becomes ``180° − o``.  A phyllotactic
         spiral turns either way on real trees; this compares patterns of opposite handedness."""
-        return attrs.evolve(self, points=_mirrored_points(self.points), name=f"{self.name} (mirrored)")
+        return attrs.evolve(self, points=_mirrored_points(self.points), name=f"{self.name} (mirrored)",
+                            handedness=_other_hand(self.handedness))
 
     # -- measured -------------------------------------------------------------------------------
     def patch_table(self, min_size: int = MIN_PATCH_SIZE) -> "PatchTable":
@@ -197,7 +203,8 @@ class Pattern:
 
     def statistics(self, min_size: int = MIN_PATCH_SIZE) -> "PatternStatistics":
         """The pattern's statistics over its patches of at least ``min_size`` points."""
-        return PatternStatistics.of_table(self.patch_table(min_size), name=self.name)
+        return attrs.evolve(PatternStatistics.of_table(self.patch_table(min_size), name=self.name),
+                            handedness=self.handedness)
 
 
 def _patch_axes(points: np.ndarray, row: np.ndarray, size: np.ndarray, on_trunk: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -237,6 +244,25 @@ def _mirrored_points(points: np.ndarray) -> np.ndarray:
     flip = np.ones(points.shape[1])
     flip[1 if points.shape[1] == 3 else 0] = -1.0
     return points * flip
+
+
+def spiral_handedness(x: np.ndarray) -> str | None:
+    """The handedness of the lattice whose bases sit at ``x`` (``(n, 3)``, trunk axis z, in lattice
+    order): ``"right"`` where base i + 1 lies mostly counter-clockwise of base i seen from above (the
+    angle from one to the next, wrapped to (−180°, 180°], has a positive median), ``"left"`` where
+    clockwise; ``None`` with fewer than two bases or a median turn of 0 or 180° (no direction)."""
+    if x.shape[0] < 2:
+        return None
+    theta = np.arctan2(x[:, 1], x[:, 0])
+    turn = float(np.median(np.remainder(np.diff(theta) + math.pi, 2.0 * math.pi) - math.pi))
+    if not (1e-9 < abs(turn) < math.pi - 1e-9):
+        return None
+    return "right" if turn > 0 else "left"
+
+
+def _other_hand(handedness: str | None) -> str | None:
+    """The handedness of a mirror image."""
+    return {"right": "left", "left": "right"}.get(handedness)
 
 
 def _mirror(deg):
@@ -352,6 +378,8 @@ class PatternStatistics:
     where a published summary does not give it)."""
     source: str = ""
     """Where the figures come from, in words (a file, or the publication of a summary)."""
+    handedness: str | None = None
+    """The handedness of the pattern's lattice (``Pattern.handedness``); ``None`` where unknown."""
 
     @classmethod
     def of_table(cls, table: PatchTable, name: str = "", source: str = "") -> "PatternStatistics":
@@ -392,7 +420,8 @@ class PatternStatistics:
         spreads and anisotropy unchanged."""
         o = self.orientation
         return attrs.evolve(self, name=f"{self.name} (mirrored)", orientation=attrs.evolve(o, mean_deg=float(_mirror(o.mean_deg))),
-                            patches=None if self.patches is None else self.patches.mirrored())
+                            patches=None if self.patches is None else self.patches.mirrored(),
+                            handedness=_other_hand(self.handedness))
 
     def as_dict(self) -> dict:
         """The figures as plain values (for JSON and tables); no per-patch rows."""
@@ -402,7 +431,7 @@ class PatternStatistics:
                 "orientation_se_deg": self.orientation.se_deg,
                 "mean_anisotropy": None if a is None else a.mean, "anisotropy_sd": None if a is None else a.sd,
                 "anisotropy_se": None if a is None else a.se, "fraction_within_45_deg": self.fraction_within_45,
-                "source": self.source}
+                "handedness": self.handedness, "source": self.source}
 
 
 def _records(body: list[tuple[int, str]], path: Path):

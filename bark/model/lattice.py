@@ -1,6 +1,6 @@
 """The phyllotactic lattice of leaf bases on a cylinder (paper: "Fracture simulation", Table 2).
 
-Leaf base ``i`` sits at angle ``i·φ`` and height ``i·h``.  Springs join it to the bases at the
+Leaf base ``i`` sits at angle ``i·φ`` and height ``i·h`` (``−i·φ`` for a left-handed lattice).  Springs join it to the bases at the
 index offsets ``±o`` for each ``o`` in ``offsets`` (Table 2: ±21, ±34), giving each interior base
 four neighbours.  The exact lattice is degenerate (every spring of one offset has the
 same length and reaches its threshold in the same step), so the lattice carries an explicit,
@@ -17,7 +17,7 @@ import math
 import attrs
 import numpy as np
 
-from bark.validators import INT_MAX, in_range, non_negative, optional, positive, positive_int
+from bark.validators import INT_MAX, in_range, non_negative, one_of, optional, positive, positive_int
 from bark.errors import BarkError, Ref
 
 __all__ = ["GOLDEN_ANGLE_DEG", "Lattice"]
@@ -74,6 +74,11 @@ class Lattice:
     """Number of leaf bases on the trunk segment (Table 2: 3000)."""
     divergence_deg: float = attrs.field(default=GOLDEN_ANGLE_DEG, validator=in_range(0.0, 360.0, lo_open=True, hi_open=True))
     """Divergence angle φ between successive bases, degrees (default: the golden angle)."""
+    handedness: str = attrs.field(default="right", validator=one_of("right", "left"))
+    """Which way the generative spiral (base i to base i + 1) turns: right, a right-handed helix up the
+    trunk (θ grows by φ, counter-clockwise seen from above); left, its mirror image (θ falls by φ).
+    Real trees come in both; a left-handed lattice grows the mirror image of a right-handed one of the
+    same seed, each orientation o as 180° − o."""
     rise: float = attrs.field(default=0.0005, validator=positive)
     """Vertical displacement h between successive bases, length units (1 = 0.3 m; Table 2: 0.0005)."""
     offsets: tuple[int, ...] = attrs.field(default=(21, 34), converter=_offsets, validator=_check_offsets)
@@ -126,6 +131,11 @@ class Lattice:
             k += 1
         return k * self.join_every
 
+    @property
+    def turn(self) -> float:
+        """The signed angle from one base to the next, radians: ``φ``, or ``−φ`` when left-handed."""
+        return math.radians(self.divergence_deg) * (1.0 if self.handedness == "right" else -1.0)
+
     def spacing(self, radius: float) -> float:
         """Typical distance between neighbouring bases: the side of the area 2πr·h one base covers."""
         return math.sqrt(2.0 * math.pi * radius * self.rise)
@@ -133,7 +143,9 @@ class Lattice:
     def sites(self, radius: float, rng: np.random.Generator, first: int = 0, count: int | None = None
               ) -> tuple[np.ndarray, np.ndarray]:
         """Angle θ (radians) and height z of bases ``first`` .. ``first + count − 1`` (default: the
-        initial ones) on a cylinder of ``radius``: base i at ``i·φ`` and ``i·h``, jittered.
+        initial ones) on a cylinder of ``radius``: base i at ``i·φ`` and ``i·h``, jittered; a
+        left-handed lattice's angles are those of the right-handed one negated (its mirror image, jitter
+        and all).
 
         The jitter is drawn from ``rng`` (the simulation's one seeded generator) even when it is
         zero, so that the generator's later draws do not depend on whether jitter is on."""
@@ -143,7 +155,7 @@ class Lattice:
         sigma = self.jitter * self.spacing(radius)
         theta = i * math.radians(self.divergence_deg) + noise[0] * (sigma / radius)
         z = i * self.rise + noise[1] * sigma
-        return theta, z
+        return (theta if self.handedness == "right" else -theta), z
 
     def partition_offsets(self) -> tuple[int, int]:
         """The two index offsets whose midpoints make a base's rhomboid (``partition``, or from ``offsets``)."""

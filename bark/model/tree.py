@@ -206,7 +206,7 @@ class Apex:
         ids = np.arange(first, self.tip_index(t, radius) + 1)
         sigma = np.maximum(ids - j, 0.0) * self.organ_area(radius)  # area between organ and the dome's base
         rho, u = self.dome.at_area(self.dome.area(radius) - sigma, radius)
-        theta = ids * math.radians(self.lattice.divergence_deg)
+        theta = ids * self.lattice.turn
         return ids, np.column_stack([rho * np.cos(theta), rho * np.sin(theta), float(self.top(t)) + u])
 
 
@@ -228,7 +228,7 @@ def _half_vectors(lattice: Lattice, radius) -> tuple[np.ndarray, np.ndarray]:
     """Half the lattice vectors (arc length, height) to the partition neighbours ``p`` and ``q`` at
     ``radius`` (one per base): the rhomboid's corners are ``±`` these."""
     radius = np.atleast_1d(np.asarray(radius, dtype=float))
-    phi = math.radians(lattice.divergence_deg)
+    phi = lattice.turn
 
     def half(o: int) -> np.ndarray:
         turn = math.remainder(o * phi, 2.0 * math.pi)
