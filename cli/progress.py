@@ -77,6 +77,22 @@ def print_summary(summary: dict, out: Path) -> None:
                 "mean_anisotropy", "fraction_within_45_deg", "wall_time_s"):
         value = summary.get(key)
         table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
+    for name, r in (summary.get("regions") or {}).items():  # a trunk with regions: each its own line
+        table.add_row(f"region {name}", _region_line(r))
     for key, value in (summary.get("fracture") or {}).items():  # the fracture-history effect
         table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
     Console().print(table)
+
+
+def _region_line(r: dict) -> str:
+    """A region's statistics in one line: its patches' orientation and anisotropy, its largest patch."""
+    import math
+
+    def num(key: str, fmt: str) -> str:
+        value = r.get(key)
+        return "—" if value is None or not math.isfinite(value) else format(value, fmt)
+
+    n, share = r["n_patches"], r.get("largest_patch_share")
+    text = "no patches" if not n else (f"{n} patch{'es' if n > 1 else ''} at {num('mean_orientation_deg', '.1f')}° "
+                                       f"(SD {num('circular_sd_deg', '.1f')}°), anisotropy {num('mean_anisotropy', '.3f')}")
+    return text + ("" if share is None else f"; largest {100 * share:.0f} % of {r['n_bases']:,} bases")

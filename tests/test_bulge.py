@@ -113,6 +113,34 @@ def test_pattern_statistics_per_region_near_bulges_and_away():
     assert plain.summary["regions"] is None
 
 
+def test_regions_of_a_hand_made_trunk_count_patches_bases_and_the_largest_share():
+    """Three bases away from a bulge and three in it on the trunk of the start, four that joined later:
+    a patch goes to ``young`` when most of its bases joined later, else by its centroid's height; each
+    region counts its own bases and the largest share of them one patch holds."""
+    from types import SimpleNamespace
+
+    from bark.io.output import region_summaries, trunk_regions
+
+    growth = SimpleNamespace(region=lambda z: np.where(np.asarray(z) > 0.5, "bulge", "straight").astype(object))
+    z = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
+    state = SimpleNamespace(anchor=np.column_stack([np.ones(10), np.zeros(10), z]),
+                            born=np.array([0.0] * 6 + [5.0] * 4))
+    sim = SimpleNamespace(growth=growth, state=state)
+    labels = np.array([0, 0, 0, 1, 1, 1, 1, 2, 2, 2])
+    rows = [{"patch": 0, "z": 0.0, "orientation_deg": 80.0, "anisotropy": 0.5},
+            {"patch": 1, "z": 1.2, "orientation_deg": 40.0, "anisotropy": 0.2},  # a quarter joined later
+            {"patch": 2, "z": 2.0, "orientation_deg": 170.0, "anisotropy": 0.9}]
+    every = trunk_regions(sim)
+    assert list(every) == ["bulge", "straight", "young"]
+    out = region_summaries(sim, rows, every, labels)
+    assert {k: (v["n_patches"], v["mean_orientation_deg"]) for k, v in out.items()} == {
+        "bulge": (1, pytest.approx(40.0)), "straight": (1, pytest.approx(80.0)), "young": (1, pytest.approx(170.0))}
+    assert {k: (v["n_bases"], v["largest_patch_share"]) for k, v in out.items()} == {
+        "bulge": (3, 1.0), "straight": (3, 1.0), "young": (4, 0.75)}
+    windows = region_summaries(sim, rows, every, labels, shares=False)
+    assert "n_bases" not in windows["young"] and windows["young"]["n_patches"] == 1
+
+
 def test_the_bulge_law_per_base_and_on_arrays_gives_the_same_bits():
     """The kernel calls its part's ``radius(t, z, time(t, params, ...))`` for one height at a time (the
     sine only inside a bulge), the numpy backend for all heights at once: the same numbers, to the

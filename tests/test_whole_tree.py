@@ -64,7 +64,10 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
 
     with Image.open(out / "tree.png") as image:  # the side view, of a bounded size
         assert 300 < image.size[0] <= 1000 and 300 < image.size[1] <= 2000
-    assert set(summary["regions"]) == {"bulge", "straight"}
+    regions = summary["regions"]  # the trunk of the start near bulges and away, and the trunk grown since
+    assert set(regions) == {"bulge", "straight", "young"}
+    assert sum(r["n_bases"] for r in regions.values()) == 7000 and regions["young"]["n_bases"] == 7000 - 4500
+    assert sum(r["n_patches"] for r in regions.values()) == summary["n_patches"]
     windows = summary["windows"]  # the same, in photograph-sized windows; and on the trunk of the start
     assert windows["window_m"] == pytest.approx(0.15) and set(windows["initial_trunk"]) == {"bulge", "straight"}
     assert sum(w["n_patches"] for w in windows["regions"].values()) >= summary["n_patches"]

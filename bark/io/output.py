@@ -46,20 +46,51 @@ PATTERN_KEYS = ("mean_orientation_deg", "circular_sd_deg", "orientation_se_deg",
 """The pattern statistics summary.json takes from the analyzer's summary (``bark.analysis.patches.pattern_summary``)."""
 
 
+YOUNG = "young"
+"""The region of the bases that joined after the run began (primary growth at the top): the trunk
+that grew during the run, stretched for less of it than the trunk it began with."""
+
+
+def base_regions(sim) -> np.ndarray:
+    """Each base's region: the growth law's region of its site (``Growth.region``), or
+    :data:`YOUNG` for a base that joined during the run."""
+    s = sim.state
+    names = np.asarray(sim.growth.region(s.anchor[:, 2]), dtype=object).copy()
+    names[s.born > s.born.min(initial=0.0)] = YOUNG
+    return names
+
+
 def trunk_regions(sim) -> np.ndarray | None:
-    """The names of the trunk's regions (``Growth.region`` of every base's site), or ``None`` when it
-    has one region."""
-    every = np.unique(sim.growth.region(sim.state.anchor[:, 2]))
+    """The names of the trunk's regions (``base_regions``), or ``None`` when it has one region."""
+    every = np.unique(base_regions(sim))
     return every if len(every) >= 2 else None
 
 
-def region_summaries(sim, rows: list[dict], every: np.ndarray) -> dict[str, dict]:
-    """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk: each patch counted
-    in the region of its centroid's height (near bulges and away from them)."""
+def region_summaries(sim, rows: list[dict], every: np.ndarray, labels: np.ndarray, shares: bool = True
+                     ) -> dict[str, dict]:
+    """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk: each patch counted in
+    :data:`YOUNG` when most of its bases joined during the run, else in the region of its centroid's
+    height (near bulges and away from them); ``labels`` is every base's patch, as ``rows`` number
+    them.  With ``shares`` each region also has its bases (``n_bases``) and the largest share of them
+    that one patch holds (``largest_patch_share``, fragments counted): near 1 when the region has not
+    come apart."""
     from bark.analysis.patches import pattern_summary
 
-    names = sim.growth.region(np.array([r["z"] for r in rows], dtype=float))
-    return {str(name): pattern_summary([r for r, n in zip(rows, names) if n == name]) for name in every}
+    z = np.array([r["z"] for r in rows], dtype=float)
+    names = np.asarray(sim.growth.region(z), dtype=object).copy()
+    if len(rows):
+        young = sim.state.born > sim.state.born.min(initial=0.0)
+        counts = np.bincount(labels, minlength=int(labels.max(initial=-1)) + 1)
+        share = np.bincount(labels, weights=young, minlength=counts.size) / np.maximum(counts, 1)
+        names[share[np.array([r["patch"] for r in rows], dtype=np.int64)] > 0.5] = YOUNG
+    out = {}
+    for name in every:
+        out[str(name)] = pattern_summary([r for r, n in zip(rows, names) if n == name])
+        if shares:
+            inside = labels[base_regions(sim) == name]
+            out[str(name)].update(n_bases=int(inside.size), largest_patch_share=float(
+                np.bincount(inside).max() / inside.size) if inside.size else None)
+    return out
 
 
 def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> dict[str, Any]:
@@ -75,8 +106,8 @@ def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> di
     joined = s.born > s.born.min()  # grew on the trunk the run began with
     initial = np.bincount(labels, weights=joined) == 0  # per window patch: none of its bases joined later
     old = [r for r in rows if initial[r["patch"]]] if joined.any() else None
-    return {"window": window, "window_m": metres(window), "regions": region_summaries(sim, rows, every),
-            "initial_trunk": None if old is None else region_summaries(sim, old, every)}
+    return {"window": window, "window_m": metres(window), "regions": region_summaries(sim, rows, every, labels, False),
+            "initial_trunk": None if old is None else region_summaries(sim, old, every[every != YOUNG], labels, False)}
 
 
 def _phyllotaxis(sim) -> dict | None:
@@ -123,7 +154,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "n_broken": sim.n_broken,
         "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size) if "fracture" in effects else None),
         **{k: stats.get(k) for k in PATTERN_KEYS},
-        "regions": region_summaries(sim, rows, every) if every is not None else None,
+        "regions": region_summaries(sim, rows, every, sim.patch_labels()) if every is not None else None,
         "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
