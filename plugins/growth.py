@@ -8,15 +8,18 @@ from typing import ClassVar
 import attrs
 import numpy as np
 
-from bark.validators import construct, non_negative, optional, positive
+from bark.validators import REAL_MAX, construct, in_range, non_negative, optional, positive, positive_int
 from bark.errors import BarkError, Ref
 from bark.contract.parts import GrowthPart
 from bark.contract.strategies import Growth
 from bark.model.effects import Effect
 from bark.model.physics import weighted_radius
 
-__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeGrowth", "bulge_radius", "bulge_time", "bulge_weights",
-           "sin2_profile"]
+__all__ = ["SqrtGrowth", "LinearGrowth", "Bulge", "BulgeSeries", "BulgeGrowth", "bulge_radius", "bulge_time",
+           "bulge_weights", "sin2_profile"]
+
+ROW = 6
+"""Numbers per bulge in the bulge law's part: peak, half width, magnitude, decay, has its own G, start."""
 
 
 def sqrt_radius(t, z, p):
@@ -55,13 +58,16 @@ class LinearGrowth(SqrtGrowth):
         return GrowthPart(radius=linear_radius, params=(self.r0, self.G), uniform=True)
 
 
-def _bulges(value):
-    """A list of bulge tables (or :class:`Bulge` s) → a tuple of :class:`Bulge`; a bad entry is a
+def _tables_of(cls, key: str, what: str):
+    """A converter: a list of tables (or ``cls`` instances) → a tuple of ``cls``; a bad entry is a
     one-line error naming it (``bulges[1].G``)."""
-    if not isinstance(value, (list, tuple)):
-        raise BarkError("{0}: must be a list of bulge tables ([[growth.bulges]] in a scene file)", Ref(None, "bulges", value))
-    return tuple(v if isinstance(v, Bulge) else construct(Bulge, v, "a bulge", prefix=f"bulges[{i}].")
-                 for i, v in enumerate(value))
+    def convert(value):
+        if not isinstance(value, (list, tuple)):
+            raise BarkError(f"{{0}}: must be a list of {what} tables ([[growth.{key}]] in a scene file)",
+                            Ref(None, key, value))
+        return tuple(v if isinstance(v, cls) else construct(cls, v, f"a {what}", prefix=f"{key}[{i}].")
+                     for i, v in enumerate(value))
+    return convert
 
 
 def _base(value):
@@ -138,24 +144,29 @@ def bulge_time(t, p, inner_time, inner_radius):
     """The per-step part of :class:`BulgeGrowth`'s compiled work (its part's ``time``): everything that
     depends on time alone, once per step, on the uniform law the bulges sit on (``inner_time`` and
     ``inner_radius``: that law's part).  From ``p = (nb, the law's nb numbers, n, then for each bulge
-    z, half_width, magnitude, decay, has_G, then for each bulge the law's numbers with its own G)`` it
-    makes ``q = (r_base(t), extra_1(t), ..., extra_n(t), z_1, half_width_1, ..., z_n, half_width_n,
-    n)``, where a bulge's ``extra`` is its fading magnitude plus what its own growth constant adds to
-    the base law: the radius is ``q[0] + s_1(z)·q[1] + ... + s_n(z)·q[n]`` (``bulge_weights`` gives
-    the ``s_b``)."""
+    z, half_width, magnitude, decay, has_G, start, then for each bulge the law's numbers with its own
+    G)`` it makes ``q = (r_base(t), extra_1(t), ..., extra_n(t), z_1, half_width_1, ..., z_n,
+    half_width_n, n)``, where a bulge's ``extra`` is 0 before its start and then its fading magnitude
+    plus what its own growth constant has added to the base law since: the radius is
+    ``q[0] + s_1(z)·q[1] + ... + s_n(z)·q[n]`` (``bulge_weights`` gives the ``s_b``)."""
     nb = int(p[0])
     n = int(p[1 + nb])
-    rows, variants = 2 + nb, 2 + nb + 5 * n
+    rows, variants = 2 + nb, 2 + nb + ROW * n
     base = inner_radius(t, 0.0, inner_time(t, p[1:1 + nb]))
     q = np.empty(2 + 3 * n)
     q[0] = base
     q[-1] = p[1 + nb]
     for b in range(n):
-        o = rows + 5 * b
-        extra = p[o + 2] * math.exp(-p[o + 3] * t)  # a scalar: the C library's exp in numpy and numba alike
-        if p[o + 4] != 0.0:
-            g = variants + nb * b
-            extra = extra + inner_radius(t, 0.0, inner_time(t, p[g:g + nb])) - base
+        o = rows + ROW * b
+        start = p[o + 5]
+        extra = 0.0
+        if t >= start:  # there: its magnitude at start, fading (a scalar: the C library's exp in numpy and numba alike)
+            extra = p[o + 2] * math.exp(-p[o + 3] * (t - start))
+            if p[o + 4] != 0.0:  # and its own growth constant since start (0 at t = 0 for laws like r0 + G·f(t))
+                g = variants + nb * b
+                extra = extra + inner_radius(t, 0.0, inner_time(t, p[g:g + nb])) - base
+                extra = extra - (inner_radius(start, 0.0, inner_time(start, p[g:g + nb]))
+                                 - inner_radius(start, 0.0, inner_time(start, p[1:1 + nb])))
         q[1 + b] = extra
         q[1 + n + 2 * b] = p[o]
         q[2 + n + 2 * b] = p[o + 1]
@@ -178,7 +189,8 @@ def bulge_radii(t, z, q, out):
     every radius, ``s`` the profile of ``u = (z − peak)/half_width`` inside and of ``u = 1`` (exactly
     0) outside, as :func:`bump` does for an array.  A bulge the whole block is out of reach of adds
     nothing (``0·extra``, for a finite ``extra``) and is skipped: the block's lowest and highest
-    heights decide (a NaN height is out of every bulge, and left out of both)."""
+    heights decide (a NaN height is out of every bulge, and left out of both); so is a bulge whose
+    ``extra`` is 0 (not yet there: ``s·0`` adds nothing)."""
     n = int(q[-1])
     lowest, highest = np.inf, -np.inf
     for i in range(z.shape[0]):
@@ -188,8 +200,8 @@ def bulge_radii(t, z, q, out):
         out[i] = q[0]
     for b in range(n):
         extra, center, half_width = q[1 + b], q[1 + n + 2 * b], q[2 + n + 2 * b]
-        if (highest - center <= -half_width or lowest - center >= half_width) and abs(extra) < np.inf:
-            continue  # |z - peak| >= half_width for every height: bump gives 0 for each
+        if extra == 0.0 or (highest - center <= -half_width or lowest - center >= half_width) and abs(extra) < np.inf:
+            continue  # nothing to add, or |z - peak| >= half_width for every height: bump gives 0 for each
         for i in range(z.shape[0]):
             u = (z[i] - center) / half_width
             inside = abs(u) < 1.0
@@ -202,7 +214,7 @@ def bulge_weights(z, p):
     z = np.asarray(z, dtype=float)
     nb = int(p[0])
     n = int(p[1 + nb])
-    return np.array([profile(z, p[2 + nb + 5 * b], p[3 + nb + 5 * b]) for b in range(n)]).reshape(-1, z.size)
+    return np.array([profile(z, p[2 + nb + ROW * b], p[3 + nb + ROW * b]) for b in range(n)]).reshape(-1, z.size)
 
 
 @attrs.frozen(kw_only=True)
@@ -214,14 +226,18 @@ class Bulge:
     half_width: float = attrs.field(validator=positive)
     """Half the height range it covers; outside ``|z − peak| < half_width`` it has no effect."""
     magnitude: float = attrs.field(default=0.0, validator=non_negative)
-    """Extra radius at the peak at t = 0 (length units)."""
+    """Extra radius at the peak when the bulge appears (length units)."""
     decay: float = attrs.field(default=0.0, validator=non_negative)
-    """The magnitude falls as ``exp(−decay·t)`` (paper, "Integrative model": the bulge fades)."""
+    """The magnitude falls as ``exp(−decay·(t − start))`` (paper, "Integrative model": the bulge fades)."""
     G: float | None = attrs.field(default=None, validator=optional(non_negative))
-    """Growth constant at the peak (paper, Table 1: 0.02 at the peak, 0.04 at the ends); ``None``
-    keeps the base law's."""
+    """Growth constant at the peak from the bulge's start on (paper, Table 1: 0.02 at the peak, 0.04 at
+    the ends; below the base law's, it makes the bulge fade); ``None`` keeps the base law's."""
     f_max: float | None = attrs.field(default=None, validator=optional(positive))
-    """Breaking threshold at the peak (paper, Table 1: 0.006 in bulges); ``None`` keeps the scene's."""
+    """Breaking threshold at the peak of springs made once the bulge is there (paper, Table 1: 0.006
+    in bulges); ``None`` keeps the scene's."""
+    start: float = attrs.field(default=0.0, validator=non_negative)
+    """Time the bulge appears (time units; 0: there from the start).  Before it the trunk has no bulge
+    there; bases that join inside it once it is there take their rest lengths at its larger radius."""
 
     def profile(self, z: np.ndarray) -> np.ndarray:
         """``sin²`` bump: 1 at the peak, 0 with zero slope at ``peak ± half_width``, 0 outside."""
@@ -229,27 +245,72 @@ class Bulge:
 
 
 @attrs.frozen(kw_only=True)
+class BulgeSeries:
+    """Bulges made one after another below the apical dome as the tree grows (paper, "Growth
+    simulation": "a periodic increase in the trunk diameter ('bulging') below the apical dome",
+    possibly at the sites of inflorescences): the k-th (k = 0, 1, ...) appears at ``first + k·every``
+    with its peak ``offset`` above the top of the trunk then (``Lattice.top``), and stays at that
+    height while the trunk grows on above it.  Each is a :class:`Bulge` with these numbers."""
+
+    every: float = attrs.field(validator=positive)
+    """Time between two bulges (time units; 1 = 88.5 days, so 4.13 is a year)."""
+    half_width: float = attrs.field(validator=positive)
+    """Half the height range each covers (length units)."""
+    count: int = attrs.field(default=1, validator=positive_int)
+    """How many bulges the series makes."""
+    first: float = attrs.field(default=0.0, validator=non_negative)
+    """When the first appears (time units)."""
+    offset: float | None = attrs.field(default=None, validator=optional(in_range(-REAL_MAX, REAL_MAX)))
+    """Height of each peak above the top of the trunk when it appears (length units; negative: below
+    it).  None: its half width, so a bulge begins at the top and no base already on the trunk moves
+    when it appears: the bases joining through it take its larger radius."""
+    magnitude: float = attrs.field(default=0.0, validator=non_negative)
+    """Extra radius at each peak when it appears (length units)."""
+    decay: float = attrs.field(default=0.0, validator=non_negative)
+    """Each magnitude falls as ``exp(−decay·(t − its start))``."""
+    G: float | None = attrs.field(default=None, validator=optional(non_negative))
+    """Growth constant at each peak once it is there; None keeps the base law's."""
+    f_max: float | None = attrs.field(default=None, validator=optional(positive))
+    """Breaking threshold at each peak of springs made once it is there; None keeps the scene's."""
+
+    def on(self, lattice) -> tuple[Bulge, ...]:
+        """The series' bulges on a trunk whose bases follow ``lattice``: at fixed heights and times."""
+        offset = self.half_width if self.offset is None else self.offset
+        starts = self.first + self.every * np.arange(self.count)
+        return tuple(Bulge(z=max(0.0, float(lattice.top(t)) + offset), half_width=self.half_width,
+                           magnitude=self.magnitude, decay=self.decay, G=self.G, f_max=self.f_max, start=float(t))
+                     for t in starts)
+
+
+@attrs.frozen(kw_only=True)
 class BulgeGrowth(Growth):
     """Another growth law plus bulges (paper, "Growth simulation" and "Integrative model")::
 
-        r(t, z) = r_base(t, z) + Σ_b s_b(z) · [ r_base,G_b(t, z) − r_base(t, z) + A_b · exp(−λ_b t) ]
+        r(t, z) = r_base(t, z) + Σ_b s_b(z) · e_b(t),   e_b = 0 before the bulge's start t_b, then
+        e_b(t) = A_b · exp(−λ_b (t − t_b)) + [r_base,G_b − r_base](t, z) − [r_base,G_b − r_base](t_b, z)
 
     with ``s_b`` each bulge's ``sin²`` profile, ``r_base,G_b`` the base law with the bulge's own
     growth constant, ``A_b`` its magnitude and ``λ_b`` its decay.  Inside a bulge the breaking
-    threshold moves towards the bulge's ``f_max`` by the same profile (``adjust_thresholds``).
+    threshold of springs made once it is there moves towards the bulge's ``f_max`` by the same
+    profile (``adjust_thresholds``).  Bulges are given where they are (``bulges``) or as series made
+    below the apical dome as the trunk grows (``series``), placed when the law is put on a lattice
+    (``on``).
     """
 
     base: Growth = attrs.field(factory=SqrtGrowth, converter=_base)
     """The law the bulges sit on (any growth strategy; a scene gives it as a table)."""
-    bulges: tuple[Bulge, ...] = attrs.field(default=(), converter=_bulges)
-    """The bulges (a scene gives them as an array of tables)."""
+    bulges: tuple[Bulge, ...] = attrs.field(default=(), converter=_tables_of(Bulge, "bulges", "bulge"))
+    """The bulges at given heights (a scene gives them as an array of tables)."""
+    series: tuple[BulgeSeries, ...] = attrs.field(default=(), converter=_tables_of(BulgeSeries, "series", "bulge series"))
+    """Bulges made one after another below the apical dome (:class:`BulgeSeries`; ``[[growth.series]]``)."""
 
     @bulges.validator
+    @series.validator
     def _own_growth_constant(self, attribute, value) -> None:
         for i, b in enumerate(value):
             if b.G is not None and "G" not in attrs.fields_dict(type(self.base)):
                 raise BarkError("{0}: the law the bulges sit on has no growth constant G to vary",
-                                Ref(None, f"bulges[{i}].G", b.G))
+                                Ref(None, f"{attribute.name}[{i}].G", b.G))
 
     provides: ClassVar[tuple[Effect, ...]] = (
         Effect("bulges", "bulges raise the trunk locally ([growth] name = 'bulge')", ("secondary-growth",)),)
@@ -258,17 +319,25 @@ class BulgeGrowth(Growth):
         """Without its bulges, the law they sit on: the bulge code is never built."""
         return self.base
 
+    def on(self, lattice) -> "BulgeGrowth":
+        """The law with its series' bulges placed on ``lattice``'s trunk (``BulgeSeries.on``), after
+        the bulges given where they are."""
+        if not self.series:
+            return self
+        return attrs.evolve(self, bulges=self.bulges + tuple(b for s in self.series for b in s.on(lattice)), series=())
+
     def part(self) -> GrowthPart | None:
         """The bulges on the part of the law they sit on, when that law has one that is uniform (the
         same radius at every height) and its variants with the bulges' own G are the same work on
         other numbers; else ``None``: the radius is then taken in Python, one step a call."""
+        self._placed()
         base = self.base.part_
         if base is None or not base.uniform or base.inner is not None:
             return None
         variants = [base if b.G is None else attrs.evolve(self.base, G=b.G).part_ for b in self.bulges]
         if any(v is None or (v.radius, v.time, v.params.size) != (base.radius, base.time, base.params.size) for v in variants):
             return None
-        rows = [[b.z, b.half_width, b.magnitude, b.decay, 0.0 if b.G is None else 1.0] for b in self.bulges]
+        rows = [[b.z, b.half_width, b.magnitude, b.decay, 0.0 if b.G is None else 1.0, b.start] for b in self.bulges]
         params = [base.params.size, *base.params, len(rows), *np.ravel(rows), *(x for v in variants for x in v.params)]
         return GrowthPart(radius=bulge_radius, params=params, time=bulge_time, weights=bulge_weights,
                           radii=bulge_radii, inner=base)
@@ -281,14 +350,26 @@ class BulgeGrowth(Growth):
                 return np.asarray(part.radius_at(t, float(z)), dtype=float)
             # heights: q[0] + w_0(z) q[1] + ..., the kernel's sum to the bit
             return weighted_radius(part.at(t), bulge_weights(z, part.params)).reshape(z.shape)
+        self._placed()
         base = np.broadcast_to(self.base.radius(t, z), z.shape).astype(float)
         r = base.copy()
         for b in self.bulges:
-            extra = b.magnitude * math.exp(-b.decay * t)
+            if t < b.start:
+                continue
+            extra = b.magnitude * math.exp(-b.decay * (t - b.start))
             if b.G is not None:
-                extra = extra + np.broadcast_to(attrs.evolve(self.base, G=b.G).radius(t, z), z.shape) - base
+                own = attrs.evolve(self.base, G=b.G)
+                extra = extra + np.broadcast_to(own.radius(t, z), z.shape) - base
+                extra = extra - (np.broadcast_to(own.radius(b.start, z), z.shape)
+                                 - np.broadcast_to(self.base.radius(b.start, z), z.shape))
             r = r + b.profile(z) * extra
         return r
+
+    def _placed(self) -> None:
+        if self.series:
+            raise BarkError("{0}: a bulge series is placed on a trunk before the law is used "
+                            "(BulgeGrowth.on(lattice); a simulation does it when it is built)",
+                            Ref(None, "series", [attrs.asdict(s) for s in self.series]))
 
     def region(self, z: np.ndarray) -> np.ndarray:
         """``bulge`` within a bulge's reach (``|z − peak| < half_width``), ``straight`` elsewhere (the
@@ -299,10 +380,11 @@ class BulgeGrowth(Growth):
             inside |= np.abs(z - b.z) < b.half_width
         return np.where(inside, "bulge", "straight").astype(object)
 
-    def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+    def adjust_thresholds(self, t: float, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+        self._placed()
         out = np.asarray(fmax, dtype=float).copy()
         for b in self.bulges:
-            if b.f_max is not None:
+            if b.f_max is not None and t >= b.start:
                 s = b.profile(z)
                 out += s * (b.f_max - out)
         return out

@@ -65,7 +65,7 @@ def test_own_growth_constant_and_threshold_inside():
     b = Bulge(z=0.75, half_width=0.3, G=0.007, f_max=0.005)
     g = BulgeGrowth(base=SqrtGrowth(G=0.014), bulges=[b])
     assert g.radius(4.0, np.array([0.75]))[0] == pytest.approx(0.2 + 0.007 * 2.0)
-    f = g.adjust_thresholds(np.array([0.75, 0.0, 0.75 + 0.15]), np.full(3, 0.0028))
+    f = g.adjust_thresholds(4.0, np.array([0.75, 0.0, 0.75 + 0.15]), np.full(3, 0.0028))
     assert f[0] == pytest.approx(0.005) and f[1] == 0.0028 and 0.0028 < f[2] < 0.005
 
 
@@ -149,7 +149,8 @@ def test_the_bulge_law_per_base_and_on_arrays_gives_the_same_bits():
 
     growth = BulgeGrowth(base={"name": "sqrt", "r0": 0.35, "G": 0.04},
                          bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.1, decay=0.03, G=0.02),
-                                 Bulge(z=0.5, half_width=0.05, magnitude=0.02)])
+                                 Bulge(z=0.5, half_width=0.05, magnitude=0.02),
+                                 Bulge(z=0.7, half_width=0.1, magnitude=0.05, G=0.01, start=12.5)])
     part = growth.part_
     assert part.radius is bulge_radius and part.time is bulge_time and part.inner == growth.base.part_
     z = np.concatenate([np.linspace(0.0, 1.0, 1001), [0.2, 0.6, 0.45, 0.55]])  # edges of both bulges
@@ -272,7 +273,7 @@ def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, height
 
     g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
                     bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
-                            Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1)])
+                            Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1, G=0.03, start=100.0)])
     assert g.part_.radii is bulge_radii
     q = g.part_.at(t)
     if extra is not None:
@@ -361,8 +362,111 @@ def test_a_bulge_laws_radius_of_heights_is_its_compiled_form_to_the_bit(t, heigh
 
     g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
                     bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
-                            Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1)])
+                            Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1, G=0.03, start=100.0)])
     z = np.array(heights)
     compiled = bulge_radius(t, z, g.part_.at(t))
     np.testing.assert_array_equal(g.radius(t, z), compiled)
     np.testing.assert_array_equal([float(g.radius(t, v)) for v in z], compiled)
+
+
+# -- bulges made during the run, below the apical dome -------------------------------------------
+
+def _series_law(**series):
+    from bark_plugins.growth import BulgeSeries
+
+    return BulgeGrowth(base={"name": "sqrt", "G": 0.05},
+                       series=[BulgeSeries(**{"every": 2.0, "count": 3, "half_width": 0.05, "magnitude": 0.01,
+                                              "G": 0.02, "f_max": 0.006, **series})])
+
+
+def test_a_series_places_its_bulges_above_the_top_of_the_trunk_as_it_grows():
+    from bark.model.lattice import Lattice
+
+    lattice = Lattice(n_bases=1200, n_start=400, join_rate=100.0)
+    placed = _series_law(first=1.0).on(lattice)
+    assert placed.series == () and placed.on(lattice) is placed
+    assert [b.start for b in placed.bulges] == [1.0, 3.0, 5.0]
+    for b in placed.bulges:  # its peak one half width above the top then: the lower edge at the top
+        assert b.z == pytest.approx(lattice.top(b.start) + 0.05, abs=1e-15)
+        assert (b.G, b.f_max, b.magnitude, b.half_width) == (0.02, 0.006, 0.01, 0.05)
+    below = _series_law(offset=-0.02).on(lattice).bulges[0]
+    assert below.z == pytest.approx(lattice.top(0.0) - 0.02)
+
+
+@given(t=st.floats(0.0, 30.0), dz=st.floats(-0.2, 0.2))
+def test_a_bulge_is_not_there_before_its_start_and_moves_no_base_already_there_when_it_comes(t, dz):
+    from bark.model.lattice import Lattice
+
+    lattice = Lattice(n_bases=1200, n_start=400, join_rate=100.0)
+    law = _series_law().on(lattice)
+    plain = SqrtGrowth(G=0.05)
+    first = law.bulges[1]  # appears at t = 2
+    z = np.array([first.z + dz])
+    expected = plain.radius(t, z) + sum(float(b.profile(z)[0]) * (0.01 + (0.02 - 0.05) * (np.sqrt(t) - np.sqrt(b.start)))
+                                        for b in law.bulges if t >= b.start)  # only the bulges already there
+    assert law.radius(t, z)[0] == pytest.approx(expected, abs=1e-12)
+    at = first.start
+    below_top = np.linspace(0.0, float(lattice.top(at)), 50)
+    before = law.radius(np.nextafter(at, 0.0), below_top)
+    np.testing.assert_allclose(law.radius(at, below_top), before, rtol=0, atol=1e-9)
+    peak = law.radius(at, np.array([first.z]))[0]
+    assert peak == pytest.approx(plain.radius(at, 0.0) + 0.01, abs=1e-12)  # its magnitude, its own G from now on
+    later = law.radius(at + 4.0, np.array([first.z]))[0]
+    assert later == pytest.approx(plain.radius(at + 4.0, 0.0) + 0.01 + (0.02 - 0.05) * (np.sqrt(at + 4) - np.sqrt(at)), abs=1e-12)
+
+
+def test_a_law_with_an_unplaced_series_refuses_in_one_line():
+    with pytest.raises(BarkError, match=r"series.*placed on a trunk"):
+        _series_law().radius(1.0, np.zeros(3))
+
+
+@pytest.mark.parametrize("series, key", [({"half_width": 0.05}, "series[0].every"),
+                                         ({"every": 2.0}, "series[0].half_width"),
+                                         ({"every": -1.0, "half_width": 0.05}, "series[0].every"),
+                                         ({"every": 2.0, "half_width": 0.05, "count": 0}, "series[0].count"),
+                                         ({"every": 2.0, "half_width": 0.05, "offset": float("nan")}, "series[0].offset"),
+                                         ({"every": 2.0, "half_width": 0.05, "height": 1.0}, "height")])
+def test_a_bad_series_is_one_line_naming_its_key(series, key):
+    data = {"lattice": {"n_bases": 600, "n_start": 400, "join_rate": 100.0}, "run": {"until_time": 1.0},
+            "growth": {"name": "bulge", "series": [series]}}
+    with pytest.raises(BarkError) as err:
+        Scene.from_dict(data)
+    assert key in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_run_with_a_series_numpy_and_numba_to_the_bit_and_the_bulges_own_thresholds():
+    """Bulges made as bases join: the same state on both backends; springs made inside a bulge once it
+    is there take its threshold, those made before it (the trunk already there, below the top) the
+    scene's; and the bases that joined in it have the longer springs of its larger radius."""
+    from bark.engine.kernels import available
+    from bark.model.lattice import Lattice
+
+    lattice = Lattice(n_bases=1600, n_start=400, join_rate=100.0)
+    growth = _series_law(every=3.0, count=3, first=1.0, offset=-0.01, magnitude=0.02)
+    runs = {}
+    for backend in ["numpy"] + (["numba"] if available("numba") else []):
+        sim = build_sim(growth=growth, backend=backend, lattice=lattice, stepping="adaptive")
+        sim.run(Stop(until_time=9.0))
+        runs[backend] = sim
+    sims = list(runs.values())
+    for other in sims[1:]:
+        for name in ("x", "v", "anchor", "rest", "fmax"):
+            np.testing.assert_array_equal(getattr(sims[0].state, name), getattr(other.state, name))
+        assert np.array_equal(sims[0].state.intact, other.state.intact)
+    s = sims[0].state
+    placed = sims[0].growth
+    assert [b.start for b in placed.bulges] == [1.0, 4.0, 7.0]
+    mid = 0.5 * (s.anchor[s.pairs[:, 0], 2] + s.anchor[s.pairs[:, 1], 2])
+    born = np.maximum(s.born[s.pairs[:, 0]], s.born[s.pairs[:, 1]])
+    for b in placed.bulges:
+        inside = np.abs(mid - b.z) < 0.3 * b.half_width
+        assert (inside & (born >= b.start)).any() and (s.fmax[inside & (born >= b.start)] > 0.0028).all()
+        assert (s.fmax[inside & (born < b.start)] == 0.0028).all()
+    first = placed.bulges[0]  # against the same trunk without bulges: the same springs, longer where it is
+    plain = build_sim(growth=SqrtGrowth(G=0.05), backend="numpy", lattice=lattice, stepping="adaptive")
+    plain.run(Stop(until_time=9.0))
+    assert np.array_equal(plain.state.pairs, s.pairs)
+    before = born < first.start
+    np.testing.assert_array_equal(plain.state.rest[before], s.rest[before])
+    inside = (born >= first.start) & (born < placed.bulges[1].start) & (np.abs(mid - first.z) < 0.2 * first.half_width)
+    assert inside.sum() > 20 and (s.rest[inside] / plain.state.rest[inside]).mean() > 1.02

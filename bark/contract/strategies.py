@@ -129,10 +129,18 @@ class Growth(Strategy):
         z = np.asarray(z, dtype=float)
         return float(np.mean(np.broadcast_to(self.radius(t, z), z.shape)))
 
-    def adjust_thresholds(self, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
-        """Breaking thresholds of springs whose midpoints are at heights ``z`` (called when springs
-        are made).  The default leaves them as they are; a law with regions of their own material
-        (bulges) overrides it."""
+    def on(self, lattice) -> "Growth":
+        """This law on a trunk whose leaf bases follow ``lattice`` (``bark.model.lattice.Lattice``):
+        a law with features placed relative to the top of the trunk as it grows (bulges made below
+        the apical dome, every so often) places them here, at fixed heights and times, and returns
+        the law that has them; the simulation asks it once, before it runs.  The default is the law
+        itself."""
+        return self
+
+    def adjust_thresholds(self, t: float, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+        """Breaking thresholds of springs made at time ``t`` whose midpoints are at heights ``z``
+        (called when springs are made).  The default leaves them as they are; a law with regions of
+        their own material (bulges) overrides it."""
         return fmax
 
     def region(self, z: np.ndarray) -> np.ndarray:

@@ -158,6 +158,7 @@ def _check_feasible(lattice: Lattice, run: RunSettings, growth, resolved: dict) 
                         "(ask for fewer patches, or smaller ones)",
                         Ref("run", "until_patches", run.until_patches), Ref("run", "min_patch_size", run.min_patch_size),
                         Ref("lattice", "n_bases", lattice.n_bases))
+    growth = growth.on(lattice)
     _check_effects_act(lattice, growth, resolved)
     if run.until_radius is not None:
         z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
@@ -182,9 +183,9 @@ def _check_effects_act(lattice: Lattice, growth, resolved: dict) -> None:
         if effect.name not in resolved:
             continue
         plain = growth.without(effect.name)
-        same = np.array_equal(growth.adjust_thresholds(z, fmax), plain.adjust_thresholds(z, fmax)) and all(
-            np.array_equal(np.broadcast_to(growth.radius(t, z), z.shape), np.broadcast_to(plain.radius(t, z), z.shape))
-            for t in (0.0, 1.0, 100.0))
+        same = all(np.array_equal(growth.adjust_thresholds(t, z, fmax), plain.adjust_thresholds(t, z, fmax)) and
+                   np.array_equal(np.broadcast_to(growth.radius(t, z), z.shape), np.broadcast_to(plain.radius(t, z), z.shape))
+                   for t in (0.0, 1.0, 100.0, 10_000.0))
         if same:
             warnings.warn(f"the effect {effect.name!r} of the growth law {registry.name_of(growth)!r} changes nothing on "
                           f"this trunk (its heights run from 0 to {z[-1]:.6g}): the run is the run without it",
@@ -335,7 +336,7 @@ class Scene:
         return dict(
             lattice=self.lattice,
             mechanics=mechanics,
-            growth=chosen["growth"],
+            growth=chosen["growth"].on(self.lattice),
             integrator=chosen["integrator"],
             breakers=[chosen["breaker"]] if "fracture" in has else [],
             analyzers=[chosen["analyzer"]] if "patch-statistics" in has else [],

@@ -178,6 +178,7 @@ class Simulation:
             return self
         if self.rng is None:
             self.rng = np.random.default_rng(self.seed)
+        self.growth = self.growth.on(self.lattice)  # features placed relative to the growing top
         self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
         self.forces = ForceField(self.mechanics, self.backend)
         from bark.model.graph import LeafBaseGraph
@@ -350,7 +351,7 @@ class Simulation:
         if len(pairs):  # their ends' positions gathered first (np.take of a few rows copies all of x)
             ends = s.x[pairs.ravel()]
             _, rest = spring_geometry(ends, np.arange(ends.shape[0]).reshape(-1, 2))
-            fmax = self.growth.adjust_thresholds(0.5 * (ends[0::2, 2] + ends[1::2, 2]),
+            fmax = self.growth.adjust_thresholds(t, 0.5 * (ends[0::2, 2] + ends[1::2, 2]),
                                                  self.mechanics.thresholds(len(pairs), self.rng))
             s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
         self._tension = _rows(self._tension, s.n_springs)

@@ -186,8 +186,8 @@ class Apex:
 
     def top(self, t) -> np.ndarray:
         """Height of the dome's base (where the trunk's cylinder ends) at time ``t``: primary growth,
-        linear in time at ``join_rate · rise``."""
-        return self.lattice.rise * self.top_index(t)
+        linear in time at ``join_rate · rise`` (``Lattice.top``)."""
+        return self.lattice.top(t)
 
     def organ_area(self, radius) -> np.ndarray:
         """Area one organ takes: that of one base on the trunk below the dome, ``2π R h``."""
