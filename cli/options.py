@@ -208,7 +208,9 @@ class Provenance:
             return f"{ref} in {source[5:]}"
         if source == "--set":
             item = f"--set {self.set_items[(ref.section, ref.top_key)]}"
-            return f"{ref.key} = {show(ref.value)} in {item}" if nested else item
+            if not nested:
+                return item
+            return f"{ref.key} in {item}" if not ref.given else f"{ref.key} = {show(ref.value)} in {item}"
         if source == "--grid":  # one value of a swept setting
             return f"--grid {ref.section}.{ref.key}={_cli_value(ref.value)}"
         option = self.aliases.get((ref.section, ref.top_key)) or option_for(ref.section, ref.top_key)

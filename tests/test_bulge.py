@@ -470,3 +470,15 @@ def test_a_run_with_a_series_numpy_and_numba_to_the_bit_and_the_bulges_own_thres
     np.testing.assert_array_equal(plain.state.rest[before], s.rest[before])
     inside = (born >= first.start) & (born < placed.bulges[1].start) & (np.abs(mid - first.z) < 0.2 * first.half_width)
     assert inside.sum() > 20 and (s.rest[inside] / plain.state.rest[inside]).mean() > 1.02
+
+
+@pytest.mark.parametrize("item, named", [("growth.bulges=[{z=0.5}]", "bulges[0].half_width in --set"),
+                                         ("growth.series=[{every=2.0}]", "series[0].half_width in --set")])
+def test_a_missing_key_in_a_set_table_is_named_without_a_value(item, named):
+    from click.testing import CliRunner
+
+    from bark_cli.main import cli
+
+    result = CliRunner().invoke(cli, ["simulate", "--set", "growth.name=bulge", "--set", item, "--quiet"])
+    assert result.exit_code == 2 and named in result.stderr and "is missing" in result.stderr
+    assert "NOTHING" not in result.stderr and len(result.stderr.splitlines()) == 1
