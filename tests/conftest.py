@@ -35,6 +35,11 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 NUMERICS = ("dt", "stepping", "overshoot_tol", "max_halvings", "backend", "threads")
 
 
+def slow_cases(*values) -> list:
+    """Parameters left to the full suite (``slow``): the quick subset keeps one case of a class."""
+    return [pytest.param(v, marks=pytest.mark.slow) for v in values]
+
+
 def build_sim(
     *,
     n_bases: int = 300,

@@ -21,7 +21,7 @@ from bark.io import checkpoint, files
 from bark.io.folder import RUN_FILES
 from bark_cli.main import cli
 
-from conftest import REPO_ROOT, assert_clean_outcome
+from conftest import REPO_ROOT, assert_clean_outcome, slow_cases
 
 SMALL = ["--n-bases", "300", "-G", "0.05", "--until-time", "6"]
 PATTERNED = ["--n-bases", "800", "--until-time", "200"]
@@ -60,7 +60,7 @@ def _no_temporaries(folder: Path) -> None:
     assert not [p.name for p in folder.iterdir() if p.name.endswith(files.TMP_SUFFIX)]
 
 
-@pytest.mark.parametrize("limit", [2_000, 30_000, 120_000])
+@pytest.mark.parametrize("limit", [30_000, *slow_cases(2_000, 120_000)])
 def test_a_file_size_limit_costs_only_the_files_it_refuses(limit, tmp_path):
     out = tmp_path / "run"
     proc = _bark("simulate", *SMALL, "--quiet", "--out", str(out), limit=limit)
@@ -142,7 +142,7 @@ def test_a_refused_end_checkpoint_keeps_the_last_good_one(tmp_path, monkeypatch)
     assert {"state.npz", "breaks.csv", "summary.json"} <= {p.name for p in out.iterdir()}
 
 
-@pytest.mark.parametrize("command", ["simulate", "analyze", "compare", "sweep", "strategies"])
+@pytest.mark.parametrize("command", ["simulate", "analyze", "compare", "strategies", *slow_cases("sweep")])
 def test_a_full_standard_output_costs_nothing_of_the_run(command, tmp_path):
     """The output a command prints is one of its outputs: refused, it is one line and status 1;
     the files are written all the same."""
@@ -166,7 +166,7 @@ def test_a_full_standard_output_costs_nothing_of_the_run(command, tmp_path):
         assert json.loads((out / "summary.json").read_text())["steps"] > 0
 
 
-@pytest.mark.parametrize("closed", ["1>&-", "2>&-", "1>&- 2>&-"])
+@pytest.mark.parametrize("closed", ["1>&- 2>&-", *slow_cases("1>&-", "2>&-")])
 def test_closed_standard_streams_cost_nothing_of_the_run(closed, tmp_path):
     out = tmp_path / "run"
     command = f"{sys.executable} -m bark_cli simulate {' '.join(SMALL)} --out {out} {closed}"

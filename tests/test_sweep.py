@@ -78,6 +78,7 @@ def test_a_sweep_run_again_runs_nothing_again(tmp_path):
     assert len(got) == 6 and all(r[3] >= 0 for r in got)
 
 
+@pytest.mark.slow
 def test_the_table_does_not_depend_on_the_number_of_workers(tmp_path):
     plan = Sweep(base=TINY, axes=_grid(2), seeds=(0, 1))
     run_sweep(plan, tmp_path / "one.sqlite", workers=1)
