@@ -51,12 +51,16 @@ YOUNG = "young"
 that grew during the run, stretched for less of it than the trunk it began with."""
 
 
+def joined_later(state) -> np.ndarray:
+    """Which bases joined after the run began (born after the first): the trunk grown since."""
+    return state.born > (state.born.min() if state.born.size else 0.0)
+
+
 def base_regions(sim) -> np.ndarray:
     """Each base's region: the growth law's region of its site (``Growth.region``), or
     :data:`YOUNG` for a base that joined during the run."""
-    s = sim.state
-    names = np.asarray(sim.growth.region(s.anchor[:, 2]), dtype=object).copy()
-    names[s.born > s.born.min(initial=0.0)] = YOUNG
+    names = np.asarray(sim.growth.region(sim.state.anchor[:, 2]), dtype=object).copy()
+    names[joined_later(sim.state)] = YOUNG
     return names
 
 
@@ -79,15 +83,15 @@ def region_summaries(sim, rows: list[dict], every: np.ndarray, labels: np.ndarra
     z = np.array([r["z"] for r in rows], dtype=float)
     names = np.asarray(sim.growth.region(z), dtype=object).copy()
     if len(rows):
-        young = sim.state.born > sim.state.born.min(initial=0.0)
         counts = np.bincount(labels, minlength=int(labels.max(initial=-1)) + 1)
-        share = np.bincount(labels, weights=young, minlength=counts.size) / np.maximum(counts, 1)
+        share = np.bincount(labels, weights=joined_later(sim.state), minlength=counts.size) / np.maximum(counts, 1)
         names[share[np.array([r["patch"] for r in rows], dtype=np.int64)] > 0.5] = YOUNG
+    where = base_regions(sim) if shares else None
     out = {}
     for name in every:
         out[str(name)] = pattern_summary([r for r, n in zip(rows, names) if n == name])
         if shares:
-            inside = labels[base_regions(sim) == name]
+            inside = labels[where == name]
             out[str(name)].update(n_bases=int(inside.size), largest_patch_share=float(
                 np.bincount(inside).max() / inside.size) if inside.size else None)
     return out
@@ -103,7 +107,7 @@ def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> di
     s = sim.state
     labels = window_labels(s.x, s.pairs, s.intact, window)
     rows = patch_statistics(s.x, labels, min_size)
-    joined = s.born > s.born.min()  # grew on the trunk the run began with
+    joined = joined_later(s)  # grew on the trunk the run began with
     initial = np.bincount(labels, weights=joined) == 0  # per window patch: none of its bases joined later
     old = [r for r in rows if initial[r["patch"]]] if joined.any() else None
     return {"window": window, "window_m": metres(window), "regions": region_summaries(sim, rows, every, labels, False),

@@ -136,10 +136,15 @@ class Lattice:
         """The signed angle from one base to the next, radians: ``φ``, or ``−φ`` when left-handed."""
         return math.radians(self.divergence_deg) * (1.0 if self.handedness == "right" else -1.0)
 
+    def top_index(self, t) -> np.ndarray:
+        """The (fractional) index of the base at the top of the trunk at time ``t``: primary growth
+        adds ``join_rate`` a time unit."""
+        return self.initial - 1 + self.join_rate * np.asarray(t, dtype=float)
+
     def top(self, t) -> np.ndarray:
         """Height of the top of the trunk (where the apical dome begins) at time ``t``: the site of
         its youngest base, primary growth making it rise steadily at ``join_rate · rise``."""
-        return self.rise * (self.initial - 1 + self.join_rate * np.asarray(t, dtype=float))
+        return self.rise * self.top_index(t)
 
     def spacing(self, radius: float) -> float:
         """Typical distance between neighbouring bases: the side of the area 2πr·h one base covers."""

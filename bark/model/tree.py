@@ -181,8 +181,8 @@ class Apex:
     lattice: Lattice = attrs.field(factory=Lattice)
 
     def top_index(self, t) -> np.ndarray:
-        """The (fractional) index of the base at the dome's base at time ``t``."""
-        return self.lattice.initial - 1 + self.lattice.join_rate * np.asarray(t, dtype=float)
+        """The (fractional) index of the base at the dome's base at time ``t`` (``Lattice.top_index``)."""
+        return self.lattice.top_index(t)
 
     def top(self, t) -> np.ndarray:
         """Height of the dome's base (where the trunk's cylinder ends) at time ``t``: primary growth,
