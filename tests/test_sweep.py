@@ -112,6 +112,31 @@ def test_a_damaged_database_is_one_line(tmp_path):
         run_sweep(Sweep(base=TINY, axes=_grid(1)), db)
 
 
+def test_each_row_holds_the_run_s_largest_patch_share_and_its_regions_as_json(tmp_path):
+    """A trunk with a bulge: the row's ``regions`` is summary.json's per-region statistics, strict
+    JSON that SQLite's ``json_extract`` reads; a trunk of one region has none."""
+    from bark.engine.scene import Scene, merge
+    from bark.io.files import json_text
+    from bark.studies import runner
+
+    bulge = merge(TINY, {"growth": {"name": "bulge", "bulges": [{"z": 0.07, "half_width": 0.03, "magnitude": 0.01}]}})
+    db = tmp_path / "s.sqlite"
+    run_sweep(Sweep(base=bulge, axes=(Axis("mechanics.f_max", (0.002, 0.003)),)), db)
+    with SweepTable(db) as table:
+        rows = table.rows()
+        got = table.con.execute("SELECT json_extract(regions, '$.straight.n_bases'), "
+                                "json_extract(regions, '$.bulge.largest_patch_share') FROM runs").fetchall()
+    plan = Sweep(base=bulge, axes=(Axis("mechanics.f_max", (0.002,)),)).points()[0]
+    summary = runner.run(Scene.from_dict(plan.scene), None).summary
+    row = next(r for r in rows if r["key"] == plan.key)
+    assert row["largest_patch_share"] == summary["largest_patch_share"] and 0 < row["largest_patch_share"] <= 1
+    assert json.loads(row["regions"]) == json.loads(json_text(summary["regions"]))
+    assert all(n == summary["regions"]["straight"]["n_bases"] for n, _ in got) and all(0 < s <= 1 for _, s in got)
+    run_sweep(Sweep(base=TINY, axes=(Axis("mechanics.f_max", (0.002,)),)), tmp_path / "plain.sqlite")
+    with SweepTable(tmp_path / "plain.sqlite") as table:
+        assert [r["regions"] for r in table.rows()] == [None]
+
+
 def test_a_table_of_an_earlier_bark_gets_the_columns_added_since(tmp_path):
     import sqlite3
 

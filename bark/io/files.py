@@ -145,8 +145,14 @@ def _jsonable(obj):
     return obj
 
 
+def json_text(obj: Any, indent: int | None = None) -> str:
+    """``obj`` as strict JSON (what SQLite's ``json_extract`` and other readers accept): numpy
+    scalars as numbers, NaN and infinities as ``null``."""
+    return json.dumps(_jsonable(obj), indent=indent, allow_nan=False)
+
+
 def write_json(path: str | Path, obj: Any) -> Path:
-    data = json.dumps(_jsonable(obj), indent=2, allow_nan=False).encode() + b"\n"
+    data = json_text(obj, indent=2).encode() + b"\n"
     return atomic_write(path, lambda fh: fh.write(data))
 
 

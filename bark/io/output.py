@@ -70,6 +70,12 @@ def trunk_regions(sim) -> np.ndarray | None:
     return every if len(every) >= 2 else None
 
 
+def largest_share(labels: np.ndarray) -> float | None:
+    """The share of the bases ``labels`` (each base's patch) that the largest patch holds, fragments
+    counted: near 1 for bark that has not come apart (``None`` for no bases)."""
+    return float(np.bincount(labels).max() / labels.size) if labels.size else None
+
+
 def region_summaries(sim, rows: list[dict], every: np.ndarray, labels: np.ndarray, shares: bool = True
                      ) -> dict[str, dict]:
     """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk: each patch counted in
@@ -92,8 +98,7 @@ def region_summaries(sim, rows: list[dict], every: np.ndarray, labels: np.ndarra
         out[str(name)] = pattern_summary([r for r, n in zip(rows, names) if n == name])
         if shares:
             inside = labels[where == name]
-            out[str(name)].update(n_bases=int(inside.size), largest_patch_share=float(
-                np.bincount(inside).max() / inside.size) if inside.size else None)
+            out[str(name)].update(n_bases=int(inside.size), largest_patch_share=largest_share(inside))
     return out
 
 
@@ -134,6 +139,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
     stats, rows = (measured.summary, measured.patches) if measured is not None else ({}, None)
     every = trunk_regions(sim) if rows is not None else None  # asked first: one region costs nothing more
     effects = scene.effects
+    labels = sim.patch_labels() if rows is not None or "fracture" in effects else None
     return {
         "bark_version": __version__,
         "seed": sim.seed,
@@ -157,8 +163,9 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "n_springs": sim.state.n_springs,
         "n_broken": sim.n_broken,
         "n_patches": stats.get("n_patches", sim.patch_count(scene.run.min_patch_size) if "fracture" in effects else None),
+        "largest_patch_share": largest_share(labels) if labels is not None else None,
         **{k: stats.get(k) for k in PATTERN_KEYS},
-        "regions": region_summaries(sim, rows, every, sim.patch_labels()) if every is not None else None,
+        "regions": region_summaries(sim, rows, every, labels) if every is not None else None,
         "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],

@@ -42,6 +42,7 @@ import attrs
 import numpy as np
 
 from bark.errors import BarkError, Ref
+from bark.io.files import json_text
 from bark.io.output import PATTERN_KEYS
 from bark.engine.stepping import cores
 from bark.engine.kernels import numba_env
@@ -55,12 +56,13 @@ IDENTITY = ("key", "point", "seed", "scene")
 """The columns that make a ``runs`` table a sweep's (the others are added as bark grows)."""
 RESULT_COLUMNS = {
     "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
-    "n_patches": "INTEGER", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL",
-    "initial_fractures": "INTEGER", "dissipation_rate": "REAL", "growth_dissipation": "REAL",
+    "n_patches": "INTEGER", "largest_patch_share": "REAL", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL",
+    "initial_fractures": "INTEGER", "dissipation_rate": "REAL", "growth_dissipation": "REAL", "regions": "TEXT",
 }
 """What the table holds of each run besides its identity, by SQLite type: the keys of the run's
 summary (summary.json) of these names, and of its ``fracture`` part (the ``fracture-history`` effect;
-else empty)."""
+else empty); ``regions`` is summary.json's per-region statistics as JSON text (none for a trunk
+without regions), read in SQL by ``json_extract(regions, '$.straight.circular_sd_deg')``."""
 
 
 MAX_RUNS = 1_000_000
@@ -187,6 +189,7 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
     sim = outcome.sim
     found = {**outcome.summary, **(outcome.summary.get("fracture") or {})}  # fracture: with the fracture-history effect
     row = {k: found.get(k) for k in RESULT_COLUMNS}  # the run's own summary: its analyzer's statistics
+    row["regions"] = json_text(row["regions"]) if row["regions"] is not None else None
     return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, sim.radius).astype(np.float32),
             "labels": sim.patch_labels().astype(np.int32), "colours": simulation_colours(sim, sc.run.min_patch_size)}
 
