@@ -6,6 +6,7 @@ run)::
     python examples/paper/figures.py fig8       # quartet analysis against the photographs
     python examples/paper/figures.py fig9       # the G × f_max montage
     python examples/paper/figures.py fractures  # initial fractures against the dissipation rate
+    python examples/paper/figures.py fig11      # the whole tree's regions over c × b × jitter
 
 Options: ``--out DIR`` (default ``runs/paper``), ``--workers N`` (sweeps).  Runs already there are
 reused: ``bark sweep`` skips finished points, and a regime's run folder with its summary is kept.
@@ -28,6 +29,10 @@ REGIMES = {  # Fig. 7's rows: Table 2's first regime, the reticulate fit (43 %),
     "diamond": SCENES / "diamond.toml",
 }
 FRACTURE_GRID = ["--grid", "mechanics.b=1,2,5,10,20", "--grid", "growth.G=0.007,0.01,0.014"]
+FIG11_GRID = ["--grid", "mechanics.c=0.03,0.06,0.1,0.15,0.2", "--grid", "mechanics.b=2,5",
+              "--grid", "lattice.jitter=0.03,0.05"]
+FIG11_EFFECTS = '["bulges", "anchors", "damping", "patch-statistics"]'  # the statistics only: no pictures
+FIG11_AXES = ("mechanics.c", "mechanics.b", "lattice.jitter")
 
 
 def bark(*args: str) -> None:
@@ -124,7 +129,53 @@ def fractures(out: Path, workers: int) -> None:
     print(f"power laws: {folder}/power-law-*.png, {folder / 'power-law.json'}")
 
 
-FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures}
+def fig11(out: Path, workers: int) -> None:
+    """Fig. 11's comparison on whole patches: the shipped whole tree over anchor stiffness c, damping
+    b and the lattice's jitter, three seeds a point; per point the straight trunk of the start (its
+    largest patch's share, the mean orientation and SD of its patches, their anisotropy) and the
+    bulges' difference from it, each seed's figure, and whether the point meets the three tests:
+    no patch over 10 % of the straight trunk's bases, its mean within 15° of vertical with an SD
+    under 25°, and the bulges' mean over 20° from it or their anisotropy over 0.1 lower."""
+    import csv
+
+    from bark.analysis.circular import axial_difference
+
+    folder = out / "fig11"
+    bark("sweep", "--scene", str(SCENES / "whole-tree.toml"), *FIG11_GRID, "--seeds", "3", "--workers", str(workers),
+         "--set", f"effects.want={FIG11_EFFECTS}", "--out", str(folder), "--quiet")
+    con = sqlite3.connect(folder / "sweep.sqlite")
+    axes = ", ".join(f'"{a}"' for a in FIG11_AXES)
+    got = con.execute(f"SELECT {axes}, seed, regions FROM runs ORDER BY {axes}, seed").fetchall()
+    con.close()
+    points: dict[tuple, list[dict]] = {}
+    for *settings, _seed, regions in got:
+        points.setdefault(tuple(settings), []).append(json.loads(regions))
+    columns = [*FIG11_AXES, "straight share", "straight mean", "straight SD", "straight anisotropy",
+               "bulge − straight mean", "straight − bulge anisotropy", "passes"]
+    lines = []
+    for settings, seeds in points.items():
+        s = [r["straight"] for r in seeds]
+        b = [r["bulge"] for r in seeds]
+        dmean = [abs(float(axial_difference(y["mean_orientation_deg"], x["mean_orientation_deg"]))) for x, y in zip(s, b)]
+        daniso = [x["mean_anisotropy"] - y["mean_anisotropy"] for x, y in zip(s, b)]
+        passes = sum(x["largest_patch_share"] <= 0.1 and abs(x["mean_orientation_deg"] - 90) <= 15
+                     and x["circular_sd_deg"] < 25 and (dm > 20 or da > 0.1) for x, dm, da in zip(s, dmean, daniso))
+        lines.append([*(f"{v:g}" for v in settings),
+                      " / ".join(f"{x['largest_patch_share']:.3f}" for x in s),
+                      " / ".join(f"{x['mean_orientation_deg']:.1f}" for x in s),
+                      " / ".join(f"{x['circular_sd_deg']:.1f}" for x in s),
+                      " / ".join(f"{x['mean_anisotropy']:.2f}" for x in s),
+                      " / ".join(f"{d:.1f}" for d in dmean), " / ".join(f"{d:.2f}" for d in daniso),
+                      f"{passes} of {len(seeds)}"])
+    with open(folder / "fig11-study.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([columns, *lines])
+    print("| " + " | ".join(columns) + " |\n|" + "---|" * len(columns))
+    for line in lines:
+        print("| " + " | ".join(line) + " |")
+    print(f"table: {folder / 'fig11-study.csv'} (each cell: seeds 0 / 1 / 2; orientations in degrees)")
+
+
+FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11}
 
 
 def main(argv: list[str] | None = None) -> None:
