@@ -91,7 +91,7 @@ class TreeData:
         zs = np.linspace(float(z.min()), float(z.max()), 400)
         r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)
         top_r = float(r[-1])
-        apex = Apex(dome=dome, lattice=sim.lattice)
+        apex = Apex(dome=dome, packing=sim.packing)
         top = float(apex.top(sim.state.t))
         rho, u = dome.curve(200)
         profile = np.column_stack([rho * top_r, top + u * top_r])

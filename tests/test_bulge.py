@@ -462,14 +462,16 @@ def test_a_run_with_a_series_numpy_and_numba_to_the_bit_and_the_bulges_own_thres
         inside = np.abs(mid - b.z) < 0.3 * b.half_width
         assert (inside & (born >= b.start)).any() and (s.fmax[inside & (born >= b.start)] > 0.0028).all()
         assert (s.fmax[inside & (born < b.start)] == 0.0028).all()
-    first = placed.bulges[0]  # against the same trunk without bulges: the same springs, longer where it is
+    first = placed.bulges[0]  # against the same trunk without bulges: the same springs before it, longer in it
     plain = build_sim(growth=SqrtGrowth(G=0.05), backend="numpy", lattice=lattice, stepping="adaptive")
     plain.run(Stop(until_time=9.0))
-    assert np.array_equal(plain.state.pairs, s.pairs)
     before = born < first.start
-    np.testing.assert_array_equal(plain.state.rest[before], s.rest[before])
+    assert np.array_equal(plain.state.pairs[: before.sum()], s.pairs[before]) and before[: before.sum()].all()
+    np.testing.assert_allclose(plain.state.rest[: before.sum()], s.rest[before], rtol=1e-12)
     inside = (born >= first.start) & (born < placed.bulges[1].start) & (np.abs(mid - first.z) < 0.2 * first.half_width)
-    assert inside.sum() > 20 and (s.rest[inside] / plain.state.rest[inside]).mean() > 1.02
+    plain_rest = dict(zip(map(tuple, plain.state.pairs.tolist()), plain.state.rest))
+    ratio = [r / plain_rest[p] for p, r in zip(map(tuple, s.pairs[inside].tolist()), s.rest[inside]) if p in plain_rest]
+    assert len(ratio) > 20 and np.mean(ratio) > 1.02
 
 
 @pytest.mark.parametrize("item, named", [("growth.bulges=[{z=0.5}]", "bulges[0].half_width in --set"),

@@ -13,7 +13,7 @@ from bark import Lattice, Stop
 from bark.analysis.pattern import Pattern, PatternStatistics, read, spiral_handedness
 from bark.engine.kernels import available
 from bark.errors import BarkError
-from bark.model.tree import Apex, leaf_corners
+from bark.model.tree import Apex, Packing, leaf_corners
 from bark_cli.main import cli
 from conftest import REPO_ROOT, assert_clean_outcome, build_sim
 
@@ -85,7 +85,7 @@ def test_a_mirror_image_has_the_other_handedness_and_a_photograph_none():
 def test_the_dome_and_the_leaf_bases_are_mirrored_too():
     right = Lattice(n_bases=70000, n_start=45000, join_rate=101.0, rise=0.00012, offsets=(55, 89))
     left = Lattice(n_bases=70000, n_start=45000, join_rate=101.0, rise=0.00012, offsets=(55, 89), handedness="left")
-    (ids_r, x_r), (ids_l, x_l) = Apex(lattice=right).organs(12.3, 0.5), Apex(lattice=left).organs(12.3, 0.5)
+    (ids_r, x_r), (ids_l, x_l) = Apex(packing=Packing.of(right)).organs(12.3, 0.5), Apex(packing=Packing.of(left)).organs(12.3, 0.5)
     assert np.array_equal(ids_r, ids_l) and np.array_equal(x_l * [1, -1, 1], x_r)
     c_r, c_l = leaf_corners(right, np.full(5, 0.4)), leaf_corners(left, np.full(5, 0.4))
     # each rhomboid mirrored (arc length negated), its corners still counter-clockwise seen from outside

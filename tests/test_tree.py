@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from bark.errors import BarkError
 from bark.model.lattice import Lattice
-from bark.model.tree import Apex, Dome
+from bark.model.tree import Apex, Dome, Packing
 
 WHOLE_TREE = Lattice(n_bases=70000, n_start=45000, join_rate=101.0, rise=0.00012, offsets=(55, 89))
 FIBONACCI = [1, 2, 3, 5, 8, 13, 21, 34, 55, 89, 144, 233, 377, 610, 987]
@@ -43,11 +43,11 @@ def test_a_hemisphere_has_area_two_pi_r_squared():
 def test_each_organ_takes_the_prescribed_area(t, radius):
     """Between two successive organs on the dome lies the organ area 2πRh of surface, and the
     youngest sits within 1½ organ areas of the tip (a new one is inserted once there is room)."""
-    apex = Apex(dome=Dome(height=1.0), lattice=WHOLE_TREE)
+    apex = Apex(dome=Dome(height=1.0), packing=Packing.of(WHOLE_TREE))
     ids, x = apex.organs(t, radius)
     u = (x[:, 2] - apex.top(t)) / radius  # height above the join, per radius: sin ψ on a hemisphere
     from_tip = np.array([ellipse_area(1.0, 2.0, math.asin(min(v, 1.0))) for v in u]) * radius**2
-    a = apex.organ_area(radius)
+    a = apex.organ_area(t, radius)
     spacing = np.diff(from_tip[::-1])[:-1]  # tip first; the oldest may be waiting at the join
     assert len(ids) > 100
     assert a == pytest.approx(2 * math.pi * radius * 0.00012, rel=1e-15)  # one base's area on the trunk
@@ -56,7 +56,7 @@ def test_each_organ_takes_the_prescribed_area(t, radius):
 
 
 def test_successive_organs_keep_the_divergence_angle():
-    apex = Apex(lattice=WHOLE_TREE)
+    apex = Apex(packing=Packing.of(WHOLE_TREE))
     ids, x = apex.organs(12.3, 0.5)
     theta = np.arctan2(x[:, 1], x[:, 0])
     step = np.degrees(np.mod(np.diff(theta), 2 * math.pi))
@@ -138,7 +138,7 @@ def test_organs_are_never_lost_or_duplicated_and_only_move_down(t1, dt, r1, dr):
     """From t1 to t2 = t1 + dt, with the trunk not narrowing: ids on the dome are one run, every organ
     on it at t1 is still on it or has passed to the trunk at t2, the tip only gains organs, and each
     organ is further from the tip (in area) than before."""
-    apex = Apex(lattice=WHOLE_TREE)
+    apex = Apex(packing=Packing.of(WHOLE_TREE))
     t2, r2 = t1 + dt, r1 + dr
     ids1, x1 = apex.organs(t1, r1)
     ids2, x2 = apex.organs(t2, r2, first=int(ids1[0]))
@@ -155,7 +155,7 @@ def test_organs_are_never_lost_or_duplicated_and_only_move_down(t1, dt, r1, dr):
 def test_an_organ_reaches_the_trunk_at_its_lattice_site():
     """When j(t) = i the organ is at the join, at height i·h and angle i·φ: the site where it joins the
     mechanics (before jitter)."""
-    apex = Apex(lattice=WHOLE_TREE)
+    apex = Apex(packing=Packing.of(WHOLE_TREE))
     i = 50000
     t = (i - (WHOLE_TREE.initial - 1)) / WHOLE_TREE.join_rate
     ids, x = apex.organs(t, 0.6, first=i)
@@ -193,3 +193,125 @@ def test_rhomboids_of_no_width_have_no_count_side_by_side(divergence_deg, partit
     theta, z = lattice.sites(0.2, np.random.default_rng(0), 0, lattice.n_bases)
     sites = np.column_stack([0.2 * np.cos(theta), 0.2 * np.sin(theta), z])
     assert phyllotaxis(lattice, sites, np.full(lattice.n_bases, 0.2))["bases_side_by_side_front"] is None
+
+
+# -- Ridley's packing makes the trunk's sites ---------------------------------------------------
+
+def _growing(organ_area=None, area_exponent=1.0, jitter=0.0, growth=None, n_bases=6000):
+    """A simulation whose trunk of 3,000 bases gains up to 3,000 more from the dome, widening fast."""
+    from bark.engine.scene import Scene
+
+    scene = {"lattice": {"n_bases": n_bases, "n_start": 3000, "rise": 0.00012, "offsets": [55, 89], "join_rate": 100.0,
+                         "join_every": 0.1, "jitter": jitter, "organ_area": organ_area, "area_exponent": area_exponent},
+             "growth": growth or {"name": "sqrt", "r0": 0.35, "G": 0.04}, "run": {"until_time": 20.0}}
+    scene["lattice"] = {k: v for k, v in scene["lattice"].items() if v is not None}
+    return Scene.from_dict(scene).simulation()
+
+
+def test_the_trunk_s_sites_come_from_the_dome_s_placement():
+    """A fixed leaf area of 30 mm² (not the lattice's 2πRh): each base that joins sits where its organ,
+    placed on the dome by Ridley's packing, meets the dome's base — at its crossing time, on the
+    dome's rim, at its divergence angle — and its vertical spacing is a/(2πR), not the lattice's h."""
+    from bark.engine.simulation import Stop
+
+    area = 30e-6 / 0.09  # 30 mm² in length units²
+    sim = _growing(organ_area=area, area_exponent=0.0)
+    sim.run(Stop(until_time=15.0))
+    lat, packing = sim.lattice, sim.packing
+    ids = np.arange(lat.initial, sim.state.n_bases)
+    assert len(ids) > 1000 and not packing.uniform
+    apex = Apex(dome=Dome(height=0.8), packing=packing)
+    for i in ids[:: len(ids) // 20]:
+        t = float(packing.crossing(i))
+        radius = float(sim.growth.radius(t, 0.0))
+        got, where = apex.organs(t, radius, first=int(i))
+        assert got[0] == i
+        theta = i * lat.turn
+        assert where[0] == pytest.approx([radius * math.cos(theta), radius * math.sin(theta), sim.state.anchor[i, 2]], abs=1e-9)
+    z = sim.state.anchor[ids, 2]
+    when = packing.crossing(ids)
+    r_between = np.array([float(sim.growth.radius(t, 0.0)) for t in 0.5 * (when[1:] + when[:-1])])
+    band = 2 * math.pi * r_between * np.diff(z)  # the trunk's area between two successive leaves
+    assert band == pytest.approx(np.full(band.size, area), rel=2e-3)
+    # not the lattice's h: 30 mm² takes 1.2 h of the trunk at first, less as the trunk widens
+    assert np.diff(z)[0] > 1.2 * lat.rise and np.diff(z)[-1] < 0.9 * lat.rise
+
+
+def test_with_the_default_leaf_size_the_packing_continues_the_lattice():
+    """One base's area on the trunk of the start, growing with the trunk (p = 1), on a trunk of one
+    radius: the joining bases are the lattice's own sites, to the bit (no table is made)."""
+    sim = _growing(jitter=0.05)
+    sim.build()
+    assert sim.packing.uniform
+    rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
+    got = sim.packing.sites(0.5, rng_a, 3000, 200)
+    want = sim.lattice.sites(0.5, rng_b, 3000, 200)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_the_leaves_crossed_are_the_trunk_s_new_area_over_the_leaf_area():
+    """A fixed leaf area a on r = r0 + G√t: N(t) = (2πv/a)(r0·t + ⅔G·t^{3/2}), v the dome's rise a time unit."""
+    area = 3e-4
+    sim = _growing(organ_area=area, area_exponent=0.0, n_bases=60000)
+    sim.build()
+    v = 100.0 * 0.00012
+    for t in (1.0, 7.3, 20.0, 60.0):
+        exact = 2 * math.pi * v / area * (0.35 * t + 2.0 / 3.0 * 0.04 * t**1.5)
+        assert float(sim.packing.crossed(t)) == pytest.approx(exact, rel=1e-6)
+
+
+def test_an_area_growing_with_the_square_of_the_radius_keeps_the_parastichy_angle():
+    """p = 2: the leaves' lattice only scales as the trunk widens, so the angle between the parastichies of
+    the springs stays that of the trunk of the start; p = 1 (a fixed rise) flattens them."""
+    from bark.analysis.phyllotaxis import phyllotaxis
+    from bark.engine.simulation import Stop
+    from bark.model.tree import join_radii
+
+    angles = {}
+    for p in (1.0, 2.0):
+        sim = _growing(area_exponent=p, growth={"name": "sqrt", "r0": 0.35, "G": 0.1}, n_bases=9000)
+        sim.run(Stop(until_time=60.0))
+        s = sim.state
+        late = slice(s.n_bases - 2000, s.n_bases)
+        rise, radii = sim.packing.rise_of(np.arange(s.n_bases)), join_radii(sim)
+        sites = np.column_stack([radii[:, None] * s.anchor_dir, s.anchor[:, 2]])  # as each joined
+        start = phyllotaxis(sim.lattice, sites[:3000], radii[:3000])["parastichy_angle_deg"]
+        angles[p] = (start, phyllotaxis(sim.lattice, sites[late], radii[late], rise[late])["parastichy_angle_deg"])
+    assert angles[2.0][1] == pytest.approx(angles[2.0][0], abs=0.5)
+    assert angles[1.0][1] < angles[1.0][0] - 10.0
+
+
+def test_a_bulge_at_the_dome_s_base_packs_its_leaves_closer_in_height():
+    """The leaf size follows the trunk, not the bulge: where the dome's base is wider, the leaves crossing
+    there are closer in height by the ratio of the radii (each keeps its area)."""
+    bulge = {"name": "bulge", "base": {"name": "sqrt", "r0": 0.35, "G": 0.04},
+             "series": [{"every": 100.0, "half_width": 0.05, "first": 2.0, "magnitude": 0.1}]}
+    sim = _growing(growth=bulge)
+    sim.build()
+    b = sim.growth.bulges[0]
+    t = float((b.z - float(sim.lattice.top(0.0))) / (100.0 * 0.00012))  # the dome's base at the bulge's peak
+    r, r_trunk = float(sim.growth.radius(t, np.array([b.z]))[0]), float(sim.growth.base.radius(t, 0.0))
+    assert float(sim.packing.rise_at(t)) == pytest.approx(0.00012 * r_trunk / r, rel=1e-3)
+    assert float(sim.packing.rise_at(1.0)) == pytest.approx(0.00012, rel=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(t=st.floats(0.0, 40.0), p=st.sampled_from([0.0, 0.5, 2.0]))
+def test_bases_join_when_the_packing_says_and_never_before(t, p):
+    sim = _growing(area_exponent=p, organ_area=3e-4)
+    sim.build()
+    packing, every = sim.packing, sim.lattice.join_every
+    present = packing.bases_at(t)
+    later = packing.next_join(t, present)
+    if present >= sim.lattice.n_bases:
+        assert later is None
+        return
+    assert later > t and packing.bases_at(later) > present
+    assert later - every <= t or packing.bases_at(later - every) == present
+
+
+@pytest.mark.parametrize("key, value", [("organ_area", 3e-4), ("area_exponent", 2.0)])
+def test_a_leaf_size_for_a_trunk_that_grows_no_leaves_is_refused_in_one_line(key, value):
+    with pytest.raises(BarkError) as err:
+        Lattice(n_bases=3000, **{key: value})
+    assert key in str(err.value) and "n_start" in str(err.value) and "\n" not in str(err.value)

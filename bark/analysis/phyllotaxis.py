@@ -9,14 +9,19 @@ import numpy as np
 from bark.analysis.circular import axial_difference, axial_mean
 from bark.model.lattice import Lattice
 from bark.model.tree import _half_vectors
+from bark.units import METRES_PER_LENGTH_UNIT
 
-__all__ = ["phyllotaxis"]
+__all__ = ["phyllotaxis", "lattice_angle"]
 
 
-def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray, n_lines: int = 16) -> dict:
+def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray, rise: np.ndarray | None = None,
+                n_lines: int = 16) -> dict:
     """The paper's checks of the phyllotactic pattern ("Growth simulation", Fig. 4), measured on the
-    bases' sites (``anchor``, one row per base) and the radius each joined at:
+    bases' sites (``anchor``, one row per base, consecutive ids), the radius each joined at and the
+    rise of the leaves packed then (``bark.model.tree.Packing.rise_of``; default the lattice's):
 
+    * ``leaf_base_area_mm2``: the mean area of the bases' rhomboids, ``2πR·rise`` each (mm²; the
+      paper assumed ≈ 30 mm²).
     * ``parastichy_angle_deg``: the acute angle between the two parastichies of the spring offsets
       (55 and 89 in Table 1) — each the axial mean direction of its site-to-site vectors, unrolled on
       the trunk (arc length at the sites' radius, height); the paper measured ≈ 57° on real trunks.
@@ -38,10 +43,13 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
         np.remainder(arc, 2 * math.pi, out=arc)
         arc -= math.pi
         arc *= r_site[:-o]
-        rise = z[o:] - z[:-o]
-        angles.append(axial_mean(np.degrees(np.arctan2(rise, arc, out=arc), out=arc)))
-        del arc, rise
-    u, v = _half_vectors(lattice, radius_joined)  # the corners are ±u, ±v: extents without them
+        up = z[o:] - z[:-o]
+        angles.append(axial_mean(np.degrees(np.arctan2(up, arc, out=arc), out=arc)))
+        del arc, up
+    radius_joined = np.asarray(radius_joined, dtype=float)
+    rise = np.broadcast_to(lattice.rise if rise is None else np.asarray(rise, dtype=float), radius_joined.shape)
+    area = float(np.mean(2.0 * math.pi * radius_joined * rise)) * (1000.0 * METRES_PER_LENGTH_UNIT) ** 2
+    u, v = _half_vectors(lattice, radius_joined, rise)  # the corners are ±u, ±v: extents without them
     reach = np.maximum(np.abs(u[:, 1]), np.abs(v[:, 1]))
     low, high = z - reach, z + reach
     width = 2.0 * np.maximum(np.abs(u[:, 0]), np.abs(v[:, 0]))
@@ -52,7 +60,18 @@ def phyllotaxis(lattice: Lattice, anchor: np.ndarray, radius_joined: np.ndarray,
     # rhomboids of no width (a divergence angle that stacks the bases in columns), or too little: no count
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         side_by_side = float(np.mean(math.pi * radius_joined / width))
-    return {"parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
+    return {"leaf_base_area_mm2": area,
+            "parastichy_angle_deg": float(abs(axial_difference(angles[0], angles[1]))),
             "parastichy_directions_deg": [float(a) for a in angles],
             "bases_crossed_front": float(np.mean(counts)),
             "bases_side_by_side_front": side_by_side if math.isfinite(side_by_side) else None}
+
+
+def lattice_angle(lattice: Lattice, radius, rise) -> np.ndarray:
+    """The acute angle (degrees) between the exact lattice vectors of the two spring offsets (arc
+    length ``radius · (o·φ mod 2π)``, height ``o · rise``) of leaves packed at ``rise`` on a trunk of
+    ``radius``: the parastichy angle of bases as they cross from the dome, before jitter."""
+    radius, rise = np.broadcast_arrays(np.asarray(radius, dtype=float), np.asarray(rise, dtype=float))
+    o1, o2 = sorted(lattice.offsets)[:2]
+    angle = [np.degrees(np.arctan2(o * rise, radius * math.remainder(o * lattice.turn, 2.0 * math.pi))) for o in (o1, o2)]
+    return np.abs(axial_difference(angle[0], angle[1]))

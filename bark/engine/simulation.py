@@ -22,6 +22,7 @@ from bark.errors import BarkError, NonFiniteStateError, Ref
 from bark.model.forces import ForceField, Mechanics, spring_geometry
 from bark.model.lattice import Lattice
 from bark.model.state import State, cylinder_points, grown
+from bark.model.tree import Packing
 from bark.engine.stepping import Clock, Numerics
 from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
 
@@ -147,6 +148,9 @@ class Simulation:
     """The mechanical state (arrays and time).  This and the next four are made by :meth:`build`, on
     first use."""
     graph: LeafBaseGraph = attrs.field(init=False)
+    packing: Packing = attrs.field(init=False)
+    """Where and when the bases that join during the run join (``bark.model.tree.Packing``: Ridley's
+    packing, from the lattice and the placed growth law)."""
     clock: Clock = attrs.field(init=False)
     backend: kernels.Backend = attrs.field(init=False)
     forces: ForceField = attrs.field(init=False)
@@ -179,6 +183,7 @@ class Simulation:
         if self.rng is None:
             self.rng = np.random.default_rng(self.seed)
         self.growth = self.growth.on(self.lattice)  # features placed relative to the growing top
+        self.packing = Packing.of(self.lattice, self.growth)
         self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
         self.forces = ForceField(self.mechanics, self.backend)
         from bark.model.graph import LeafBaseGraph
@@ -310,10 +315,10 @@ class Simulation:
         if plan.breaks == "python" or plan.breaks == "candidates" and result.picked:
             self._break_selected()
         self.clock.relax(result.load)
-        due = self.lattice.bases_at(self.state.t) - self.state.n_bases
-        if due > 0:  # primary growth has made room at the top: the next bases of the lattice join
-            top = float(np.broadcast_to(self.growth.radius(self.state.t, self.state.n_bases * self.lattice.rise), 1)[0])
-            self.join(*self.lattice.sites(top, self.rng, self.state.n_bases, due))
+        due = self.packing.bases_at(self.state.t) - self.state.n_bases
+        if due > 0:  # primary growth has raised the dome past the next leaves: they join where they crossed
+            top = float(np.broadcast_to(self.growth.radius(self.state.t, float(self.packing.top(self.state.t))), 1)[0])
+            self.join(*self.packing.sites(top, self.rng, self.state.n_bases, due))
         return result.done
 
     def step(self) -> None:
@@ -370,7 +375,7 @@ class Simulation:
         first ones (its own generator from the seed: the simulation's is not drawn), with its springs
         at rest: what a bound on a lattice that is still to grow is taken on.  Arrays only — no graph,
         and every threshold ``f_max`` (a bound needs neither)."""
-        lattice = attrs.evolve(self.lattice, n_start=None, join_rate=0.0)
+        lattice = attrs.evolve(self.lattice, n_start=None, join_rate=0.0, organ_area=None, area_exponent=1.0)
         radius = float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1)))
         state = State.empty(lattice.n_bases, lattice.n_springs)
         state.add_bases(**self._new_bases(*lattice.sites(radius, np.random.default_rng(self.seed)), 0.0))
@@ -461,7 +466,7 @@ class Simulation:
     def __getstate__(self) -> dict:
         """A simulation pickles as its parts, its state and its records; the backend (work buffers)
         and the graph (a view of the state) are not data."""
-        skip = {"graph", "backend", "forces", "_labels", *(() if self._built else _MADE_BY_BUILD)}
+        skip = {"graph", "backend", "forces", "packing", "_labels", *(() if self._built else _MADE_BY_BUILD)}
         return {a.name: getattr(self, a.name) for a in attrs.fields(type(self)) if a.name not in skip}
 
     def __setstate__(self, data: dict) -> None:
@@ -496,4 +501,4 @@ def _rows(a: np.ndarray, n: int) -> np.ndarray:
     return buffer[:n]
 
 
-_MADE_BY_BUILD = ("state", "graph", "clock", "backend", "forces", "stability_limit")
+_MADE_BY_BUILD = ("state", "graph", "packing", "clock", "backend", "forces", "stability_limit")

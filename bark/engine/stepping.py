@@ -249,7 +249,7 @@ def breaking_part(breakers) -> BreakerPart | None:
 def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
     """``n`` cut to end where bases next join, a trigger is next due, or a time or radius stop can
     next hold."""
-    join = sim.lattice.next_join(sim.state.t, sim.state.n_bases)
+    join = sim.packing.next_join(sim.state.t, sim.state.n_bases)
     if join is not None:
         n = min(n, _first(times >= join - 1e-9 * sim.clock.h) + 1)
     for trigger, _ in sim.actions:

@@ -45,6 +45,7 @@ from bark.errors import BarkError
 from bark.io.files import write_npz
 from bark.paths import is_zip, open_regular
 from bark.model.state import BASE_FIELDS, SPRING_FIELDS
+from bark.model.tree import Packing
 
 __all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "load", "read", "read_meta", "Damaged"]
 
@@ -268,14 +269,15 @@ def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
         stop = Stop(**meta["stop"])
     except (BarkError, TypeError) as err:
         raise Damaged(f"checkpoint {str(path)!r} is damaged: its scene is not valid ({err})") from None
+    sim = scene.simulation()
     lattice, pairs = scene.lattice, arrays["pairs"].astype(np.int64)
-    n, due = arrays["x"].shape[0], lattice.bases_at(float(meta["t"]))
+    n, due = arrays["x"].shape[0], Packing.of(lattice, sim.growth.on(lattice)).bases_at(float(meta["t"]))
     if n != due or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():
         what = f"it holds {n} bases, its scene's lattice {due} at t = {meta['t']:.6g}" if n != due else \
             "its springs do not fit its scene's lattice"
         raise Damaged(f"checkpoint {str(path)!r} is damaged: {what}")
     state = {k: a for k, a in arrays.items() if not k.startswith("rec_")}
-    sim = scene.simulation().restore(Snapshot(state, meta))  # built from the checkpoint's state, not the scene's lattice
+    sim.restore(Snapshot(state, meta))  # built from the checkpoint's state, not the scene's lattice
     recorded: dict[str, dict[str, np.ndarray]] = {}
     for key, a in arrays.items():
         if key.startswith("rec_"):

@@ -32,7 +32,7 @@ MESH_FILES = ("tree.vtu", "tree.ply")
 def leaf_quads(sim) -> np.ndarray:
     """The corners of every base's rhomboid now, shape ``(n, 4, 3)``, on the trunk's surface."""
     s = sim.state
-    corners = leaf_corners(sim.lattice, join_radii(sim))
+    corners = leaf_corners(sim.lattice, join_radii(sim), sim.packing.rise_of(np.arange(s.n_bases)))
     x = s.x
     theta = np.arctan2(x[:, 1], x[:, 0])
     r_now = np.hypot(x[:, 0], x[:, 1])

@@ -119,15 +119,32 @@ def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> di
             "initial_trunk": None if old is None else region_summaries(sim, old, every[every != YOUNG], labels, False)}
 
 
+LAST_JOINED = 2000
+"""Bases that joined last, on which summary.json's ``phyllotaxis.last_joined`` is measured."""
+
+
 def _phyllotaxis(sim) -> dict | None:
-    """The paper's checks of the leaf-base pattern now (``bark.model.tree.phyllotaxis``), or ``None`` for a
-    lattice without two spring offsets."""
+    """The paper's checks of the leaf-base pattern (``bark.analysis.phyllotaxis``) on the whole trunk
+    now, and as the bases crossed from the dome (``at_transition``): on the trunk of the start
+    (``initial_trunk``) and on the last ``LAST_JOINED`` bases to join (``last_joined``, for a run in
+    which bases joined), each at the radius and rise it joined at; ``None`` for a lattice without two
+    spring offsets."""
     from bark.analysis.phyllotaxis import phyllotaxis
     from bark.model.tree import join_radii
 
-    if len(sim.lattice.offsets) != 2 or sim.state.n_bases <= max(sim.lattice.offsets) + sum(sim.lattice.partition_offsets()):
+    lattice, n = sim.lattice, sim.state.n_bases
+    least = max(lattice.offsets) + sum(lattice.partition_offsets()) if len(lattice.offsets) == 2 else None
+    if least is None or n <= least:
         return None
-    return phyllotaxis(sim.lattice, sim.state.anchor, join_radii(sim))
+    s = sim.state
+    radii, rise = join_radii(sim), sim.packing.rise_of(np.arange(n))
+    out = phyllotaxis(lattice, s.anchor, radii, rise)
+    sites = np.column_stack([radii[:, None] * s.anchor_dir, s.anchor[:, 2]])  # where each base joined, as it joined
+    first = min(lattice.initial, n)
+    groups = {"initial_trunk": slice(0, first), "last_joined": slice(max(first, n - LAST_JOINED), n)}
+    out["at_transition"] = {name: phyllotaxis(lattice, sites[at], radii[at], rise[at]) if at.stop - at.start > least else None
+                            for name, at in groups.items()}
+    return out
 
 
 def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s: float | None = None,

@@ -134,7 +134,7 @@ class Dissipation(Recorder):
 
     def analyse(self, sim, min_size: int) -> FractureHistory:
         """The run's fracture history at the samples recorded (kept as ``result``)."""
-        found = history(sim.breaks.arrays(), sim.state.pairs, sim.lattice.offsets, sim.lattice.bases_at,
+        found = history(sim.breaks.arrays(), sim.state.pairs, sim.lattice.offsets, sim.packing.bases_at,
                         np.array(self.t), np.array(self.power), min_size)
         if found.first_break_t is not None:
             found = attrs.evolve(found, growth_dissipation=growth_dissipation(sim, found.first_break_t))

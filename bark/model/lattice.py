@@ -98,6 +98,15 @@ class Lattice:
     """Index offsets p, q to the bases whose midpoints with a base are the corners of its rhomboid
     leaf-base shape, drawn in 3-D output (Table 1: 34, 144); none: o2 − o1 and o1 + o2 from the
     two spring offsets (21, 34 give 13, 55; 55, 89 give 34, 144)."""
+    organ_area: float | None = attrs.field(default=None, validator=optional(in_range(1e-12, 1e6)))
+    """Surface area one leaf takes on the apical dome as the run begins, length units² (1 = 0.09 m²;
+    the paper's ≈ 30 mm² is 0.000333): Ridley's packing places the bases that join during the run
+    this far apart in area.  None: the area of one base of the trunk of the start, 2π·r·rise, so the
+    packing goes on as the trunk began."""
+    area_exponent: float = attrs.field(default=1.0, validator=in_range(0.0, 3.0))
+    """How the leaves' area follows the trunk as it widens: ``organ_area · (R/R₀)^p``, R the trunk's
+    radius at the dome's base.  0: a fixed leaf size; 1: a fixed rise per leaf (Table 1's h: the
+    paper's leaf counts and heights); 2: a fixed shape of the lattice (its parastichy angle)."""
 
     def __attrs_post_init__(self) -> None:
         if self.n_start is not None and self.n_start > self.n_bases:
@@ -106,6 +115,18 @@ class Lattice:
             raise BarkError("{0} below {1} needs {2} > 0: the other bases never join",
                             Ref(None, "n_start", self.n_start), Ref(None, "n_bases", self.n_bases),
                             Ref(None, "join_rate", self.join_rate))
+        if self.initial >= self.n_bases and (self.organ_area is not None or self.area_exponent != 1.0):
+            ref = Ref(None, "organ_area", self.organ_area) if self.organ_area is not None else \
+                Ref(None, "area_exponent", self.area_exponent)
+            raise BarkError("{0} sizes the leaves that join during the run, and this trunk has none: give {1} below "
+                            "{2} and a {3}, or leave it out", ref, Ref(None, "n_start", self.n_start),
+                            Ref(None, "n_bases", self.n_bases), Ref(None, "join_rate", self.join_rate))
+
+    @property
+    def keeps_rise(self) -> bool:
+        """Whether the bases that join keep the trunk's rise whatever its radius (the default leaf size
+        following the trunk's radius), so that no growth law is needed to place them."""
+        return self.organ_area is None and self.area_exponent == 1.0
 
     @property
     def initial(self) -> int:
@@ -150,21 +171,22 @@ class Lattice:
         """Typical distance between neighbouring bases: the side of the area 2πr·h one base covers."""
         return math.sqrt(2.0 * math.pi * radius * self.rise)
 
-    def sites(self, radius: float, rng: np.random.Generator, first: int = 0, count: int | None = None
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def sites(self, radius: float, rng: np.random.Generator, first: int = 0, count: int | None = None,
+              z: np.ndarray | None = None, rise: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Angle θ (radians) and height z of bases ``first`` .. ``first + count − 1`` (default: the
-        initial ones) on a cylinder of ``radius``: base i at ``i·φ`` and ``i·h``, jittered; a
-        left-handed lattice's angles are those of the right-handed one negated (its mirror image, jitter
-        and all).
+        initial ones) on a cylinder of ``radius``: base i at ``i·φ`` and ``i·h`` (or at heights ``z``,
+        where each one's ``rise`` is given: what Ridley's packing makes of the bases that join later,
+        ``bark.model.tree.Packing``), jittered by the spacing √(2π·r·rise); a left-handed lattice's
+        angles are those of the right-handed one negated (its mirror image, jitter and all).
 
         The jitter is drawn from ``rng`` (the simulation's one seeded generator) even when it is
         zero, so that the generator's later draws do not depend on whether jitter is on."""
         count = self.initial if count is None else count
         i = np.arange(first, first + count, dtype=float)
         noise = rng.standard_normal((2, count))
-        sigma = self.jitter * self.spacing(radius)
+        sigma = self.jitter * (self.spacing(radius) if rise is None else np.sqrt(2.0 * math.pi * radius * rise))
         theta = i * math.radians(self.divergence_deg) + noise[0] * (sigma / radius)
-        z = i * self.rise + noise[1] * sigma
+        z = (i * self.rise if z is None else z) + noise[1] * sigma
         return (theta if self.handedness == "right" else -theta), z
 
     def partition_offsets(self) -> tuple[int, int]:

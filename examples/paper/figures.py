@@ -7,6 +7,7 @@ run)::
     python examples/paper/figures.py fig9       # the G × f_max montage
     python examples/paper/figures.py fractures  # initial fractures against the dissipation rate
     python examples/paper/figures.py fig11      # the whole tree's regions over c × b × jitter
+    python examples/paper/figures.py packing    # Ridley's packing: what each leaf-size law keeps
 
 Options: ``--out DIR`` (default ``runs/paper``), ``--workers N`` (sweeps).  Runs already there are
 reused: ``bark sweep`` skips finished points, and a regime's run folder with its summary is kept.
@@ -175,7 +176,47 @@ def fig11(out: Path, workers: int) -> None:
     print(f"table: {folder / 'fig11-study.csv'} (each cell: seeds 0 / 1 / 2; orientations in degrees)")
 
 
-FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11}
+PACKINGS = [  # (organ area in mm², or None: one base's area on the trunk of the start; area exponent p)
+    (None, 1.0), (None, 0.0), (None, 2.0), (30.0, 0.0), (30.0, 1.0), (30.0, 2.0)]
+
+
+def packing(out: Path, workers: int) -> None:
+    """What each law of the leaves' size keeps of the paper's numbers, on the shipped whole tree
+    (geometry only: Ridley's packing, no mechanics): the leaves at 60 years, and the leaf-base area
+    and parastichy angle of the bases crossing from the dome at the start and at the end."""
+    import math
+
+    import attrs
+
+    from bark.analysis.phyllotaxis import lattice_angle
+    from bark.engine.scene import Scene
+    from bark.model.tree import Packing
+    from bark.units import METRES_PER_LENGTH_UNIT, metres
+
+    scene = Scene.from_toml(SCENES / "whole-tree.toml")
+    end = scene.run.until_time
+    mm2 = (1000.0 * METRES_PER_LENGTH_UNIT) ** 2
+    growth = scene.simulation().growth.without("bulges")  # the leaves' own law, on a trunk without bulges
+    rows = ["| leaf area at the start | p | leaves at 60 years | bases at the end | height at the end "
+            "| leaf-base area, start → end | parastichy angle, start → end |", "|---|---|---|---|---|---|---|"]
+    for area, p in PACKINGS:
+        lattice = attrs.evolve(scene.lattice, n_bases=400_000, organ_area=None if area is None else area / mm2,
+                               area_exponent=p)
+        packed = Packing.of(lattice, growth)
+        radius = [float(growth.radius(t, 0.0)) for t in (0.0, end)]
+        rise = [float(packed.rise_at(t)) for t in (0.0, end)]
+        areas = [2.0 * math.pi * r * h * mm2 for r, h in zip(radius, rise)]
+        angles = [float(lattice_angle(lattice, r, h)) for r, h in zip(radius, rise)]
+        joined = packed.bases_at(end) - lattice.initial
+        rows.append(f"| {'one base of the start' if area is None else f'{area:g} mm²'} | {p:g} | {joined:,} "
+                    f"| {lattice.initial + joined:,} | {metres(float(lattice.top(end))):.2f} m "
+                    f"| {areas[0]:.1f} → {areas[1]:.1f} mm² | {angles[0]:.1f}° → {angles[1]:.1f}° |")
+    print("\n".join(rows))
+    print(f"(the paper: 25,000 leaves, 45,000 → 70,000 bases, 1.62 → 2.52 m, ≈ 30 mm², ≈ 57°; radius "
+          f"{100 * metres(radius[0]):.1f} → {100 * metres(radius[1]):.1f} cm)")
+
+
+FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11, "packing": packing}
 
 
 def main(argv: list[str] | None = None) -> None:
