@@ -23,7 +23,7 @@ from PIL import Image, ImageDraw, ImageFont
 from bark.model.graph import count_patches
 from bark.io.recorders import Frames
 from bark.io.files import atomic_write
-from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, patch_colours, raster_values
+from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, patch_colours, patches, raster_values
 
 
 def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
@@ -51,7 +51,7 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
 
 
 def _caption(t: float, r: float, labels: np.ndarray, min_size: int) -> str:
-    return f"t = {t:.1f}   r = {r:.3f}   {count_patches(labels, min_size)} patches"
+    return f"t = {t:.1f}   r = {r:.3f}   {patches(count_patches(labels, min_size))}"
 
 
 def _dots(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.Image]:
@@ -81,11 +81,11 @@ def _cells(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.
     fig.canvas.draw()
     rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
     rows = rgb.shape[0]
-    patches = np.vstack([PALETTE, FRAGMENT_GREY])
-    axes = Image.fromarray(rgb).quantize(colors=256 - len(patches), method=Image.Quantize.FASTOCTREE)
+    ours = np.vstack([PALETTE, FRAGMENT_GREY])
+    axes = Image.fromarray(rgb).quantize(colors=256 - len(ours), method=Image.Quantize.FASTOCTREE)
     background = np.asarray(axes)
     own = np.asarray(axes.getpalette()[:3 * (int(background.max()) + 1)], dtype=np.uint8).reshape(-1, 3)
-    palette = np.vstack([own, patches])
+    palette = np.vstack([own, ours])
     colours = palette.ravel().tolist()
     to_pixels = ax.transData.transform
     inner = ax.bbox.padded(-1.0 - max(s.get_linewidth() for s in ax.spines.values()) * fig.dpi / 72.0)  # spines stay

@@ -23,7 +23,7 @@ from matplotlib.ticker import MaxNLocator
 from bark.analysis.compare import QUANTITIES, Comparison
 from bark.analysis.pattern import PatternStatistics
 from bark_cli.options import value_text
-from bark_cli.plot import new_figure, save_figure
+from bark_cli.plot import new_figure, patches, save_figure
 
 BINS = 10
 """Histogram bins over [0°, 180°): 18° each, as in the paper."""
@@ -34,7 +34,7 @@ def _caption(s: PatternStatistics) -> str:
     text = f"μθ = {o.mean_deg:.1f}°  SD {o.sd_deg:.1f}°  SE {o.se_deg:.2f}°"
     if a is not None:
         text += f"\nμR = {a.mean:.3f}  SD {a.sd:.3f}  SE {a.se:.4f}"
-    return text + f"\n{s.n_patches} patches"
+    return text + f"\n{patches(s.n_patches)}"
 
 
 def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:

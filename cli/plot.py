@@ -24,6 +24,11 @@ from scipy.ndimage import distance_transform_edt  # noqa: E402 — here, not in 
 from bark.io.files import atomic_write
 
 
+def patches(n: int) -> str:
+    """``n`` patches, in words: "1 patch", "3 patches"."""
+    return f"{n:,} patch" if n == 1 else f"{n:,} patches"
+
+
 def new_figure(**kwargs) -> Figure:
     """A matplotlib figure (``Figure(**kwargs)``) on the Agg canvas: the object API, no pyplot and
     no global state."""
@@ -80,7 +85,7 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
                   fontsize=8)
     ax.set_ylabel("height z (m)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"), fontsize=8)
     ax.set_title(title or f"{years(data.t):.1f} years (t = {data.t:.4g}), radius {100 * r:.1f} cm ({data.radius:.4g} length "
-                 f"units), {data.n_patches} patches of ≥ {min_size} bases, {data.n_broken} broken springs", fontsize=8)
+                 f"units), {patches(data.n_patches)} of ≥ {min_size} bases, {data.n_broken} broken springs", fontsize=8)
     return save_figure(fig, path)
 
 
