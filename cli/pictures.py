@@ -59,7 +59,8 @@ class PatternData:
 
 @attrs.frozen
 class TreeData:
-    """What tree.png shows, as plain arrays (sent to the drawing process)."""
+    """What tree.png shows (and each picture of the tree series), as plain arrays (sent to the drawing
+    process)."""
 
     polygons: np.ndarray
     """Projected rhomboids (x, z) of the bases facing the viewer, far first, ``(n, 4, 2)``, metres."""
@@ -73,40 +74,86 @@ class TreeData:
     t: float
     n_bases: int
     n_patches: int
-    n_broken: int
+    n_broken: int | None
+    leaves: np.ndarray = np.empty((0, 2, 2))
+    """The leaves' axes projected (x, z), ``(n, points, 2)``, metres, far first (``leaves`` effect)."""
+    leaf_widths: np.ndarray = np.empty((0, 1))
+    """Each segment's width, ``(n, points − 1)``, metres."""
+    leaf_colours: np.ndarray = np.empty((0, 3))
+    leaf_front: np.ndarray = np.empty(0, bool)
+    """Whether each leaf is on the viewer's side of the trunk (drawn over it)."""
 
     @classmethod
-    def of(cls, sim, min_size: int, dome) -> "TreeData":
-        from bark.io.mesh import leaf_quads
+    def of(cls, sim, min_size: int, dome, leaves=None) -> "TreeData":
+        """The tree at the end of the run (``leaves``: the ``[leaves]`` settings, or ``None``: no leaves)."""
         from bark.analysis.pattern import simulation_colours
+
+        return cls.at(sim, sim.state.t, sim.state.x, simulation_colours(sim, min_size), sim.patch_count(min_size),
+                      sim.n_broken, dome, leaves)
+
+    @classmethod
+    def at(cls, sim, t: float, x: np.ndarray, colours: np.ndarray, n_patches: int, n_broken: int | None, dome,
+           leaves=None) -> "TreeData":
+        """The tree at time ``t`` of ``sim``'s run, its bases at ``x`` then, coloured ``colours``."""
+        from bark.io.mesh import leaf_quads
         from bark.model.tree import Apex
 
-        quads = leaf_quads(sim)
+        quads = leaf_quads(sim, t, x)
         depth = quads[..., 1].mean(axis=1)  # towards the viewer
         shown = np.flatnonzero(depth > 0.0)
         shown = shown[np.argsort(depth[shown])]  # far (small y) first
         polygons = metres(quads[shown][..., [0, 2]])
-        colours = simulation_colours(sim, min_size)[shown]
-        z = sim.state.anchor[:, 2]
+        z = x[:, 2]
         zs = np.linspace(float(z.min()), float(z.max()), 400)
-        r = np.broadcast_to(sim.growth.radius(sim.state.t, zs), zs.shape)
+        r = np.broadcast_to(sim.growth.radius(t, zs), zs.shape)
         top_r = float(r[-1])
         apex = Apex(dome=dome, packing=sim.packing)
-        top = float(apex.top(sim.state.t))
+        top = float(apex.top(t))
         rho, u = dome.curve(200)
         profile = np.column_stack([rho * top_r, top + u * top_r])
-        _, organs = apex.organs(sim.state.t, top_r)
+        _, organs = apex.organs(t, top_r)
         organs = organs[organs[:, 1] > 0.0]
         organs = organs[np.argsort(organs[:, 1])][:, [0, 2]]
-        return cls(polygons=polygons, colours=colours, outline=metres(np.column_stack([zs, r])), dome=metres(profile),
-                   organs=metres(organs),
-                   t=sim.state.t, n_bases=sim.state.n_bases, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
+        drawn = {}
+        if leaves is not None:
+            from bark.model.leaves import plant_leaves
+
+            plant = plant_leaves(leaves, apex, sim.growth, t, x)
+            order = np.argsort(plant.axes[:, :, 1].mean(axis=1))  # far first
+            segments = 0.5 * (plant.widths[:, 1:] + plant.widths[:, :-1])
+            drawn = {"leaves": metres(plant.axes[order][..., [0, 2]]), "leaf_widths": metres(segments[order]),
+                     "leaf_colours": plant.colours[order], "leaf_front": plant.axes[order, 0, 1] > 0.0}
+        return cls(polygons=polygons, colours=colours[shown], outline=metres(np.column_stack([zs, r])),
+                   dome=metres(profile), organs=metres(organs), t=t, n_bases=len(x), n_patches=n_patches,
+                   n_broken=n_broken, **drawn)
+
+
+@attrs.frozen
+class SeriesData:
+    """What tree-series.png shows: the tree at several ages (``TreeData`` each)."""
+
+    trees: tuple
+
+    @classmethod
+    def of(cls, sim, scene, frames) -> "SeriesData":
+        from bark.analysis.pattern import patch_colours
+        from bark.model.graph import count_patches
+
+        min_size = scene.run.min_patch_size
+        leaves = scene.leaves if scene.has("leaves") else None
+        trees = []
+        for t, x, labels in frames.frames:
+            trees.append(TreeData.at(sim, t, np.asarray(x, dtype=float), patch_colours(labels, min_size),
+                                     count_patches(labels, min_size), None, scene.dome, leaves))
+        return cls(trees=tuple(trees))
 
 
 PICTURES = {
     "pattern-image": ("pattern.png", "pattern", lambda sim, scene, recorded: PatternData.of(sim, scene.run.min_patch_size)),
     "animation": ("development.gif", "animation", lambda sim, scene, recorded: recorded["frames"]),
-    "tree-image": ("tree.png", "tree", lambda sim, scene, recorded: TreeData.of(sim, scene.run.min_patch_size, scene.dome)),
+    "tree-image": ("tree.png", "tree", lambda sim, scene, recorded: TreeData.of(
+        sim, scene.run.min_patch_size, scene.dome, scene.leaves if scene.has("leaves") else None)),
+    "tree-series": ("tree-series.png", "tree-series", lambda sim, scene, recorded: SeriesData.of(sim, scene, recorded["trees"])),
     "fracture-history": ("fracture.png", "fracture", lambda sim, scene, recorded: recorded["dissipation"].result),
 }
 """Per effect: its picture's file, the kind of drawing, and the data it is drawn from."""
@@ -137,6 +184,10 @@ def _draw(kind: str, data, path: str, min_size: int) -> None:
         from bark_cli.tree_picture import plot_tree
 
         plot_tree(data, path, min_size)
+    elif kind == "tree-series":
+        from bark_cli.tree_picture import plot_tree_series
+
+        plot_tree_series(data, path, min_size)
     else:
         from bark_cli.animation import write_gif
 

@@ -1,51 +1,112 @@
-"""The whole tree seen from the side (``tree-image`` effect, tree.png; the paper's Fig. 10).
+"""The whole tree seen from the side (``tree-image`` effect, tree.png; ``tree-series``, tree-series.png:
+the paper's Fig. 10).
 
 An orthographic view along −y of the trunk's leaf bases — each its rhomboid (``bark.io.mesh``), coloured
-by patch, fragments grey, cracks showing as the gaps between bases — with the trunk's outline
-(bulges stand out) and the apical dome on top, its leaf bases where Ridley's placement puts them
-(``bark.model.tree.Apex``).  Only the half facing the viewer is drawn,
-far bases first.  Lengths in metres, the title in years.  A bounded figure: the trunk's height sets
-it, at most ``MAX_HEIGHT_IN`` inches.
+by patch, fragments grey, cracks showing dark between bases — with the trunk's outline (bulges stand
+out) and the apical dome on top, its leaf bases where Ridley's placement puts them
+(``bark.model.tree.Apex``).  Only the half facing the viewer is drawn, far bases first.  With the
+``leaves`` effect, the plant's leaves (``bark.model.leaves``): those behind the trunk first, hidden
+by it, then the trunk, then those in front, each a line as wide as the leaf, green when young,
+browning with age.  Lengths in metres, the title in years.  A bounded figure: the tree's height sets
+it, at most ``MAX_HEIGHT_IN`` inches (a taller tree is drawn with its height axis compressed, said on
+the axis).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from matplotlib.collections import PolyCollection
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
 
 from bark.units import METRES_PER_LENGTH_UNIT, years
-from bark_cli.pictures import TreeData
-from bark_cli.plot import new_figure, save_figure
+from bark_cli.pictures import SeriesData, TreeData
+from bark_cli.plot import new_figure, patches, save_figure
 
 MAX_HEIGHT_IN = 12.0
 WIDTH_IN = 5.0
+TRUNK = "0.22"
+"""The trunk's own colour, seen through the cracks between its leaf bases."""
+
+
+def _extent(data: TreeData) -> tuple[float, float, float]:
+    """Half the width, the lowest and the highest height the drawing needs (metres)."""
+    z_lo = float(data.outline[0, 0])
+    z_hi = float(data.dome[:, 1].max())
+    half = float(max(data.outline[:, 1].max(), 1e-9)) * 1.15
+    if len(data.leaves):  # the crown, its height and spread; leaves hanging below the trunk's foot are cut there
+        half = max(half, 1.05 * float(np.abs(data.leaves[..., 0]).max()))
+        z_hi = max(z_hi, float(data.leaves[..., 1].max()))
+    return half, z_lo, z_hi
+
+
+def _leaves(ax, data: TreeData, which: np.ndarray, points_per_metre: float, zorder: float) -> None:
+    if not which.any():
+        return
+    axes = data.leaves[which]
+    segments = np.stack([axes[:, :-1], axes[:, 1:]], axis=2).reshape(-1, 2, 2)
+    widths = np.maximum(data.leaf_widths[which].ravel() * points_per_metre, 0.25)
+    colours = np.repeat(data.leaf_colours[which], axes.shape[1] - 1, axis=0)
+    ax.add_collection(LineCollection(segments, linewidths=widths, colors=colours, capstyle="round", zorder=zorder))
+
+
+def draw_tree(ax, data: TreeData, extent: tuple[float, float, float], points_per_metre: float) -> None:
+    """Draw ``data`` into ``ax`` within ``extent`` (``_extent``): leaves behind, trunk, leaves in front."""
+    half, z_lo, z_hi = extent
+    zo, ro = data.outline[:, 0], data.outline[:, 1]
+    _leaves(ax, data, ~data.leaf_front, points_per_metre, 1.0)
+    ax.fill_betweenx(zo, -ro, ro, color=TRUNK, lw=0, zorder=1.5)  # hides the leaves behind; dark in the cracks
+    ax.add_collection(PolyCollection(data.polygons, facecolors=data.colours / 255.0, edgecolors="none", zorder=2))
+    ax.plot(ro, zo, color="0.2", lw=0.6, zorder=2.1)
+    ax.plot(-ro, zo, color="0.2", lw=0.6, zorder=2.1)
+    ax.fill_betweenx(data.dome[:, 1], -data.dome[:, 0], data.dome[:, 0], color="#6b8e23", alpha=0.35, lw=0, zorder=2)
+    if len(data.organs):  # the leaf bases still on the dome, where Ridley's placement puts them
+        per_organ = (72.0 * WIDTH_IN) ** 2 * 0.25 / len(data.organs)
+        ax.scatter(data.organs[:, 0], data.organs[:, 1], s=float(min(4.0, per_organ)), c="#3b5e0b", linewidths=0, zorder=2.2)
+    _leaves(ax, data, data.leaf_front, points_per_metre, 3.0)
+    ax.set_xlim(-half, half)
+    ax.set_ylim(z_lo, z_hi + 0.02 * (z_hi - z_lo))
 
 
 def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
     """Draw ``data`` into ``path`` (PNG, atomically)."""
-    z_lo = float(data.outline[0, 0])
-    z_hi = float(data.dome[:, 1].max())
-    half = float(max(data.outline[:, 1].max(), 1e-9)) * 1.15
+    extent = _extent(data)
+    half, z_lo, z_hi = extent
     height_in = min(MAX_HEIGHT_IN, max(3.0, WIDTH_IN * (z_hi - z_lo) / (2 * half)))
     fig = new_figure(figsize=(WIDTH_IN, height_in + 0.5), dpi=150)
     ax = fig.add_subplot()
-    ax.add_collection(PolyCollection(data.polygons, facecolors=data.colours / 255.0, edgecolors="none"))
-    zo, ro = data.outline[:, 0], data.outline[:, 1]
-    ax.plot(ro, zo, color="0.2", lw=0.6)
-    ax.plot(-ro, zo, color="0.2", lw=0.6)
-    ax.fill_betweenx(data.dome[:, 1], -data.dome[:, 0], data.dome[:, 0], color="#6b8e23", alpha=0.35, lw=0)
-    if len(data.organs):  # the leaf bases still on the dome, where Ridley's placement puts them
-        per_organ = (72.0 * WIDTH_IN) ** 2 * 0.25 / len(data.organs)
-        ax.scatter(data.organs[:, 0], data.organs[:, 1], s=float(min(4.0, per_organ)), c="#3b5e0b", linewidths=0)
-    ax.set_xlim(-half, half)
-    ax.set_ylim(z_lo, z_hi + 0.02 * (z_hi - z_lo))
+    draw_tree(ax, data, extent, 72.0 * height_in / (z_hi - z_lo))
     ax.set_aspect("auto" if height_in == MAX_HEIGHT_IN else "equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("height (m)" + ("" if height_in < MAX_HEIGHT_IN else ", compressed"))
-    ax.set_title(f"{years(data.t):.1f} years, {data.n_bases} leaf bases, {data.n_patches} patches "
-                 f"(≥ {min_size} bases; fragments grey)", fontsize=8)
+    broken = "" if data.n_broken is None else f", {data.n_broken} broken springs"
+    ax.set_title(f"{years(data.t):.1f} years, {data.n_bases:,} leaf bases, {patches(data.n_patches)} "
+                 f"(≥ {min_size} bases; fragments grey){broken}", fontsize=8)
     return save_figure(fig, path)
 
 
-__all__ = ["TreeData", "plot_tree", "METRES_PER_LENGTH_UNIT"]
+def plot_tree_series(data: SeriesData, path: str | Path, min_size: int = 7) -> Path:
+    """The tree at each age of ``data`` side by side, on one scale (the paper's Fig. 10), into ``path``."""
+    extents = [_extent(tree) for tree in data.trees]
+    z_lo = min(e[1] for e in extents)
+    z_hi = max(e[2] for e in extents)
+    half = max(e[0] for e in extents)
+    panel_in = 2.0 * WIDTH_IN / max(len(data.trees), 1) * 1.5
+    height_in = min(MAX_HEIGHT_IN, max(1.5, panel_in * (z_hi - z_lo) / (2 * half)))
+    fig = new_figure(figsize=(panel_in * len(data.trees), height_in + 0.7), dpi=150)
+    axes = fig.subplots(1, len(data.trees), sharey=True, squeeze=False)[0]
+    for ax, tree in zip(axes, data.trees):
+        draw_tree(ax, tree, (half, z_lo, z_hi), 72.0 * height_in / (z_hi - z_lo))
+        ax.set_aspect("auto" if height_in == MAX_HEIGHT_IN else "equal")
+        ax.set_title(f"{years(tree.t):.0f} years: {tree.n_bases:,} bases, {patches(tree.n_patches)}", fontsize=8)
+        ax.set_xlabel("x (m)")
+    axes[0].set_ylabel("height (m)" + ("" if height_in < MAX_HEIGHT_IN else ", compressed"))
+    for ax in axes:
+        ax.apply_aspect()  # where the panels end up, so that the heading sits just above them
+    top = max(ax.get_position().y1 for ax in axes)
+    fig.text(0.5, top + 0.35 / (height_in + 0.7), f"The tree as it grew (patches of ≥ {min_size} bases coloured; "
+             "fragments grey)", ha="center", va="bottom", fontsize=9)
+    return save_figure(fig, path)
+
+
+__all__ = ["TreeData", "SeriesData", "draw_tree", "plot_tree", "plot_tree_series", "METRES_PER_LENGTH_UNIT"]

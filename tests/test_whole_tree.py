@@ -74,8 +74,11 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
     # the mean radius: Table 1's law, a little less where the bulge grows at G = 0.02 (and stands out)
     assert 0.35 + 0.02 * math.sqrt(24.8) < summary["radius"] < 0.35 + 0.04 * math.sqrt(24.8) + 0.06
     assert summary["n_broken"] > 0
-    mesh = meshio.read(out / "tree.vtu")
-    assert mesh.points.shape == (4 * 7005, 3) and mesh.cells[0].data.shape == (7005, 4)
+    mesh = meshio.read(out / "tree.vtu")  # each base a quad; and the leaves' (leaf = 1)
+    bases = mesh.cell_data["leaf"][0] == 0
+    assert bases.sum() == 7005 and mesh.cells[0].data[bases].max() == 4 * 7005 - 1
+    assert (mesh.cell_data["patch"][0][~bases] == -1).all() and (~bases).sum() % (4 * 8) == 0
+    assert {"tree-series.png", "tree.png"} <= {p.name for p in out.iterdir()}
     assert {"statistics.csv", "pattern.png", "tree.ply", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
     from PIL import Image
 

@@ -11,8 +11,9 @@ vertical regime of Table 2)::
     [breaker]     name = "threshold" + its fields
     [analyzer]    name = "patches" + its fields          (min_size)
     [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
-    [effects]     want = [...] (bark.model.effects), frame_every, series_every, window  (what is simulated and written)
+    [effects]     want = [...] (bark.model.effects), frame_every, series_every, tree_every, window  (what is simulated and written)
     [dome]        bark.model.tree.Dome fields                  (shape, height, exponent, points: the apical dome)
+    [leaves]      bark.model.leaves.Leaves fields              (length, width, lifespan, ...: the leaves effect)
 
 Unknown tables or keys, bad values and unknown strategy names raise :class:`~bark.errors.BarkError`
 with one line naming the key and what is allowed.  Nothing here writes files or imports plotting.
@@ -31,11 +32,12 @@ import numpy as np
 
 from bark.model import effects
 from bark.contract import registry
-from bark.validators import construct, positive
+from bark.validators import MISSING, construct, optional, positive
 from bark.paths import NotARegularFile, open_regular
 from bark.errors import BarkError, BarkWarning, Ref
 from bark.model.forces import Mechanics
 from bark.model.lattice import Lattice
+from bark.model.leaves import Leaves
 from bark.model.tree import Dome
 from bark.engine.simulation import Simulation, Stop
 from bark.engine.stepping import Numerics
@@ -76,7 +78,8 @@ class RunSettings(attrs.make_class(
 STOP_KEYS = ("until_time", "until_radius", "until_patches")
 STRATEGY_SECTIONS: dict[str, str] = {"growth": "growth", "integrator": "integrator", "breaker": "breaker", "analyzer": "analyzer"}
 DEFAULT_STRATEGIES: dict[str, str] = {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
-PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings, "dome": Dome}
+PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings, "dome": Dome,
+                                   "leaves": Leaves}
 SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS, "effects")
 
 
@@ -124,6 +127,9 @@ class EffectSettings:
     window: float = attrs.field(default=0.5, validator=positive)
     """On a trunk with regions (bulges): side of the windows of summary.json's ``windows``, length
     units (0.5 = 15 cm, a photograph's field of view)."""
+    tree_every: float | None = attrs.field(default=None, validator=optional(positive))
+    """With the ``tree-series`` effect: simulated time between two of its pictures of the tree; none:
+    a quarter of the run's ``until_time`` (five ages, from its start to its end)."""
 
 
 MEMORY = {"fixed": 300 * 2**20, "per_base": 800, "per_spring": 400, "per_base_image": 4000}
@@ -236,8 +242,12 @@ class Scene:
     """With the ``fracture-history`` effect: simulated time between two samples of fracture.csv."""
     window: float = 0.5
     """Side of the windows of summary.json's ``windows`` (length units; ``EffectSettings.window``)."""
+    tree_every: float | None = None
+    """With the ``tree-series`` effect: simulated time between two pictures (``EffectSettings.tree_every``)."""
     dome: Dome = attrs.field(factory=Dome)
     """The apical dome's profile (``bark.model.tree.Dome``): drawn in tree.png."""
+    leaves: Leaves = attrs.field(factory=Leaves)
+    """How the ``leaves`` effect draws the plant's leaves (``bark.model.leaves.Leaves``)."""
 
     @property
     def names(self) -> dict[str, str]:
@@ -258,6 +268,12 @@ class Scene:
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
+
+    @property
+    def tree_interval(self) -> float:
+        """Time between two pictures of the ``tree-series`` effect: ``tree_every``, or a quarter of the
+        run's ``until_time``."""
+        return self.tree_every if self.tree_every is not None else self.run.until_time / 4.0
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Scene":
@@ -304,6 +320,9 @@ class Scene:
             raise BarkError("{0}: the effect 'fracture-history' counts cracks in the lattice's cells, which takes two "
                             "spring offsets",
                             Ref("lattice", "offsets", list(parts["lattice"].offsets)))
+        if "tree-series" in resolved and eff.tree_every is None and run.until_time is None:
+            raise BarkError("{0}: the effect 'tree-series' takes a picture every tree_every, which needs a value "
+                            "when the run has no {1}", Ref("effects", "tree_every", MISSING), Ref("run", "until_time", None))
         _check_feasible(parts["lattice"], run, strategies["growth"], resolved)
         _place("dome", lambda: parts["dome"].table)  # a curve through points that leaves the trunk's width
         return cls(
@@ -315,6 +334,7 @@ class Scene:
             series_every=eff.series_every,
             history_every=eff.history_every,
             window=eff.window,
+            tree_every=eff.tree_every,
             **parts,
         )
 
@@ -383,7 +403,7 @@ class Scene:
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **_plain(strategy.params())}
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
-                          "history_every": self.history_every, "window": self.window}
+                          "history_every": self.history_every, "window": self.window, "tree_every": self.tree_every}
         return out
 
 

@@ -9,7 +9,7 @@ fast; ``np.load(..., allow_pickle=False)`` reads it) holding:
   the way is restored as it was, not rebuilt from the scene;
 * the break log so far (``breaks_*`` columns);
 * what was recorded along the way (``rec_series_*``: the statistics series; ``rec_frames_*``: the
-  animation's frames), so that a resumed run's files are the whole run's;
+  animation's frames; ``rec_trees_*``: the tree series' ages), so that a resumed run's files are the whole run's;
 * ``meta``, a JSON text: checkpoint format, bark's version, the whole scene (every setting, as in
   summary.json), the stop conditions, the clock (full step, tick count, adaptive stepping's current
   level), the step count, the random generator's state, the events so far, why it was written

@@ -224,7 +224,8 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
     if scene.has("mesh"):
         from bark.io.mesh import write_mesh
 
-        attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size), failed,
+        leaves = scene.leaves if scene.has("leaves") else None
+        attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size, leaves, scene.dome), failed,
                 (out / "tree.vtu", out / "tree.ply"))
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
     if not failed:

@@ -13,7 +13,7 @@ from bark.contract.strategies import pattern_of
 from bark.io.files import write_csv
 from bark.units import unwrap
 
-__all__ = ["Recorder", "StatisticsSeries", "Frames", "Dissipation", "SERIES_COLUMNS"]
+__all__ = ["Recorder", "StatisticsSeries", "Frames", "TreeFrames", "Dissipation", "SERIES_COLUMNS"]
 
 
 SERIES_COLUMNS = ["t", "radius", "step", "n_broken", "n_patches", "mean_orientation_deg", "circular_sd_deg",
@@ -29,6 +29,9 @@ class Recorder:
 
     name = ""
     file: str | None = None
+    from_start = False
+    """Whether it also samples the state a run starts from (the runner asks it once, before the first
+    step): its trigger's first due time, 0, would otherwise be seen only after that step."""
 
     def finish(self, sim, min_size: int) -> None:
         """At the end of the run, after its last sample (``min_size``: the smallest patch that counts)."""
@@ -97,6 +100,35 @@ class Frames(Recorder):
         starts = ends - arrays["count"]
         self.frames = [(float(t), float(r), arrays["uv"][a:b], arrays["labels"][a:b])
                        for t, r, a, b in zip(arrays["t"], arrays["r"], starts, ends)]
+
+
+class TreeFrames(Recorder):
+    """The tree at several ages, for the tree-series picture (Fig. 10): per call, the time, each base's
+    position (float32) and patch label (int32).  Drawing them is the CLI's (``bark_cli.pictures``)."""
+
+    name = "trees"
+    from_start = True  # the tree as the run found it: the first picture of the series
+
+    def __init__(self) -> None:
+        self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def record(self, sim) -> None:
+        if self.frames and self.frames[-1][0] == sim.state.t:
+            return
+        self.frames.append((sim.state.t, sim.state.x.astype(np.float32), sim.patch_labels().astype(np.int32)))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        f = self.frames
+        return {
+            "t": np.array([x[0] for x in f], dtype=float), "count": np.array([x[1].shape[0] for x in f], dtype=np.int64),
+            "x": np.concatenate([x[1] for x in f]) if f else np.empty((0, 3), np.float32),
+            "labels": np.concatenate([x[2] for x in f]) if f else np.empty(0, np.int32),
+        }
+
+    def load(self, arrays: dict[str, np.ndarray]) -> None:
+        ends = np.cumsum(arrays["count"])
+        starts = ends - arrays["count"]
+        self.frames = [(float(t), arrays["x"][a:b], arrays["labels"][a:b]) for t, a, b in zip(arrays["t"], starts, ends)]
 
 
 class Dissipation(Recorder):

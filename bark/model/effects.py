@@ -62,6 +62,10 @@ EFFECTS: dict[str, Effect] = {
                ("fracture",), ("tree.png",), ("tree.png",)),
         Effect("mesh", "the trunk's leaf bases as a 3-D mesh coloured by patch at the end: tree.vtu (ParaView), "
                "tree.ply (Blender)", ("fracture",), ("tree.vtu", "tree.ply")),
+        Effect("leaves", "the plant's leaves, ageing, drooping and burnt ([leaves]; Fig. 10), in tree.png, the "
+               "tree series and the mesh", ("tree-image",)),
+        Effect("tree-series", "the tree seen from the side at several ages (Fig. 10), every tree_every: "
+               "tree-series.png", ("fracture",), ("tree-series.png",), ("tree-series.png",)),
     ]
 }
 

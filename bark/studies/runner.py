@@ -43,7 +43,7 @@ from bark.errors import BarkError, NonFiniteStateError, one_line
 from bark.io.files import attempt
 from bark.io.folder import OutputFolder
 from bark.io.recorders import Dissipation
-from bark.io.recorders import Frames, StatisticsSeries
+from bark.io.recorders import Frames, StatisticsSeries, TreeFrames
 from bark.io.output import run_summary, write_run
 
 __all__ = ["Outcome", "run", "resume", "STOPPED_BY_SIGNAL"]
@@ -154,16 +154,20 @@ def _recorders(scene, sim, recorded: dict) -> list:
     recorded restored and their triggers brought up to the simulation's time."""
     from bark.engine.triggers import Every
 
-    wanted = [(StatisticsSeries, "statistics-series", scene.series_every), (Frames, "animation", scene.frame_every),
-              (Dissipation, "fracture-history", scene.history_every)]
+    wanted = [(StatisticsSeries, "statistics-series", lambda: scene.series_every),
+              (Frames, "animation", lambda: scene.frame_every), (Dissipation, "fracture-history", lambda: scene.history_every),
+              (TreeFrames, "tree-series", lambda: scene.tree_interval)]
     recorders = []
     for cls, effect, every in wanted:
         if not scene.has(effect):
             continue
-        rec, trigger = cls(), Every(every)
+        rec, trigger = cls(), Every(every())
         if rec.name in recorded:
             rec.load(recorded[rec.name])
             trigger.fires(sim)  # past due times were acted on before the checkpoint
+        elif rec.from_start:
+            rec.record(sim)
+            trigger.fires(sim)  # its due time 0 is this sample
         sim.add_action(trigger, rec.record)
         recorders.append(rec)
     return recorders
