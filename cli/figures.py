@@ -4,6 +4,8 @@
   orientation (90° = up the trunk), radius = anisotropy 0–1, each patch drawn at θ and θ + 180° (an
   axis has two ends), colour = patch size in leaf bases; mean, SD and SE printed.
 * ``plot_histogram``: the orientations in 10 bins of 18° (Fig. 6C / 7C), bar length = patches.
+* ``plot_regions``: ``plot_radial``'s view for each region of the trunk side by side (near bulges,
+  away from them, grown during the run): the comparison of Fig. 11.
 * ``plot_quartets``: the quartet diagrams (Fig. 8D–G): four boxes, Hellinger distances with the two
   shortest edges green, the third red, the three longest dotted; and the d_P edges, each box's
   smallest outgoing d_P green.
@@ -22,6 +24,7 @@ from matplotlib.ticker import MaxNLocator
 
 from bark.analysis.compare import QUANTITIES, Comparison
 from bark.analysis.pattern import PatternStatistics
+from bark.units import years
 from bark_cli.options import value_text
 from bark_cli.plot import new_figure, patches, save_figure
 
@@ -60,6 +63,36 @@ def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:
     cb.set_label("patch size (leaf bases)", fontsize=8)
     ax.set_title(f"{stats.name}: orientation (angle, 90° = up the trunk) × anisotropy (radius)", fontsize=8)
     fig.text(0.02, 0.02, _caption(stats), fontsize=7, family="monospace")
+    return save_figure(fig, path)
+
+
+def plot_regions(data, path: str | Path, min_size: int = 7) -> Path:
+    """regions.png: for each region of the trunk (``bark_cli.pictures.RegionsData``) its patches'
+    orientation (angle, 90° = up the trunk) against anisotropy (radius), as Fig. 6B, with the mean
+    axis and the region's statistics — the comparison of the paper's Fig. 11, region by region."""
+    k = len(data.names)
+    fig = new_figure(figsize=(3.6 * k, 4.4), dpi=130)
+    for i, (name, deg, aniso, s) in enumerate(zip(data.names, data.orientation, data.anisotropy, data.summaries)):
+        ax = fig.add_subplot(1, k, i + 1, projection="polar")
+        theta = np.radians(deg)
+        ax.scatter(np.concatenate([theta, theta + np.pi]), np.concatenate([aniso, aniso]), s=6, color="tab:blue",
+                   edgecolors="none", alpha=0.6)
+        mean = s.get("mean_orientation_deg")
+        if mean is not None and np.isfinite(mean):
+            ax.plot([np.radians(mean), np.radians(mean) + np.pi], [1, 1], color="crimson", lw=1.2)
+        ax.set_ylim(0, 1)
+        ax.set_yticks(np.linspace(0.25, 1.0, 4), labels=["", "", "", "1"], fontsize=6)
+        ax.set_xticks(np.radians(np.arange(0, 360, 45)))
+        ax.tick_params(labelsize=6)
+        ax.set_title(f"{name}: {patches(len(deg))} of ≥ {min_size} bases", fontsize=8)
+        share = s.get("largest_patch_share")
+        lines = [f"mean {mean:.1f}°, SD {s['circular_sd_deg']:.1f}°" if len(deg) else "no patches",
+                 f"anisotropy {s['mean_anisotropy']:.2f}" if len(deg) else "",
+                 f"largest patch: {100 * share:.1f} % of its bases" if share is not None else ""]
+        ax.text(0.5, -0.16, "\n".join(x for x in lines if x), transform=ax.transAxes, ha="center", va="top", fontsize=7)
+    fig.suptitle(f"Patches by region of the trunk at {years(data.t):.1f} years: orientation (angle; 90° up the trunk) "
+                 "× anisotropy (radius); red: the mean axis", fontsize=8)
+    fig.subplots_adjust(bottom=0.22, top=0.82, wspace=0.35)
     return save_figure(fig, path)
 
 

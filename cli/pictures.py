@@ -148,6 +148,45 @@ class SeriesData:
         return cls(trees=tuple(trees))
 
 
+REGION_ORDER = ("straight", "bulge", "young")
+"""The regions of a trunk in the order regions.png shows them (the paper's Fig. 11 compares the first two)."""
+
+
+@attrs.frozen
+class RegionsData:
+    """What regions.png shows: per region of the trunk (one, ``trunk``, when it has no regions), its
+    patches' orientations and anisotropies and its statistics (summary.json's ``regions``)."""
+
+    names: tuple[str, ...]
+    orientation: tuple[np.ndarray, ...]
+    anisotropy: tuple[np.ndarray, ...]
+    summaries: tuple[dict, ...]
+    t: float
+
+    @classmethod
+    def of(cls, sim, min_size: int) -> "RegionsData":
+        from bark.analysis.patches import pattern_summary
+        from bark.contract.strategies import pattern_of
+        from bark.io.output import base_regions, largest_share, patch_regions, trunk_regions
+
+        measured = pattern_of(sim.analyze().values())
+        rows = measured.patches if measured is not None else []
+        labels = sim.patch_labels()
+        every = trunk_regions(sim)  # summary.json's regions, or one: the whole trunk
+        if every is None:
+            present, names, where = ["trunk"], np.full(len(rows), "trunk", dtype=object), np.full(labels.size, "trunk")
+        else:
+            present = sorted(map(str, every), key=lambda n: (REGION_ORDER + (n,)).index(n))
+            names, where = patch_regions(sim, rows, labels), base_regions(sim)
+        picked = [[r for r, n in zip(rows, names) if n == name] for name in present]
+        summaries = [pattern_summary(chosen) for chosen in picked]
+        for name, summary in zip(present, summaries):
+            summary["largest_patch_share"] = largest_share(labels[where == name])
+        return cls(names=tuple(present), summaries=tuple(summaries), t=sim.state.t,
+                   orientation=tuple(np.array([r["orientation_deg"] for r in chosen], float) for chosen in picked),
+                   anisotropy=tuple(np.array([r["anisotropy"] for r in chosen], float) for chosen in picked))
+
+
 PICTURES = {
     "pattern-image": ("pattern.png", "pattern", lambda sim, scene, recorded: PatternData.of(sim, scene.run.min_patch_size)),
     "animation": ("development.gif", "animation", lambda sim, scene, recorded: recorded["frames"]),
@@ -155,6 +194,7 @@ PICTURES = {
         sim, scene.run.min_patch_size, scene.dome, scene.leaves if scene.has("leaves") else None)),
     "tree-series": ("tree-series.png", "tree-series", lambda sim, scene, recorded: SeriesData.of(sim, scene, recorded["trees"])),
     "fracture-history": ("fracture.png", "fracture", lambda sim, scene, recorded: recorded["dissipation"].result),
+    "region-image": ("regions.png", "regions", lambda sim, scene, recorded: RegionsData.of(sim, scene.run.min_patch_size)),
 }
 """Per effect: its picture's file, the kind of drawing, and the data it is drawn from."""
 
@@ -184,6 +224,10 @@ def _draw(kind: str, data, path: str, min_size: int) -> None:
         from bark_cli.tree_picture import plot_tree
 
         plot_tree(data, path, min_size)
+    elif kind == "regions":
+        from bark_cli.figures import plot_regions
+
+        plot_regions(data, path, min_size)
     elif kind == "tree-series":
         from bark_cli.tree_picture import plot_tree_series
 

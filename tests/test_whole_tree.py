@@ -78,7 +78,7 @@ def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
     bases = mesh.cell_data["leaf"][0] == 0
     assert bases.sum() == 7005 and mesh.cells[0].data[bases].max() == 4 * 7005 - 1
     assert (mesh.cell_data["patch"][0][~bases] == -1).all() and (~bases).sum() % (4 * 8) == 0
-    assert {"tree-series.png", "tree.png"} <= {p.name for p in out.iterdir()}
+    assert {"tree-series.png", "tree.png", "regions.png"} <= {p.name for p in out.iterdir()}
     assert {"statistics.csv", "pattern.png", "tree.ply", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
     from PIL import Image
 
@@ -116,3 +116,23 @@ def test_the_small_whole_tree_interrupted_and_resumed_ends_bit_for_bit(tmp_path)
     assert resumed.sim.state.n_bases == 7005
     for name in ("breaks.csv", "state.npz", "patches.csv", "statistics.csv", "tree.vtu", "tree.ply"):
         assert (part / name).read_bytes() == (whole / name).read_bytes(), name
+
+
+def test_the_regions_picture_shows_each_region_s_patches_and_its_summary_json_figures():
+    """regions.png's data: a panel per region of the trunk, in summary.json's figures; a trunk of one
+    region gets one panel, ``trunk``."""
+    from bark_cli.pictures import RegionsData
+
+    scene = Scene.from_toml(SCENES / "whole-tree-small.toml", {"effects": {"want": ["bulges", "anchors", "damping",
+                                                                                    "patch-statistics"]}})
+    done = runner.run(scene, None)
+    data = RegionsData.of(done.sim, scene.run.min_patch_size)
+    regions = done.summary["regions"]
+    assert data.names == ("straight", "bulge", "young") and set(data.names) == set(regions)
+    for name, deg, summary in zip(data.names, data.orientation, data.summaries):
+        assert len(deg) == regions[name]["n_patches"]
+        for key in ("mean_orientation_deg", "circular_sd_deg", "mean_anisotropy", "largest_patch_share"):
+            assert summary[key] == pytest.approx(regions[name][key], rel=1e-12, nan_ok=True), (name, key)
+    plain = runner.run(Scene.from_dict({"run": {"until_time": 60.0}}), None)
+    one = RegionsData.of(plain.sim, 7)
+    assert one.names == ("trunk",) and len(one.orientation[0]) == plain.summary["n_patches"]

@@ -76,22 +76,28 @@ def largest_share(labels: np.ndarray) -> float | None:
     return float(np.bincount(labels).max() / labels.size) if labels.size else None
 
 
-def region_summaries(sim, rows: list[dict], every: np.ndarray, labels: np.ndarray, shares: bool = True
-                     ) -> dict[str, dict]:
-    """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk: each patch counted in
-    :data:`YOUNG` when most of its bases joined during the run, else in the region of its centroid's
-    height (near bulges and away from them); ``labels`` is every base's patch, as ``rows`` number
-    them.  With ``shares`` each region also has its bases (``n_bases``) and the largest share of them
-    that one patch holds (``largest_patch_share``, fragments counted): near 1 when the region has not
-    come apart."""
-    from bark.analysis.patches import pattern_summary
-
+def patch_regions(sim, rows: list[dict], labels: np.ndarray) -> np.ndarray:
+    """The region of each patch of ``rows``: :data:`YOUNG` when most of its bases joined during the
+    run, else the growth law's region of its centroid's height (near bulges and away from them);
+    ``labels`` is every base's patch, as ``rows`` number them."""
     z = np.array([r["z"] for r in rows], dtype=float)
     names = np.asarray(sim.growth.region(z), dtype=object).copy()
     if len(rows):
         counts = np.bincount(labels, minlength=int(labels.max(initial=-1)) + 1)
         share = np.bincount(labels, weights=joined_later(sim.state), minlength=counts.size) / np.maximum(counts, 1)
         names[share[np.array([r["patch"] for r in rows], dtype=np.int64)] > 0.5] = YOUNG
+    return names
+
+
+def region_summaries(sim, rows: list[dict], every: np.ndarray, labels: np.ndarray, shares: bool = True
+                     ) -> dict[str, dict]:
+    """Pattern statistics per region ``every`` (``trunk_regions``) of the trunk, each patch counted in
+    its region (``patch_regions``).  With ``shares`` each region also has its bases (``n_bases``) and
+    the largest share of them that one patch holds (``largest_patch_share``, fragments counted): near
+    1 when the region has not come apart."""
+    from bark.analysis.patches import pattern_summary
+
+    names = patch_regions(sim, rows, labels)
     where = base_regions(sim) if shares else None
     out = {}
     for name in every:

@@ -62,6 +62,9 @@ EFFECTS: dict[str, Effect] = {
                ("fracture",), ("tree.png",), ("tree.png",)),
         Effect("mesh", "the trunk's leaf bases as a 3-D mesh coloured by patch at the end: tree.vtu (ParaView), "
                "tree.ply (Blender)", ("fracture",), ("tree.vtu", "tree.ply")),
+        Effect("region-image", "per region of the trunk (straight, bulge, young), its patches' orientation and "
+               "anisotropy (Fig. 6B) and statistics: regions.png", ("patch-statistics",), ("regions.png",),
+               ("regions.png",)),
         Effect("leaves", "the plant's leaves, ageing, drooping and burnt ([leaves]; Fig. 10), in tree.png, the "
                "tree series and the mesh", ("tree-image",)),
         Effect("tree-series", "the tree seen from the side at several ages (Fig. 10), every tree_every: "
