@@ -1,4 +1,4 @@
-"""What accuracy costs on the whole tree: the shipped scene (examples/scenes/whole-tree.toml) at the
+"""What accuracy costs on the whole tree: the shipped scene (bark/scenes/whole-tree.toml) at the
 paper's fixed dt = 0.01, at adaptive steps of several overshoot tolerances and at coarser fixed
 steps, three seeds each, statistics only (no pictures, nothing written)::
 
@@ -20,7 +20,7 @@ from pathlib import Path
 from bark.engine.scene import Scene, merge, read_toml
 from bark.studies import runner
 
-SCENE = Path(__file__).resolve().parent.parent / "examples" / "scenes" / "whole-tree.toml"
+SCENE = Path(__file__).resolve().parent.parent / "bark" / "scenes" / "whole-tree.toml"
 STEPPINGS = {
     "fixed-0.01": {"stepping": "fixed", "dt": 0.01},
     "adaptive-0.002": {"stepping": "adaptive", "overshoot_tol": 0.002},

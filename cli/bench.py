@@ -332,8 +332,8 @@ def scenes(scenes, repeats):
     """Wall time and peak memory of `bark simulate --scene S` for each scene, as the command runs it
     (a fresh process each time, outputs to a temporary folder), with ratios against the first.  A
     scene may come with options for `bark simulate`, in one argument: compare the whole tree with its
-    paper-numerics numpy baseline by `bark bench scenes examples/scenes/whole-tree.toml
-    "examples/scenes/whole-tree.toml --backend numpy --dt 0.01 --stepping fixed"`."""
+    paper-numerics numpy baseline by `bark bench scenes whole-tree "whole-tree --backend numpy --dt 0.01
+    --stepping fixed"`."""
     import subprocess
     import sys
     import tempfile

@@ -1,7 +1,7 @@
 """``bark`` — the command line.
 
     bark simulate --growth sqrt --breaker threshold      # the default scene (vertical regime)
-    bark simulate --scene examples/scenes/diamond.toml --out runs/diamond
+    bark simulate --scene diamond --out runs/diamond
     bark strategies                                      # what is installed, by kind
     bark bench speed                                     # steps per second
 
@@ -283,7 +283,7 @@ def scene_of(params: dict) -> Scene:
 
 @cli.command(context_settings=CONTEXT)
 @click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
-              help="Scene TOML file (examples/scenes/); options given here override it.")
+              help="A scene: a TOML file, or the name of one bark ships (bark scenes lists them); options given here override it.")
 @_strategy_option("growth")
 @_strategy_option("integrator")
 @_strategy_option("breaker")
@@ -469,6 +469,22 @@ def strategies():
                 except Exception:  # noqa: BLE001 (a strategy with required parameters: known once given)
                     runs = "(once its parameters are given)"
             table.add_row(kind, name, ep.value, escape(params), escape(runs))
+    Console().print(table)
+
+
+@cli.command(context_settings=CONTEXT)
+def scenes():
+    """List the scenes bark ships: each runs by its name (bark simulate --scene NAME)."""
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+
+    from bark.engine.scene import SHIPPED, read_toml, shipped_scenes
+
+    table = Table("name", "what it is", caption=escape(f"files: {SHIPPED}/NAME.toml"), caption_justify="left")
+    table.columns[0].no_wrap = True
+    for name, path in shipped_scenes().items():
+        table.add_row(name, escape(str(read_toml(path).get("scene", {}).get("description", ""))))
     Console().print(table)
 
 

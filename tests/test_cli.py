@@ -135,7 +135,7 @@ def test_scene_file_and_options_override(runner, tmp_path):
 
 def test_shipped_scene_runs_shortened(runner, tmp_path):
     out = tmp_path / "out"
-    scene = REPO_ROOT / "examples" / "scenes" / "diamond.toml"
+    scene = REPO_ROOT / "bark" / "scenes" / "diamond.toml"
     result = runner.invoke(cli, ["simulate", "--scene", str(scene), *SMALL, "--out", str(out)])
     assert result.exit_code == 0, result.output
     summary = json.loads((out / "summary.json").read_text())
@@ -265,7 +265,7 @@ def test_bench_scenes_times_the_command_as_bark_runs_it(tmp_path):
     included), its own peak memory reported as it leaves; the table has a row per scene."""
     import shlex
 
-    scene = shlex.quote(str(REPO_ROOT / "examples" / "scenes" / "vertical.toml"))
+    scene = shlex.quote(str(REPO_ROOT / "bark" / "scenes" / "vertical.toml"))
     result = CliRunner().invoke(cli, ["bench", "scenes", f"{scene} --until-time 0.5 --n-bases 300",
                                       f"{scene} --until-time 0.5 --n-bases 600", "--repeats", "1"])
     assert result.exit_code == 0, result.output

@@ -16,7 +16,7 @@ from bark.engine.scene import Scene
 from bark_cli.main import cli
 from conftest import REPO_ROOT
 
-SCENES = REPO_ROOT / "examples" / "scenes"
+SCENES = REPO_ROOT / "bark" / "scenes"
 SMALL = {"lattice": {"n_bases": 400}, "growth": {"G": 0.05}, "run": {"until_time": 6.0, "until_patches": None}}
 
 

@@ -24,7 +24,7 @@ from conftest import assert_clean_outcome
     (["bench", "accuracy", "--until-time", "nan"], "--until-time"),
     (["bench", "accuracy", "--out", "/proc/nope"], "--out"),
     (["bench", "scenes", "nosuch.toml"], "nosuch.toml"),
-    (["bench", "scenes", "examples/scenes/vertical.toml", "--repeats", "0"], "--repeats"),
+    (["bench", "scenes", "bark/scenes/vertical.toml", "--repeats", "0"], "--repeats"),
     (["plan", "nosuch.toml"], "nosuch.toml"),
 ])
 def test_bench_and_plan_refuse_bad_arguments_before_any_work(args, named, monkeypatch):

@@ -202,7 +202,7 @@ def test_a_fresh_run_leaves_nothing_of_an_earlier_one(tmp_path):
 
 def test_every_file_a_run_writes_is_one_a_fresh_run_removes(tmp_path):
     out = tmp_path / "out"
-    result = CliRunner().invoke(cli, ["simulate", "--scene", str(REPO_ROOT / "examples/scenes/everything.toml"),
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(REPO_ROOT / "bark/scenes/everything.toml"),
                                       "--n-bases", "300", "--until-time", "12", "--quiet", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert {p.name for p in out.iterdir()} <= set(RUN_FILES)

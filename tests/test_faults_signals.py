@@ -23,7 +23,7 @@ from bark_cli.main import cli
 from conftest import REPO_ROOT, assert_clean_outcome
 
 # the diamond regime with the paper's integration (fixed dt = 0.01), smaller: about 2 s of stepping
-LONG = ["--scene", "examples/scenes/diamond.toml", "--n-bases", "1500", "--dt", "0.01", "--stepping", "fixed",
+LONG = ["--scene", "diamond", "--n-bases", "1500", "--dt", "0.01", "--stepping", "fixed",
         "--until-patches", "60", "--quiet"]
 COMPARED = ("breaks.csv", "state.npz", "patches.csv")
 

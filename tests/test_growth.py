@@ -196,7 +196,7 @@ def test_growing_scene_runs_through_the_command_line(tmp_path):
     from bark_cli.main import cli
 
     out = tmp_path / "out"
-    result = CliRunner().invoke(cli, ["simulate", "--scene", str(REPO_ROOT / "examples" / "scenes" / "growing.toml"),
+    result = CliRunner().invoke(cli, ["simulate", "--scene", str(REPO_ROOT / "bark" / "scenes" / "growing.toml"),
                                       "--until-time", "20", "--n-bases", "1500", "--n-start", "800", "--quiet",
                                       "--out", str(out)])
     assert result.exit_code == 0, result.output

@@ -97,7 +97,7 @@ def test_the_dome_and_the_leaf_bases_are_mirrored_too():
 @pytest.mark.slow
 def test_the_command_line_records_compares_and_mirrors_handedness(tmp_path):
     runner = CliRunner()
-    small = ["--scene", str(REPO_ROOT / "examples" / "scenes" / "reticulate.toml"), "--n-bases", "800",
+    small = ["--scene", str(REPO_ROOT / "bark" / "scenes" / "reticulate.toml"), "--n-bases", "800",
              "--until-patches", "12", "--until-time", "400", "--seed", "2", "--quiet", "--backend", "numpy"]
     for hand in ("right", "left"):
         result = runner.invoke(cli, ["simulate", *small, "--set", f"lattice.handedness={hand}", "--out", str(tmp_path / hand)])

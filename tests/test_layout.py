@@ -27,8 +27,8 @@ LAYERS = {  # a layer -> the layers it may import (besides itself and BASE)
     "io": {"model", "contract", "engine", "analysis"},
     "studies": {"model", "contract", "engine", "analysis", "io"},
 }
-TOP = {"bark", "bark.testing"}
-"""The package's front (``import bark``) and the contract kit: they may import anything of bark."""
+TOP = {"bark", "bark.__main__", "bark.testing"}
+"""The package's front (``import bark``, ``python -m bark``) and the contract kit: they may import anything of bark."""
 
 
 def module_name(path: Path) -> str:

@@ -17,7 +17,7 @@ from bark.model.leaves import Leaves, leaf_faces, leaf_rings, leaves_at, plant_l
 from bark.model.tree import Apex
 from conftest import REPO_ROOT
 
-SCENES = REPO_ROOT / "examples" / "scenes"
+SCENES = REPO_ROOT / "bark" / "scenes"
 
 
 def _one(age=None, down=None, **kw):

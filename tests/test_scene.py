@@ -15,7 +15,7 @@ from bark.engine.scene import Scene, merge, read_toml
 
 from conftest import REPO_ROOT
 
-SCENE_DIR = REPO_ROOT / "examples" / "scenes"
+SCENE_DIR = REPO_ROOT / "bark" / "scenes"
 
 
 def _assert_one_line_naming(err: BaseException, *names: str) -> None:
@@ -46,8 +46,8 @@ def test_empty_scene_is_table_2_vertical_regime():
 
 
 def test_shipped_vertical_scene_is_the_default_scene():
-    """examples/scenes/vertical.toml says it is what `bark simulate` runs without --scene."""
-    shipped = Scene.from_toml(REPO_ROOT / "examples" / "scenes" / "vertical.toml").to_dict()
+    """bark/scenes/vertical.toml says it is what `bark simulate` runs without --scene."""
+    shipped = Scene.from_toml(REPO_ROOT / "bark" / "scenes" / "vertical.toml").to_dict()
     default = Scene.from_dict({}).to_dict()
     shipped.pop("scene"), default.pop("scene")
     assert shipped == default
@@ -269,3 +269,35 @@ def test_vertical_scene_equals_defaults():
     default = Scene.from_dict({}).to_dict()
     shipped.pop("scene"), default.pop("scene")
     assert shipped == default
+
+
+def test_a_shipped_scene_runs_by_its_name_and_a_file_of_that_name_comes_first(tmp_path, monkeypatch):
+    from bark.engine.scene import SHIPPED, find_scene, shipped_scenes
+
+    names = shipped_scenes()
+    assert {"vertical", "reticulate", "diamond", "whole-tree", "whole-tree-small"} <= set(names)
+    assert all(p.parent == SHIPPED and p.suffix == ".toml" for p in names.values())
+    assert find_scene("whole-tree") == find_scene("whole-tree.toml") == SHIPPED / "whole-tree.toml"
+    assert Scene.from_toml("reticulate").to_dict() == Scene.from_toml(SHIPPED / "reticulate.toml").to_dict()
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "reticulate").write_text('[lattice]\nn_bases = 400\n[run]\nuntil_time = 1.0\n')
+    assert Scene.from_toml("reticulate").lattice.n_bases == 400  # a file there is what was meant
+    with pytest.raises(BarkError) as err:
+        Scene.from_toml("no-such-scene")
+    assert "'no-such-scene' does not exist" in str(err.value) and "whole-tree" in str(err.value)
+    with pytest.raises(BarkError) as err:
+        Scene.from_toml("sub/whole-tree")  # a path with a folder is a path: no shipped scene is guessed
+    assert "shipped" not in str(err.value) and "\n" not in str(err.value)
+
+
+def test_bark_scenes_lists_each_shipped_scene_with_what_it_is():
+    from click.testing import CliRunner
+
+    from bark.engine.scene import shipped_scenes
+    from bark_cli.main import cli
+
+    result = CliRunner().invoke(cli, ["scenes"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    for name in shipped_scenes():
+        assert any(line.split("│")[1].strip() == name for line in result.output.splitlines() if line.count("│") >= 3), name
+    assert "Table 1 whole grasstree" in result.output

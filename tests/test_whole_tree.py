@@ -20,7 +20,7 @@ from bark.units import metres, years
 from bark_cli.main import cli
 from conftest import REPO_ROOT
 
-SCENES = REPO_ROOT / "examples" / "scenes"
+SCENES = REPO_ROOT / "bark" / "scenes"
 
 
 def test_the_whole_tree_scene_has_table_1s_values_and_the_papers_calibration():

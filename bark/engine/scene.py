@@ -22,6 +22,7 @@ with one line naming the key and what is allowed.  Nothing here writes files or 
 from __future__ import annotations
 
 import copy
+import os
 import warnings
 import tomllib
 from pathlib import Path
@@ -467,14 +468,36 @@ def _plain(value):
     return value
 
 
+SHIPPED = Path(__file__).resolve().parent.parent / "scenes"
+"""The scenes bark ships (package data ``bark/scenes/*.toml``), each selected by its name."""
+
+
+def shipped_scenes() -> dict[str, Path]:
+    """The shipped scenes by name (the file's name without ``.toml``), sorted."""
+    return {p.stem: p for p in sorted(SHIPPED.glob("*.toml"))}
+
+
+def find_scene(given: str | Path) -> Path:
+    """The scene file ``given`` names: a file that exists, or else, for a bare name (no folder, with
+    or without ``.toml``), the shipped scene of that name; else ``given`` itself (``read_toml`` then
+    says it does not exist)."""
+    path = Path(given)
+    if os.path.lexists(path) or len(path.parts) != 1:
+        return path
+    shipped = SHIPPED / (path.name if path.suffix == ".toml" else f"{path.name}.toml")
+    return shipped if shipped.is_file() else path
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
-    """Parse a scene file; a missing or malformed file gives one line naming it."""
-    path = Path(path)
+    """Parse a scene file, or a shipped scene by name (``find_scene``); a missing or malformed file
+    gives one line naming it."""
+    path = find_scene(path)
     try:
         with open_regular(path) as fh:
             return tomllib.load(fh)
     except FileNotFoundError:
-        raise BarkError(f"scene file {str(path)!r} does not exist") from None
+        hint = f"; a scene bark ships is named by one of {', '.join(shipped_scenes())}" if len(path.parts) == 1 else ""
+        raise BarkError(f"scene file {str(path)!r} does not exist{hint}") from None
     except NotARegularFile as err:
         raise BarkError(f"scene file {str(path)!r}: {err}") from None
     except OSError as err:

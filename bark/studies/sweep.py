@@ -2,7 +2,7 @@
 to an SQLite table the moment it arrives.
 
     from bark.studies.sweep import Axis, Sweep, run_sweep
-    sweep = Sweep(base=read_toml("examples/scenes/reticulate.toml"),
+    sweep = Sweep(base=read_toml("reticulate"),
                   axes=(Axis("growth.G", (0.007, 0.011, 0.014)), Axis("mechanics.f_max", (0.0028, 0.005, 0.008))),
                   seeds=(0, 1))
     run_sweep(sweep, "sweep.sqlite", workers=2)           # or client=distributed.Client(address)

@@ -3,7 +3,7 @@
     python examples/paper/diamond_orientation.py [--out runs/diamond-orientation] [--until-time 8000]
     python examples/paper/diamond_orientation.py --held-ends [--seeds 3]
 
-Runs Table 2's diamond scene (examples/scenes/diamond.toml) past its stop at 80 patches, with the
+Runs Table 2's diamond scene (bark/scenes/diamond.toml, `--scene diamond`) past its stop at 80 patches, with the
 patch statistics every 40 time units, and draws the mean orientation of the patches against time
 and against their number, beside the orientations of the lattice's two parastichies (the springs
 at offsets 21 and 34, from the bases' sites at the radius of the moment).  Prints when the mean
@@ -65,7 +65,7 @@ class HeldEnds(EulerCromer):
 
 def held_ends(seeds: int) -> None:
     """The shipped diamond scene with its ends held, each seed to its stop at 80 patches."""
-    base = Scene.from_toml(HERE.parent / "scenes" / "diamond.toml")
+    base = Scene.from_toml("diamond")
     reach = max(base.lattice.offsets)
     print(f"| reading | means, seeds {' / '.join(map(str, range(seeds)))} | SDs |\n|---|---|---|")
     means, sds = [], []
@@ -89,7 +89,7 @@ def main() -> None:
     if args.held_ends:
         held_ends(args.seeds)
         return
-    data = merge(read_toml(HERE.parent / "scenes" / "diamond.toml"),  # its physics as shipped, plus the series
+    data = merge(read_toml("diamond"),  # its physics as shipped, plus the series
                  {"run": {"until_time": args.until_time},
                   "effects": {"want": [*DEFAULT, "statistics-series"], "series_every": 20.0}})
     outcome = runner.run(Scene.from_dict(data), args.out, overwrite=True)

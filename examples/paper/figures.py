@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-SCENES = HERE.parent / "scenes"
+SCENES = HERE.parent.parent / "bark" / "scenes"
 REGIMES = {  # Fig. 7's rows: Table 2's first regime, the reticulate fit (43 %), the third regime
     "vertical": SCENES / "vertical.toml",
     "intermediate-43": HERE / "intermediate-43.toml",
