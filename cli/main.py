@@ -13,6 +13,7 @@ option or scene key as the user gave it, and exit with status 2, before anything
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import logging
 import shlex
 import signal
@@ -32,6 +33,10 @@ from bark_cli.options import (NAMER, LazyHelpOption, Provenance, name_ref, overr
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 
 
+COMMAND_LINE: contextvars.ContextVar[str | None] = contextvars.ContextVar("command_line", default=None)
+"""The command line as typed (summary.json's provenance records it)."""
+
+
 class BarkGroup(click.Group):
     """A click group whose failures are one line on stderr, never a traceback or a usage dump."""
 
@@ -43,6 +48,7 @@ class BarkGroup(click.Group):
 
     def _main(self, args, prog_name, complete_var, **extra):
         token = NAMER.set(None)
+        COMMAND_LINE.set(shlex.join(["bark", *(sys.argv[1:] if args is None else args)]))
         _listen_to_the_library()
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
@@ -69,7 +75,7 @@ class BarkGroup(click.Group):
 
 
 @click.group(cls=BarkGroup, context_settings=CONTEXT)
-@click.version_option(package_name="bark")
+@click.version_option(package_name="bark-grasstree")
 def cli():
     """Grow a virtual grasstree trunk and let its layer of leaf bases crack."""
 
@@ -329,11 +335,12 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
 
         bar = ProgressBar()
     painter = _Lazy(_painter)
-    if resume is None and any(scene.has(e) for e in ("pattern-image", "animation", "tree-image", "fracture-history")):
+    if resume is None and any(e.drawn and scene.has(name) for name, e in scene.known_effects.items()):
         painter()  # start it now: matplotlib loads on the other core while the run goes on
     with Signals() as signals:
         hooks = dict(checkpoint_every=checkpoint_every, observe=bar, interrupted=signals.reason,
-                     pictures=_pictures(signals, painter), warn=_warn, notice=None if quiet else _notice)
+                     pictures=_pictures(signals, painter), warn=_warn, notice=None if quiet else _notice,
+                     command=COMMAND_LINE.get())
         try:
             if resume is not None:
                 outcome = runner.resume(resume, **hooks)

@@ -47,7 +47,7 @@ def test_image_and_mesh_not_asked_means_matplotlib_and_meshio_never_imported(tmp
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == "False False ['patches.csv', 'summary.json']"
+    assert result.stdout.strip() == "False False ['patches.csv', 'scene.toml', 'summary.json']"
 
 
 def test_image_asked_imports_matplotlib_and_draws(tmp_path):
@@ -55,7 +55,7 @@ def test_image_asked_imports_matplotlib_and_draws(tmp_path):
     result = CliRunner().invoke(cli, ["simulate", "--scene", str(SCENES / "pattern-image.toml"), "--n-bases", "400",
                                       "-G", "0.05", "--until-time", "6", "--out", str(out), "--quiet"])
     assert result.exit_code == 0, result.output
-    assert sorted(p.name for p in out.iterdir()) == ["pattern.png", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["pattern.png", "scene.toml", "summary.json"]
 
 
 def test_the_library_draws_what_the_scene_asks_as_the_command_does(tmp_path):
@@ -239,6 +239,6 @@ def test_animation_writes_one_frame_per_trigger(tmp_path):
     from PIL import Image
 
     out = _simulate_small(tmp_path, 'want = ["anchors", "damping", "animation"]\nframe_every = 2.0')
-    assert sorted(p.name for p in out.iterdir()) == ["development.gif", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["development.gif", "scene.toml", "summary.json"]
     with Image.open(out / "development.gif") as gif:
         assert gif.n_frames == 5  # due at t = 0, 2, 4, 6, 8

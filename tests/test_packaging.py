@@ -24,7 +24,7 @@ def test_builtins_are_registered_as_entry_points(group):
     eps = {ep.name: ep for ep in metadata.entry_points(group=group)}
     for name, base in BUILTINS[group].items():
         assert name in eps, f"{name} not registered under {group}"
-        assert eps[name].dist is None or eps[name].dist.name == "bark"
+        assert eps[name].dist is None or eps[name].dist.name == "bark-grasstree"
         assert eps[name].value.startswith("bark_plugins.")
         cls = eps[name].load()
         assert isinstance(cls, type) and issubclass(cls, base)
@@ -69,7 +69,7 @@ import json
 from importlib import metadata
 from pathlib import PurePosixPath
 
-dist = metadata.distribution("bark")
+dist = metadata.distribution("bark-grasstree")
 names = set()
 for f in dist.files or []:
     parts = PurePosixPath(str(f)).parts
@@ -143,7 +143,7 @@ def test_a_built_wheel_has_every_module(tmp_path):
     build = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
                             "-w", str(wheels), str(source)], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr
-    (wheel,) = wheels.glob("bark-*.whl")
+    (wheel,) = wheels.glob("bark_grasstree-*.whl")
     install = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)],
                              capture_output=True, text=True)
     assert install.returncode == 0, install.stderr
@@ -164,3 +164,18 @@ def test_a_built_wheel_has_every_module(tmp_path):
     result = subprocess.run([sys.executable, "-c", code, *modules], capture_output=True, text=True, cwd=tmp_path, env=env)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().startswith(str(site))  # imported from the wheel, not the source tree
+    # what the wheel carries besides modules: the scenes by name, the schema, the license, py.typed
+    shipped = {p.name for p in (site / "bark" / "scenes").glob("*.toml")}
+    assert shipped == {p.name for p in (REPO_ROOT / "bark" / "scenes").glob("*.toml")} and "whole-tree.toml" in shipped
+    assert (site / "bark" / "schemas" / "summary.schema.json").is_file()
+    assert all((site / pkg / "py.typed").is_file() for pkg in ("bark", "bark_plugins", "bark_cli"))
+    (info,) = site.glob("bark_grasstree-*.dist-info")
+    assert any(p.name == "LICENSE" for p in info.rglob("*")) and "Name: bark-grasstree" in (info / "METADATA").read_text()
+    unedit = code.split("for m in")[0]  # the same finders dropped: the wheel alone
+    out = tmp_path / "run"
+    run = subprocess.run([sys.executable, "-c", unedit + "import runpy; runpy.run_module('bark', run_name='__main__')",
+                          "simulate", "--scene", "whole-tree-small", "--until-time", "1", "--out", str(out), "--quiet"],
+                         capture_output=True, text=True, cwd=tmp_path, env=env)
+    assert run.returncode == 0, run.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["scene"]["name"] == "whole-tree-small" and (out / "scene.toml").is_file()

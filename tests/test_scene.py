@@ -301,3 +301,15 @@ def test_bark_scenes_lists_each_shipped_scene_with_what_it_is():
     for name in shipped_scenes():
         assert any(line.split("│")[1].strip() == name for line in result.output.splitlines() if line.count("│") >= 3), name
     assert "Table 1 whole grasstree" in result.output
+
+
+def test_scene_toml_gives_the_scene_back_setting_for_setting():
+    """Every shipped scene, resolved and written as scene.toml, reads back as the same scene."""
+    import tomllib
+
+    from bark.engine.scene import shipped_scenes
+
+    for name, path in shipped_scenes().items():
+        scene = Scene.from_toml(path)
+        text = scene.to_toml()
+        assert Scene.from_dict(tomllib.loads(text)).to_dict() == scene.to_dict(), name

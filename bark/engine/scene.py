@@ -396,6 +396,21 @@ class Scene:
     def stop(self) -> Stop:
         return self.run.stop()
 
+    def to_toml(self) -> str:
+        """Every setting, resolved, as a scene file (``to_dict`` less the settings that are none, which
+        a scene file leaves out): reading it back gives this scene again, setting for setting."""
+        import tomli_w
+
+        def kept(value):
+            if isinstance(value, dict):
+                return {k: kept(v) for k, v in value.items() if v is not None}
+            if isinstance(value, (list, tuple)):
+                return [kept(v) for v in value]
+            return value
+
+        head = f"# The scene of a bark run, every setting resolved: `bark simulate --scene scene.toml` runs it again.\n"
+        return head + tomli_w.dumps(kept(self.to_dict()))
+
     def to_dict(self) -> dict[str, Any]:
         """Every setting, resolved (defaults filled in): the same shape as a scene file."""
         out: dict[str, Any] = {"scene": {"name": self.name, "description": self.description}}

@@ -37,9 +37,9 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 
 __all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
 
-RUN_FILES = ("summary.json", *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
-"""Every file a run may write: summary.json and each effect's files (``Effect.files``).  A fresh run
-removes these (and only these) from its folder."""
+RUN_FILES = ("summary.json", "scene.toml", *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
+"""Every file a run may write: summary.json, scene.toml and each effect's files (``Effect.files``).  A
+fresh run removes these (and only these) from its folder."""
 PROBE = "bark-probe"
 
 

@@ -201,7 +201,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
 
 def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None,
               extra: dict | None = None, failed: list[str] | None = None) -> dict:
-    """Write what the scene's effects ask for into ``out_dir``: summary.json always; patches.csv
+    """Write what the scene's effects ask for into ``out_dir``: summary.json and scene.toml always; patches.csv
     (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml),
     tree.vtu and tree.ply (mesh).  With ``failed`` given, a file the file system refuses is said
     there and the others are written (``attempt``); summary.json, written last, is then left out, so
@@ -233,6 +233,8 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
         leaves = scene.leaves if scene.has("leaves") else None
         attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size, leaves, scene.dome), failed,
                 (out / "tree.vtu", out / "tree.ply"))
+    attempt("scene.toml", lambda: atomic_write(out / "scene.toml", lambda fh: fh.write(scene.to_toml().encode())),
+            failed, (out / "scene.toml",))
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
     if not failed:
         attempt("summary.json", lambda: write_json(out / "summary.json", summary), failed)

@@ -45,6 +45,7 @@ from bark.io.folder import OutputFolder
 from bark.io.recorders import Dissipation
 from bark.io.recorders import Frames, StatisticsSeries, TreeFrames
 from bark.io.output import run_summary, write_run
+from bark.version import provenance, session
 
 __all__ = ["Outcome", "run", "resume", "STOPPED_BY_SIGNAL"]
 
@@ -75,16 +76,18 @@ class Outcome:
 def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkpoint_every: float = 60.0,
         observe: Callable | None = None, interrupted: Callable[[], str | None] | None = None,
         pictures: dict[str, Picture] | None = None, warn: Callable[[str], None] | None = None,
-        notice: Callable[[str], None] | None = None) -> Outcome:
+        notice: Callable[[str], None] | None = None, command: str | None = None) -> Outcome:
     """Run ``scene`` into the folder ``out`` (see the module's docstring; ``None``: in memory only,
     for studies and sweeps that read the outcome, not files).  ``warn`` receives what a
     user must hear (a run with no time bound, a fallback to an older checkpoint), ``notice`` what is
-    merely worth saying (an earlier run's files replaced)."""
+    merely worth saying (an earlier run's files replaced); ``command``, the command line that ran it,
+    for summary.json's provenance (default: the process's)."""
     _check_every(checkpoint_every)
     sim, stop = scene.simulation(), scene.stop()
     sim.prepare(stop)
+    sessions = [session(command)]
     if out is None:  # in memory: nothing written, nothing drawn, no checkpoints
-        return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None)
+        return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None, sessions=sessions)
     with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:
         if stop.until_time is None and warn is not None:
             conds = [f"radius {stop.until_radius:g}" if stop.until_radius is not None else None,
@@ -92,18 +95,21 @@ def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkp
             warn(f"no time bound: this run ends only at {' or '.join(c for c in conds if c)}; "
                  "a signal (Ctrl-C) stops it with a checkpoint")
         return _drive(scene, sim, stop, folder.path, {}, 0.0, False, checkpoint_every, observe, interrupted, pictures,
-                      warn)
+                      warn, sessions)
 
 
 def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable | None = None,
            interrupted: Callable[[], str | None] | None = None, pictures: dict[str, Picture] | None = None,
-           warn: Callable[[str], None] | None = None, notice: Callable[[str], None] | None = None) -> Outcome:
+           warn: Callable[[str], None] | None = None, notice: Callable[[str], None] | None = None,
+           command: str | None = None) -> Outcome:
     """Go on with the run in ``out`` from its checkpoint (every setting comes from there).  A run
-    that had ended but whose outputs were not all written gets them written."""
+    that had ended but whose outputs were not all written gets them written.  ``command`` as for
+    :func:`run`."""
     _check_every(checkpoint_every)
     with OutputFolder.open(out, fresh=False, key="resume") as folder:
         scene, sim, stop, meta, recorded, _ = checkpoint.load(folder.path, warn=warn)
         wall = float(meta.get("wall_time_s") or 0.0)
+        sessions = [*meta.get("sessions", []), session(command)]
         if meta["reason"] == "end":
             if _outputs_complete(folder.path, meta):
                 raise BarkError(f"the run in {str(folder.path)!r} has ended ({meta.get('stop_reason')}): nothing to resume")
@@ -111,9 +117,9 @@ def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable
                 warn("the run had ended, but not all of its outputs were written: writing them now")
             recorders = _recorders(scene, sim, recorded)
             return _finish(scene, sim, stop, folder.path, recorders, meta.get("stop_reason") or "time", wall, True,
-                           None, pictures, save=False)
+                           None, pictures, sessions, save=False)
         return _drive(scene, sim, stop, folder.path, recorded, wall, True, checkpoint_every, observe, interrupted, pictures,
-                      warn)
+                      warn, sessions)
 
 
 def _check_every(seconds) -> None:
@@ -174,7 +180,7 @@ def _recorders(scene, sim, recorded: dict) -> list:
 
 
 def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resumed: bool, checkpoint_every: float,
-           observe, interrupted, pictures, warn=None) -> Outcome:
+           observe, interrupted, pictures, warn=None, sessions: list | None = None) -> Outcome:
     recorders = _recorders(scene, sim, recorded)
     t0 = time.perf_counter()
     last_save = t0
@@ -192,7 +198,8 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
             wall = wall_before + time.perf_counter() - t0
             refused: list[str] = []
             if not attempt(checkpoint.CHECKPOINT_NAME, lambda: checkpoint.save(
-                    out, sim, scene, stop, "periodic", {"stop_reason": None, "wall_time_s": wall}, recorders), refused) \
+                    out, sim, scene, stop, "periodic", {"stop_reason": None, "wall_time_s": wall, "sessions": sessions},
+                    recorders), refused) \
                     and warn is not None and not refusals:
                 kept = (out / checkpoint.CHECKPOINT_NAME).exists()
                 warn(f"{refused[0]}: the run goes on; " + ("the last checkpoint written is kept" if kept else
@@ -206,7 +213,7 @@ def _drive(scene, sim, stop, out: Path, recorded: dict, wall_before: float, resu
     except NonFiniteStateError as err:
         reason, error = "non-finite", str(err)
     return _finish(scene, sim, stop, out, recorders, reason, wall_before + time.perf_counter() - t0, resumed, error,
-                   pictures)
+                   pictures, sessions)
 
 
 def _pictures_begun(pictures: dict | None, sim, scene, recorded: dict, out: Path) -> list:
@@ -235,24 +242,26 @@ def _pictures_begun(pictures: dict | None, sim, scene, recorded: dict, out: Path
 
 
 def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wall: float, resumed: bool, error,
-            pictures, save: bool = True) -> Outcome:
+            pictures, sessions: list | None = None, save: bool = True) -> Outcome:
+    made = {"provenance": provenance(sessions or [])}
     if out is None:
         by_name = _record_end(sim, scene, recorders)
-        summary = run_summary(sim, scene, sim.analyze(), reason, wall, _extra(by_name))
+        summary = run_summary(sim, scene, sim.analyze(), reason, wall, {**_extra(by_name), **made})
         return Outcome(out=None, scene=scene, sim=sim, stop_reason=reason, summary=summary, error=error)
     (out / "summary.json").unlink(missing_ok=True)  # stale from here on: written again last
     unsaved: list[str] = []  # a checkpoint the disk refused: the one before it stays
     if save and scene.has("checkpoints"):
         why = "interrupted" if reason in STOPPED_BY_SIGNAL else "end"
         attempt(checkpoint.CHECKPOINT_NAME, lambda: checkpoint.save(
-            out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall}, recorders), unsaved)
+            out, sim, scene, stop, why, {"stop_reason": reason, "wall_time_s": wall, "sessions": sessions}, recorders),
+            unsaved)
     by_name = _record_end(sim, scene, recorders)  # after the checkpoint: a resumed run records only what
     failed: list[str] = []                         # the uninterrupted run would
     for rec in recorders:
         if rec.file is not None:
             attempt(rec.file, lambda: rec.write(out / rec.file), failed, (out / rec.file,))
     waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
-    summary = write_run(sim, scene, out, reason, wall, _extra(by_name), failed)
+    summary = write_run(sim, scene, out, reason, wall, {**_extra(by_name), **made}, failed)
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error,
                       failed=unsaved + failed)
     for name, wait in waits:
