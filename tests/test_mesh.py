@@ -83,10 +83,13 @@ def test_the_mesh_is_read_back_by_meshio_with_a_quad_per_base(meshed):
     labels = sim.patch_labels()
     for name in ("tree.vtu", "tree.ply"):
         mesh = meshio.read(out / name)
-        assert mesh.points.shape == (4 * n, 3)
+        assert mesh.points == pytest.approx(0.3 * leaf_quads(sim).reshape(-1, 3), rel=1e-12)  # metres
         assert [(c.type, c.data.shape) for c in mesh.cells] == [("quad", (n, 4))]
-        colours = np.column_stack([mesh.point_data[c] for c in ("red", "green", "blue")])
+        colours = mesh.point_data["colour"] if name == "tree.vtu" else \
+            np.column_stack([mesh.point_data[c] for c in ("red", "green", "blue")])
+        assert colours.shape == (4 * n, 3) and colours.dtype == np.uint8
         assert (colours[::4] == simulation_colours(sim, 7)).all()
+    assert (meshio.read(out / "tree.ply").point_data["patch"] == np.repeat(labels, 4)).all()  # each vertex its face's
     vtu = meshio.read(out / "tree.vtu")
     assert (vtu.cell_data["patch"][0] == labels).all()
     assert (vtu.cell_data["base"][0] == np.arange(n)).all()

@@ -1,9 +1,10 @@
 """The trunk as a 3-D mesh: each leaf base a rhomboid, coloured by its patch (``mesh`` effect); with the
 ``leaves`` effect, the plant's leaves too.
 
-Written with meshio (imported here only, when a scene asks for the mesh): ``tree.vtu`` for ParaView
-(cell data ``patch``, ``patch_size``, ``base``, ``born``; point colours) and ``tree.ply`` for Blender
-(vertex colours ``red``, ``green``, ``blue``).  The VTU file is binary and uncompressed: meshio's zlib
+Written with meshio (imported here only, when a scene asks for the mesh), in metres: ``tree.vtu`` for
+ParaView and pyvista (cell data ``patch``, ``patch_size``, ``base``, ``born`` in time units; the point
+data ``colour``, one RGB array, uint8) and ``tree.ply`` for Blender (vertex colours ``red``, ``green``,
+``blue``, and each vertex's ``patch``).  The VTU file is binary and uncompressed: meshio's zlib
 compression took 15 times as long as the writing itself (0.35 s of every whole-tree run) to make the
 file 45 % smaller.  Each leaf base is a quad of its own — four corners, not shared with its
 neighbours — so bases that have moved apart show the crack between them.
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from bark.io.files import atomic_write
+from bark.units import metres
 from bark.analysis.pattern import simulation_colours
 from bark.model.tree import join_radii, leaf_corners
 
@@ -77,10 +79,13 @@ def write_mesh(sim, out: str | Path, min_size: int = 7, leaves=None, dome=None) 
                      "born": [np.concatenate([cell_data["born"][0], np.full(m, np.nan)])],
                      "leaf": [np.concatenate([np.zeros(n, np.int8), np.ones(m, np.int8)])]}
     cells = [("quad", faces.astype(np.int32))]
-    colour_data = {name: colours[:, j] for j, name in enumerate(("red", "green", "blue"))}
+    points = metres(points)  # what ParaView, Blender and pyvista take lengths in
+    vertex_patch = np.concatenate([np.repeat(labels.astype(np.int32), 4), np.full(len(points) - 4 * n, -1, np.int32)])
     out = Path(out)
-    vtu = meshio.Mesh(points, cells, point_data=colour_data, cell_data=cell_data)
-    ply = meshio.Mesh(points, cells, point_data=colour_data)  # PLY keeps no cell data
+    vtu = meshio.Mesh(points, cells, point_data={"colour": colours}, cell_data=cell_data)
+    # PLY keeps no cell data: each vertex has its face's patch (every bark quad has its own corners)
+    ply = meshio.Mesh(points, cells, point_data={**{name: colours[:, j] for j, name in enumerate(("red", "green", "blue"))},
+                                                 "patch": vertex_patch})
     return [atomic_write(out / "tree.vtu", lambda tmp: meshio.write(tmp, vtu, file_format="vtu", compression=None),
                          by_name=True),
             atomic_write(out / "tree.ply", lambda fh: fh.write(_ply_bytes(meshio, ply)))]
