@@ -308,10 +308,15 @@ def scene_of(params: dict) -> Scene:
               help="Go on with the interrupted run in this folder (its checkpoint has every setting).")
 @click.option("--checkpoint-every", type=click.FloatRange(0, 1e9), default=60.0, show_default=True,
               help="Seconds of wall time between checkpoints (0: only at the end and on a signal).")
-@click.option("--quiet", is_flag=True, help="No progress bar, no summary table, no notices (warnings and errors stay).")
+@click.option("--quiet", is_flag=True, help="No progress, no summary table, no notices (warnings and errors stay).")
+@click.option("--progress-every", type=click.FloatRange(0, 1e9), default=30.0, show_default=True,
+              help="Where stderr is not a terminal (a batch job's log): seconds of wall time between two progress "
+                   "lines (0: one a step).")
+@click.option("--json", "as_json", is_flag=True, help="Print the run's summary as JSON on stdout (summary.json's "
+              "content) instead of the table.")
 @click.pass_context
 def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, overwrite,
-             resume, checkpoint_every, quiet, **kwargs):
+             resume, checkpoint_every, quiet, progress_every, as_json, **kwargs):
     """Grow the trunk and let the bark crack; write what the scene's effects ask for (by default
     pattern.png, patches.csv, breaks.csv, summary.json, state.npz, checkpoint.npz) to --out.
     Any --until-* option replaces the scene's stop conditions.  Ctrl-C or SIGTERM stops between
@@ -322,7 +327,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
     if resume is not None:
         given = [p for p, v in ctx.params.items()
                  if ctx.get_parameter_source(p) == click.core.ParameterSource.COMMANDLINE
-                 and p not in ("resume", "quiet", "checkpoint_every")]
+                 and p not in ("resume", "quiet", "checkpoint_every", "progress_every", "as_json")]
         if given:
             option = next(p for p in ctx.command.params if p.name == given[0])
             raise BarkError(f"--resume goes on with the settings in its checkpoint: {_typed(option)} cannot be given "
@@ -330,10 +335,10 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
     else:
         scene = scene_of(ctx.params)
     bar = None
-    if not quiet and sys.stdout.isatty():
-        from bark_cli.progress import ProgressBar  # rich, only for a terminal
+    if not quiet:  # progress on stderr: a bar on a terminal, plain lines in a log
+        from bark_cli.progress import ProgressBar, ProgressLog
 
-        bar = ProgressBar()
+        bar = ProgressBar() if _is_terminal(sys.stderr) else ProgressLog(progress_every)
     painter = _Lazy(_painter)
     if resume is None and any(e.drawn and scene.has(name) for name, e in scene.known_effects.items()):
         painter()  # start it now: matplotlib loads on the other core while the run goes on
@@ -353,10 +358,17 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyz
                 bar.close()
             if painter.made:
                 painter().close()
-    return _report(outcome, quiet, signals.received)
+    return _report(outcome, quiet, signals.received, as_json)
 
 
-def _report(outcome, quiet: bool, signum: int | None = None) -> int:
+def _is_terminal(stream) -> bool:
+    try:
+        return stream is not None and stream.isatty()
+    except (ValueError, OSError):  # closed
+        return False
+
+
+def _report(outcome, quiet: bool, signum: int | None = None, as_json: bool = False) -> int:
     """Say how the run ended (stderr for what went wrong, the summary table on stdout) and choose
     the exit status: 0, 1 (non-finite state or an output not written), 128 + signal (stopped by a
     signal between steps, or while drawing).  A signal during the final data writes waits for them:
@@ -381,11 +393,16 @@ def _report(outcome, quiet: bool, signum: int | None = None) -> int:
         how = "goes on from the last checkpoint written" if any(p.startswith("checkpoint.npz") for p in unwritten) \
             else "writes what is missing"
         click.echo(f"bark: once there is room, bark simulate --resume {shlex.quote(str(out))} {how}", err=True)
-    if not quiet:
+    if as_json or not quiet:
         from bark_cli.progress import print_summary
 
         try:
-            print_summary(summary, out)
+            if as_json:
+                from bark.io.files import json_text
+
+                click.echo(json_text(summary, indent=2))
+            else:
+                print_summary(summary, out)
         except OSError as err:  # a full or closed standard output: the run and its files stand
             click.echo(f"bark: warning: the summary could not be printed ({err.strerror or err}); it is in "
                        f"{out / 'summary.json'}", err=True)

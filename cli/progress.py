@@ -1,13 +1,15 @@
-"""The rich progress bar (simulated time and years, bases, height, radius, broken springs, patches) and the
-closing table."""
+"""Progress on stderr — the rich progress bar on a terminal, plain periodic lines in a log (simulated
+time and years, bases, height, radius, broken springs, patches, elapsed time and the time left) —
+and the closing table."""
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
 from bark.units import metres, years
@@ -56,8 +58,10 @@ class ProgressBar:
                            "height={task.fields[height]:.2f} m  r={task.fields[r]:.4f} ({task.fields[r_cm]:.1f} cm)  "
                            "broken={task.fields[broken]:>6}  patches={task.fields[patches]:>4}"),
                 TimeElapsedColumn(),
+                TextColumn("left"),
+                TimeRemainingColumn(),
             )
-            self._progress = Progress(*columns, transient=False)
+            self._progress = Progress(*columns, transient=False, console=Console(stderr=True))
             self._progress.start()
             self._task = self._progress.add_task("run", total=1.0, **_fields(sim, stop))
             self._stop = stop
@@ -69,6 +73,49 @@ class ProgressBar:
             self(self._sim, self._stop, force=True)
             self._progress.stop()
             self._progress = None
+
+
+class ProgressLog:
+    """An ``observe(sim, stop)`` callback that writes a plain line to stderr at the first call, then at
+    most every ``every_s`` seconds of wall time, and at :meth:`close`: for a log (a batch job's stderr
+    is a file), which a bar would leave empty until the end.  The time left is the elapsed time scaled
+    by the part of the run still to go (its stop conditions'), once there is a part done to scale."""
+
+    def __init__(self, every_s: float = 30.0) -> None:
+        self.every_s = every_s
+        self._start = self._last = None
+        self._seen = None
+
+    def __call__(self, sim, stop, force: bool = False) -> None:
+        now = time.monotonic()
+        if self._start is None:
+            self._start, self._r0 = now, sim.radius
+        elif not force and now - self._last < self.every_s:
+            self._seen = (sim, stop)
+            return
+        self._last, self._seen = now, None
+        f = _fields(sim, stop)
+        done = _fraction(sim, stop, self._r0)
+        elapsed = now - self._start
+        left = f", {_duration(elapsed * (1 - done) / done)} left" if 0 < done < 1 else ""
+        line = (f"bark: t = {f['t']:.6g} ({f['years']:.1f} years, {100 * done:.1f} %), {f['bases']:,} bases, "
+                f"height {f['height']:.2f} m, r = {f['r']:.4g} ({f['r_cm']:.1f} cm), {f['broken']:,} broken, "
+                f"{f['patches']:,} patch{'' if f['patches'] == 1 else 'es'}; {_duration(elapsed)} elapsed{left}")
+        try:
+            print(line, file=sys.stderr, flush=True)
+        except (OSError, ValueError):  # a closed or full stderr: the run goes on without its log
+            self.every_s = float("inf")
+
+    def close(self) -> None:
+        if self._seen is not None:
+            self(*self._seen, force=True)
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(round(seconds))
+    h, rest = divmod(seconds, 3600)
+    m, s = divmod(rest, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}" if m else f"{s} s"
 
 
 def print_summary(summary: dict, out: Path) -> None:

@@ -274,3 +274,23 @@ def test_bench_scenes_times_the_command_as_bark_runs_it(tmp_path):
     for row in rows:  # wall s, time vs first, peak MiB, memory vs first: all measured, all positive
         figures = [float(v) for v in re.findall(r"│ ([0-9.]+) +(?=│)", row)]
         assert len(figures) == 4 and all(v > 0 for v in figures), row
+
+
+@pytest.mark.slow  # a whole process
+def test_a_run_whose_stderr_is_a_file_logs_its_progress_there_in_plain_lines(tmp_path):
+    """stderr not a terminal (a batch job, nohup): a line at the start, then every --progress-every
+    seconds (0: every step), and one at the end; stdout keeps the summary (here as JSON, --json)."""
+    import json
+    import subprocess
+    import sys
+
+    log = tmp_path / "log"
+    with open(log, "w") as err:
+        done = subprocess.run([sys.executable, "-m", "bark_cli", "simulate", "--until-time", "60", "--progress-every", "0",
+                               "--out", str(tmp_path / "out"), "--json"], stdout=subprocess.PIPE, stderr=err,
+                              stdin=subprocess.DEVNULL, text=True)
+    assert done.returncode == 0
+    lines = log.read_text().splitlines()
+    assert len(lines) >= 3 and all(line.startswith("bark: t = ") and "elapsed" in line for line in lines), lines[:3]
+    assert "left" in lines[1] and lines[-1].startswith("bark: t = 60 (") and "100.0 %" in lines[-1]
+    assert json.loads(done.stdout) == json.loads((tmp_path / "out" / "summary.json").read_text())
