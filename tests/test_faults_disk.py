@@ -18,7 +18,7 @@ import pytest
 from click.testing import CliRunner
 
 from bark.io import checkpoint, files
-from bark.io.folder import RUN_FILES
+from bark.io.folder import RUN_FILES, run_files
 from bark_cli.main import cli
 
 from conftest import REPO_ROOT, assert_clean_outcome, slow_cases
@@ -205,8 +205,10 @@ def test_every_file_a_run_writes_is_one_a_fresh_run_removes(tmp_path):
     result = CliRunner().invoke(cli, ["simulate", "--scene", str(REPO_ROOT / "bark/scenes/everything.toml"),
                                       "--n-bases", "300", "--until-time", "12", "--quiet", "--out", str(out)])
     assert result.exit_code == 0, result.output
-    assert {p.name for p in out.iterdir()} <= set(RUN_FILES)
-    assert {"fracture.csv", "tree.vtu", "development.gif", "graph.graphml"} <= {p.name for p in out.iterdir()}
+    written = {p for p in out.rglob("*") if p.is_file()}
+    assert written == set(run_files(out))  # every file, in the folders a run writes into too
+    assert {"fracture.csv", "tree.vtu", "development.gif", "graph.graphml", "tree.pvd", "history.nc"} <= \
+        {p.name for p in written} and any(p.parent.name == "history" for p in written)
 
 
 def test_analyze_leaves_no_picture_of_an_earlier_pattern(patterned, tmp_path):

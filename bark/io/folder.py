@@ -38,8 +38,14 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 __all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
 
 RUN_FILES = ("summary.json", "scene.toml", *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
-"""Every file a run may write: summary.json, scene.toml and each effect's files (``Effect.files``).  A
-fresh run removes these (and only these) from its folder."""
+"""Every file a run may write: summary.json, scene.toml and each effect's files (``Effect.files``; a
+name may be a pattern in a folder of the run's, such as the history's ``history/tree-*.vtu``).  A fresh
+run removes these (and only these) from its folder."""
+
+
+def run_files(path: Path) -> list[Path]:
+    """The files of ``RUN_FILES`` in the folder ``path``."""
+    return [f for name in RUN_FILES for f in (path.glob(name) if "*" in name else [path / name]) if f.is_file()]
 PROBE = "bark-probe"
 
 
@@ -204,15 +210,22 @@ def _probe(path: Path, fail) -> None:
 
 
 def _remove_stale_temporaries(path: Path) -> None:
-    """Temporary files of earlier runs killed in the middle of a write (we hold the lock: none is ours)."""
-    prefixes = tuple(temp_name_prefix(name) for name in (*RUN_FILES, PROBE))
-    for entry in path.iterdir():
-        if entry.name.startswith(prefixes) and entry.name.endswith(TMP_SUFFIX) and entry.is_file():
-            entry.unlink(missing_ok=True)
+    """Temporary files of earlier runs killed in the middle of a write (we hold the lock: none is ours),
+    in the folder and in its folders a run writes into."""
+    names = [Path(name) for name in (*RUN_FILES, PROBE)]
+    for folder in {n.parent for n in names}:
+        # a name's temporaries start with its prefix; a pattern's, with the prefix of the part before its *
+        prefixes = tuple(temp_name_prefix(n.name)[: temp_name_prefix(n.name).index("*")] if "*" in n.name
+                         else temp_name_prefix(n.name) for n in names if n.parent == folder)
+        if not (path / folder).is_dir():
+            continue
+        for entry in (path / folder).iterdir():
+            if entry.name.startswith(prefixes) and entry.name.endswith(TMP_SUFFIX) and entry.is_file():
+                entry.unlink(missing_ok=True)
 
 
 def _clear_for_fresh_run(path: Path, overwrite: bool, fail, notice) -> None:
-    present = [name for name in RUN_FILES if (path / name).is_file()]
+    present = run_files(path)
     if not present:
         return
     if not overwrite:
@@ -230,7 +243,7 @@ def _clear_for_fresh_run(path: Path, overwrite: bool, fail, notice) -> None:
                 raise fail(f"holds an unfinished run (stopped at {when}): go on with it ({{1}}), or discard it with {{2}}",
                            Ref(None, "resume", str(path)), Ref(None, "overwrite", True))
             break
-    for name in present:
-        (path / name).unlink(missing_ok=True)
+    for file in present:
+        file.unlink(missing_ok=True)
     if notice is not None:
         notice(f"replaced the earlier run's files in {str(path)!r}")

@@ -62,6 +62,9 @@ EFFECTS: dict[str, Effect] = {
                ("fracture",), ("tree.png",), ("tree.png",)),
         Effect("mesh", "the trunk's leaf bases as a 3-D mesh coloured by patch at the end: tree.vtu (ParaView), "
                "tree.ply (Blender)", ("fracture",), ("tree.vtu", "tree.ply")),
+        Effect("history", "the run's history every frame_every: tree.pvd with history/tree-NNNN.vtu (a ParaView "
+               "time series) and history.nc (netCDF for xarray: positions, patches, intact springs, statistics)",
+               ("fracture",), ("history.nc", "tree.pvd", "history/tree-*.vtu")),
         Effect("region-image", "per region of the trunk (straight, bulge, young), its patches' orientation and "
                "anisotropy (Fig. 6B) and statistics: regions.png", ("patch-statistics",), ("regions.png",),
                ("regions.png",)),

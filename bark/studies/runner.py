@@ -42,6 +42,7 @@ from bark.io import checkpoint
 from bark.errors import BarkError, NonFiniteStateError, one_line
 from bark.io.files import attempt
 from bark.io.folder import OutputFolder
+from bark.io.history import History
 from bark.io.recorders import Dissipation
 from bark.io.recorders import Frames, StatisticsSeries, TreeFrames
 from bark.io.output import run_summary, write_run
@@ -162,7 +163,7 @@ def _recorders(scene, sim, recorded: dict) -> list:
 
     wanted = [(StatisticsSeries, "statistics-series", lambda: scene.series_every),
               (Frames, "animation", lambda: scene.frame_every), (Dissipation, "fracture-history", lambda: scene.history_every),
-              (TreeFrames, "tree-series", lambda: scene.tree_interval)]
+              (TreeFrames, "tree-series", lambda: scene.tree_interval), (History, "history", lambda: scene.frame_every)]
     recorders = []
     for cls, effect, every in wanted:
         if not scene.has(effect):
