@@ -3,12 +3,13 @@
 * ``plot_radial``: orientation × anisotropy per patch on a polar plot (Fig. 6B / 7B): angle =
   orientation (90° = up the trunk), radius = anisotropy 0–1, each patch drawn at θ and θ + 180° (an
   axis has two ends), colour = patch size in leaf bases; mean, SD and SE printed.
-* ``plot_histogram``: the orientations in 10 bins of 18° (Fig. 6C / 7C), bar length = patches.
+* ``plot_histogram``: the orientations in 10 bins of 18° (Fig. 6C / 7C) centred on 0°, 18°, ..., 90°,
+  ..., bar length = patches.
 * ``plot_regions``: ``plot_radial``'s view for each region of the trunk side by side (near bulges,
   away from them, grown during the run): the comparison of Fig. 11.
 * ``plot_quartets``: the quartet diagrams (Fig. 8D–G): four boxes, Hellinger distances with the two
-  shortest edges green, the third red, the three longest dotted; and the d_P edges, each box's
-  smallest outgoing d_P green.
+  shortest edges blue and solid, the third orange and dashed, the three longest grey and dotted; and
+  the d_P edges, each box's smallest outgoing d_P blue and bold.
 
 Matplotlib's object API on the Agg canvas (no pyplot), files written atomically.
 """
@@ -29,6 +30,9 @@ from bark_cli.options import value_text
 from bark_cli.plot import new_figure, patches, save_figure
 
 BINS = 10
+NEAR, THIRD = "#0072B2", "#D55E00"
+"""The quartet figure's two meanings (Okabe and Ito's blue and vermillion, told apart by dichromats),
+each with its own line style too."""
 """Histogram bins over [0°, 180°): 18° each, as in the paper."""
 
 
@@ -96,14 +100,24 @@ def plot_regions(data, path: str | Path, min_size: int = 7) -> Path:
     return save_figure(fig, path)
 
 
+def orientation_counts(deg) -> np.ndarray:
+    """Patches per bin of orientation, ``BINS`` bins of 180°/BINS centred on 0°, 18°, ..., 162° (the
+    first wraps round: 171°–180° and 0°–9°), so that one bar holds the patches near vertical (90°)
+    on either side of it."""
+    width = 180.0 / BINS
+    return np.histogram(np.mod(np.asarray(deg, float) + width / 2, 180.0), bins=BINS, range=(0.0, 180.0))[0]
+
+
 def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
-    """Fig. 6C / 7C for ``stats`` into ``path``: patches per 18° bin of orientation."""
-    deg = stats.patches.orientation_deg
-    counts, edges = np.histogram(deg, bins=BINS, range=(0.0, 180.0))
+    """Fig. 6C / 7C for ``stats`` into ``path``: patches per 18° bin of orientation (``orientation_counts``)."""
+    counts = orientation_counts(stats.patches.orientation_deg)
+    width = 180.0 / BINS
     fig = new_figure(figsize=(5.6, 3.4), dpi=130)
     ax = fig.add_subplot(projection="polar")
-    ax.bar(np.radians(edges[:-1]), counts, width=np.radians(180.0 / BINS), align="edge", color="tab:blue",
-           edgecolor="k", linewidth=0.5)
+    centres = np.arange(BINS) * width  # the bins centred on 0°, 18°, ..., 90°, ...: vertical patches in one bar
+    for at in (centres, [180.0]):  # the horizontal bin is drawn at both ends of the half circle (axial angles)
+        ax.bar(np.radians(at), counts[: len(at)], width=np.radians(width), align="center", color="#0072B2",
+               edgecolor="k", linewidth=0.5)
     ax.set_thetamin(0)
     ax.set_thetamax(180)
     top = max(int(counts.max(initial=0)), 1)
@@ -135,7 +149,7 @@ def _quartet_panel(ax, comparison: Comparison, quantity: str) -> None:
         return
     for rank, (i, j, dist) in enumerate(q.edges):
         (x0, y0), (x1, y1) = _CORNERS[i], _CORNERS[j]
-        style = {0: ("green", "-"), 1: ("green", "-"), 2: ("red", "-")}.get(rank, ("0.6", ":"))
+        style = {0: (NEAR, "-"), 1: (NEAR, "-"), 2: (THIRD, "--")}.get(rank, ("0.6", ":"))
         ax.plot([x0, x1], [y0, y1], color=style[0], ls=style[1], lw=2 if rank < 3 else 1, zorder=0)
         t = 0.5 if (i, j) not in ((0, 3), (1, 2)) else (0.35 if (i, j) == (0, 3) else 0.65)
         ax.text(x0 + t * (x1 - x0), y0 + t * (y1 - y0), f"{dist:.3f}", fontsize=7, ha="center", va="center",
@@ -155,11 +169,11 @@ def _pairing_panel(ax, comparison: Comparison, quantity: str) -> None:
             if i == j:
                 continue
             (x0, y0), (x1, y1) = _CORNERS[i], _CORNERS[j]
-            colour = "green" if p.nearest[i] == j else "0.55"
+            colour = NEAR if p.nearest[i] == j else "0.55"
             normal = np.array([y1 - y0, x0 - x1]) * 0.03  # the two directions of a pair side by side
             a = np.array([x0, y0]) + normal + 0.18 * np.array([x1 - x0, y1 - y0])
             b = np.array([x0, y0]) + normal + 0.82 * np.array([x1 - x0, y1 - y0])
-            ax.annotate("", xy=b, xytext=a, arrowprops={"arrowstyle": "->", "color": colour, "lw": 1.2})
+            ax.annotate("", xy=b, xytext=a, arrowprops={"arrowstyle": "->", "color": colour, "lw": 2.0 if colour == NEAR else 1.0})
             label = a + 0.12 * (b - a) / max(np.hypot(*(b - a)), 1e-9) + normal * 2.5
             ax.text(*label, f"{dp[i, j]:.2g}", fontsize=6, color=colour, ha="center", va="center")
     ax.set_title(f"{quantity}, d_P (SE of the arrow's tail): pairing {'valid' if p.valid else 'not valid'}", fontsize=8)
@@ -172,8 +186,8 @@ def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
     for row, quantity in zip(axes, QUANTITIES):
         _quartet_panel(row[0], comparison, quantity)
         _pairing_panel(row[1], comparison, quantity)
-    fig.suptitle("quartet analysis (green: the two shortest edges / each pattern's nearest; red: the third; "
-                 "dotted: the three longest)", fontsize=9)
+    fig.suptitle("quartet analysis (blue, solid: the two shortest edges / each pattern's nearest, bold; orange, "
+                 "dashed: the third; grey, dotted: the three longest)", fontsize=9)
     return save_figure(fig, path)
 
 

@@ -41,6 +41,8 @@ class PatternData:
     colours: np.ndarray
     """RGB (uint8) per base: neighbouring patches never share one (``bark.analysis.pattern.patch_colours``)."""
     springs: np.ndarray
+    cracks: np.ndarray
+    """The broken springs' ends: drawn where the springs are too many to draw (the crevices)."""
     n_bases: int
     radius: float
     t: float
@@ -53,7 +55,7 @@ class PatternData:
         from bark.analysis.pattern import simulation_colours
 
         return cls(uv=unwrap(s.x, r), labels=sim.patch_labels(), colours=simulation_colours(sim, min_size),
-                   springs=np.asarray(s.pairs[s.intact]),
+                   springs=np.asarray(s.pairs[s.intact]), cracks=np.asarray(s.pairs[~s.intact]),
                    n_bases=s.n_bases, radius=r, t=s.t, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
 
 

@@ -1,4 +1,6 @@
-"""The pattern image: the trunk surface unwrapped, patches coloured, intact springs drawn (Fig. 7A).
+"""The pattern image: the trunk surface unwrapped, patches coloured, intact springs drawn (Fig. 7A); a
+pattern too large for its springs to be drawn is a raster of its patches with its broken springs,
+the crevices, drawn on it.
 
 Horizontal axis: arc length ``r·θ`` with θ increasing to the right as seen from outside the trunk;
 vertical axis: height ``z``.  Patches of at least ``min_size`` bases get a colour each, smaller
@@ -72,9 +74,13 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
         ax.add_collection(LineCollection(seg, colors="0.15", alpha=0.6, linewidths=0.4))
         per_base = (72 * 7.0) ** 2 * shown / data.n_bases  # points² of figure per base: a small dot each
         ax.scatter(uv[:, 0], uv[:, 1], s=float(min(4.0, 0.04 * per_base)), c=colours, linewidths=0)
-    else:
+    else:  # too many bases for dots and springs: the patches as a raster, and the crevices drawn on it
         ax.imshow(raster(uv, colours, width, z_lo, z_hi), origin="lower", extent=(0, width, z_lo, z_hi),
                   interpolation="nearest", aspect="auto")
+        p = data.cracks
+        seg = np.stack([uv[p[:, 0]], uv[p[:, 1]]], axis=1)
+        seg = seg[np.abs(seg[:, 0, 0] - seg[:, 1, 0]) < np.pi * r]
+        ax.add_collection(LineCollection(seg, colors="0.1", alpha=0.55, linewidths=0.25))
     if (np.bincount(data.labels)[data.labels] < min_size).any():
         ax.legend(handles=[Patch(color=FRAGMENT_GREY / 255.0, label=f"fragments (< {min_size} bases)")],
                   loc="upper right", fontsize=7, framealpha=0.9)

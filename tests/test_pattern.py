@@ -447,6 +447,43 @@ def test_no_two_neighbouring_patches_of_a_run_share_a_colour(broken_run):
     assert len({tuple(c) for c in rgb}) <= 10  # a map needs few colours (and fragments are grey)
 
 
+# Machado, Oliveira & Fernandes (2009), severity 1: the colours a deuteranope and a protanope see, on linear RGB
+DICHROMATS = {"normal": np.eye(3),
+              "deuteranopia": np.array([[0.367322, 0.860646, -0.227968], [0.280085, 0.672501, 0.047413],
+                                        [-0.011820, 0.042940, 0.968881]]),
+              "protanopia": np.array([[0.152286, 1.052583, -0.204868], [0.114503, 0.786281, 0.099216],
+                                      [-0.003882, -0.048116, 1.051998]])}
+
+
+def _lab(rgb8: np.ndarray, vision: np.ndarray) -> np.ndarray:
+    """CIELAB (D65) of sRGB colours ``rgb8`` as seen with ``vision`` (a matrix on linear RGB)."""
+    c = rgb8 / 255.0
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4) @ vision.T
+    xyz = np.clip(linear, 0, 1) @ np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722],
+                                             [0.0193, 0.1192, 0.9505]]).T / np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > (6 / 29) ** 3, np.cbrt(xyz), xyz / (3 * (6 / 29) ** 2) + 4 / 29)
+    return np.stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])], axis=1)
+
+
+@pytest.mark.parametrize("vision", list(DICHROMATS))
+def test_the_patch_colours_stay_apart_for_colour_blind_eyes(vision):
+    """Every two patch colours, and each against the fragments' grey, at least 15 ΔE*ab apart with
+    normal vision and simulated deuteranopia and protanopia; the palette bark had before passes only
+    with normal vision (its orange and green 4.6 apart for a protanope)."""
+    from itertools import combinations
+
+    from bark.analysis.pattern import FRAGMENT_GREY, PALETTE
+
+    def closest(colours) -> float:
+        lab = _lab(np.vstack([colours, FRAGMENT_GREY]).astype(float), DICHROMATS[vision])
+        return min(np.linalg.norm(lab[i] - lab[j]) for i, j in combinations(range(len(lab)), 2))
+
+    assert closest(PALETTE) >= 15.0, (vision, closest(PALETTE))
+    old = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189), (140, 86, 75),
+           (227, 119, 194), (188, 189, 34), (23, 190, 207)]  # matplotlib's tab10 less its grey, bark's before
+    assert (closest(old) >= 15.0) == (vision == "normal")  # orange and green merge for a dichromat
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.floats(0.05, 0.6), st.integers(1, 9))
 def test_greedy_patch_colouring_on_random_cracks(seed, broken, min_size):
@@ -517,3 +554,13 @@ def test_the_patch_table_is_its_definitions_patch_by_patch(seed, patches, on_tru
         if l1 - l2 > 1e-6 * scale:  # an axis to compare (near-isotropic patches have none to speak of)
             assert abs((table.orientation_deg[k] - o + 90.0) % 180.0 - 90.0) < 1e-6
             assert 0.0 <= table.orientation_deg[k] < 180.0
+
+
+def test_the_orientation_histogram_keeps_near_vertical_patches_in_one_bar():
+    """Bins of 18° centred on 0°, 18°, ..., 90°: 89.96° and 90.04° fall in one bar (at an edge they
+    were two), 179° and 1° in the horizontal bar, and every patch is counted once."""
+    from bark_cli.figures import BINS, orientation_counts
+
+    counts = orientation_counts([89.96, 90.04, 81.0, 98.99, 179.0, 1.0, 9.01, 45.0])
+    assert counts.sum() == 8 and len(counts) == BINS == 10
+    assert counts[5] == 4 and counts[0] == 2 and counts[1] == 1 and counts[2] + counts[3] == 1
