@@ -37,8 +37,10 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 
 __all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
 
-RUN_FILES = ("summary.json", "scene.toml", *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
-"""Every file a run may write: summary.json, scene.toml and each effect's files (``Effect.files``; a
+RUN_FILES = ("summary.json", "scene.toml", "report.html",
+             *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
+"""Every file a run may write: summary.json, scene.toml, the report ``bark report`` writes about it and
+each effect's files (``Effect.files``; a
 name may be a pattern in a folder of the run's, such as the history's ``history/tree-*.vtu``).  A fresh
 run removes these (and only these) from its folder."""
 

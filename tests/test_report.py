@@ -1,0 +1,107 @@
+"""`bark report`: one self-contained page for a run or a sweep, checked in a real browser (headless
+Chromium) where one is installed."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bark_cli.main import cli
+
+BROWSER = next((shutil.which(b) for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
+FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync", "--no-first-run", "--virtual-time-budget=20000"]
+
+
+@pytest.fixture(scope="module")
+def reported(tmp_path_factory):
+    out = tmp_path_factory.mktemp("report") / "run"
+    want = '["bulges", "anchors", "damping", "patch-statistics", "statistics-series", "pattern-image", "tree-image", ' \
+           '"state-snapshot", "region-image"]'
+    result = CliRunner().invoke(cli, ["simulate", "--scene", "whole-tree-small", "--until-time", "12", "--quiet",
+                                      "--set", f"effects.want={want}", "--set", "effects.series_every=2.0", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    result = CliRunner().invoke(cli, ["report", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _loaded_from(page: str) -> list[str]:
+    """Every address the page's tags load something from (scripts, styles, images, frames)."""
+    from html.parser import HTMLParser
+
+    found = []
+
+    class Tags(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            a = dict(attrs)
+            for key in ("src", "href") if tag in ("script", "img", "link", "iframe", "source", "video") else ():
+                if a.get(key):
+                    found.append(a[key])
+
+    Tags().feed(page)
+    return found
+
+
+def test_the_page_holds_everything_and_needs_no_network(reported):
+    page = (reported / "report.html").read_text()
+    assert all(src.startswith("data:") for src in _loaded_from(page))  # nothing fetched: plotly inlined
+    assert page.count("<script>") >= 3  # the page's watch, plotly's bundle, the figures
+    assert sum(src.startswith("data:image/png;base64,") for src in _loaded_from(page)) == 3  # tree, pattern, regions
+    for words in ("Provenance", "Statistics at the end", "By region of the trunk", "The trunk in 3-D", "Along the run",
+                  "Settings", "whole-tree-small"):
+        assert words in page, words
+    summary = json.loads((reported / "summary.json").read_text())
+    assert summary["provenance"]["sessions"][0]["command"] in page.replace("&#x27;", "'").replace("&quot;", '"')
+
+
+def test_a_fresh_run_removes_an_earlier_report(reported, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(reported, out)
+    assert CliRunner().invoke(cli, ["simulate", "--until-time", "1", "--quiet", "--out", str(out)]).exit_code == 0
+    assert not (out / "report.html").exists()
+
+
+@pytest.mark.parametrize("make, words", [(lambda p: None, "no finished run"),
+                                         (lambda p: (p / "summary.json").write_text("{oops"), "cannot be read")])
+def test_a_folder_without_a_run_is_one_line(tmp_path, make, words):
+    make(tmp_path)
+    result = CliRunner().invoke(cli, ["report", str(tmp_path)])
+    assert result.exit_code == 2 and words in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+def test_a_sweep_gets_a_page_with_its_runs(tmp_path):
+    out = tmp_path / "sweep"
+    result = CliRunner().invoke(cli, ["sweep", "--grid", "mechanics.f_max=0.004,0.005", "--set", "lattice.n_bases=300",
+                                      "--set", "run.until_time=20", "--out", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert CliRunner().invoke(cli, ["report", str(out)]).exit_code == 0
+    page = (out / "report.html").read_text()
+    assert "bark sweep" in page and "2 runs" in page and "mechanics.f_max" in page
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(BROWSER is None, reason="no headless browser installed (Debian: apt-get install chromium)")
+def test_headless_chromium_loads_the_page_without_errors_and_shows_the_trunk(reported, tmp_path):
+    from PIL import Image
+
+    from bark.analysis.pattern import PALETTE
+
+    url = (reported / "report.html").as_uri()
+    dom = subprocess.run([BROWSER, *FLAGS, f"--user-data-dir={tmp_path / 'a'}", "--dump-dom", url],
+                         capture_output=True, text=True, timeout=180)
+    assert dom.returncode == 0, dom.stderr[-2000:]
+    assert 'data-loaded="yes"' in dom.stdout and 'data-errors="[]"' in dom.stdout, dom.stdout[:300]
+    shot = tmp_path / "shot.png"
+    done = subprocess.run([BROWSER, *FLAGS, f"--user-data-dir={tmp_path / 'b'}", "--window-size=1200,2200",
+                           f"--screenshot={shot}", url], capture_output=True, text=True, timeout=180)
+    assert done.returncode == 0 and shot.is_file(), done.stderr[-2000:]
+    with Image.open(shot) as image:
+        pixels = np.asarray(image.convert("RGB"), dtype=int).reshape(-1, 3)
+    near = np.abs(pixels[:, None, :] - PALETTE[None, :, :].astype(int)).max(axis=2) <= 12
+    assert near.any(axis=1).sum() > 2000  # the trunk's leaf bases, drawn in the patches' colours by WebGL
