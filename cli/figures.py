@@ -25,7 +25,7 @@ from matplotlib.ticker import MaxNLocator
 
 from bark.analysis.compare import QUANTITIES, Comparison
 from bark.analysis.pattern import PatternStatistics
-from bark.units import years
+from bark.units import metres, years
 from bark_cli.options import value_text
 from bark_cli.plot import new_figure, patches, save_figure
 
@@ -205,7 +205,7 @@ def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | No
     cell = min(2.4, 16.0 / max(ncols, nrows))
     fig = new_figure(figsize=(cell * ncols + 0.8, cell * 1.25 * nrows + 0.8), dpi=110, layout="constrained")
     axes = np.atleast_2d(fig.subplots(nrows, ncols, squeeze=False))
-    drawn = 0
+    drawn, tallest = 0, 0.0  # the cells' largest height / width: the sheet is sized to it once they are drawn
     for index, p in first.items():
         i, j = (index + (0, 0))[:2]
         ax = axes[nrows - 1 - j, i]  # the second axis grows upwards
@@ -219,19 +219,23 @@ def plot_montage(plan, points, rows: dict, table, path: str | Path) -> Path | No
         uv, _, colours = got
         width = 2 * np.pi * row["radius"]
         z_lo, z_hi = float(uv[:, 1].min()), float(uv[:, 1].max())
-        ax.imshow(raster(uv, rgba(colours), width, z_lo, z_hi), origin="lower",
-                  extent=(0, width, z_lo, z_hi), interpolation="nearest", aspect="auto")
+        ax.imshow(raster(uv, rgba(colours), width, z_lo, z_hi), origin="lower",  # to scale: a 45° crack looks 45°
+                  extent=metres(np.array([0, width, z_lo, z_hi])), interpolation="nearest", aspect="equal")
+        tallest = max(tallest, (z_hi - z_lo) / width)
         mean = row["mean_orientation_deg"]
         count = row["n_patches"]
-        ax.set_title(f"{count} patch{'' if count == 1 else 'es'}" + ("" if mean is None else f", {mean:.0f}°"), fontsize=6)
+        ax.set_title(f"{count} patch{'' if count == 1 else 'es'}" + ("" if mean is None else f", {mean:.0f}°")
+                     + f"; {100 * metres(width):.0f} × {100 * metres(z_hi - z_lo):.0f} cm", fontsize=6)
         drawn += 1
     for i, v in enumerate(plan.axes[0].values):
         axes[-1, i].set_xlabel(f"{plan.axes[0].key} = {value_text(v)}", fontsize=7)
     if len(plan.axes) == 2:
         for j, v in enumerate(plan.axes[1].values):
             axes[nrows - 1 - j, 0].set_ylabel(f"{plan.axes[1].key} = {value_text(v)}", fontsize=7)
-    fig.suptitle("bark sweep: the unwrapped trunk of each run (arc length across, height up; patches coloured, "
-                 "fragments grey)", fontsize=8)
+    fig.suptitle("bark sweep: the unwrapped trunk of each run, to scale (arc length across, height up, the size "
+                 "in each title; patches coloured, fragments grey)", fontsize=8)
+    if drawn:
+        fig.set_size_inches(cell * ncols + 0.8, cell * min(max(tallest, 0.2), 4.0) * nrows + 1.0)
     return save_figure(fig, path) if drawn else None
 
 
@@ -239,7 +243,7 @@ def plot_fracture_history(history, path: str | Path) -> Path:
     """A run's fracture history (``bark.analysis.fracture.FractureHistory``): broken springs and cracks (top),
     patches and the damping's power per base (bottom) against time in years; the initial fractures
     (the most cracks at once) and the initial fracture phase marked."""
-    from bark.units import years
+    from bark.units import metres, years
 
     s = history.samples
     t = years(s["t"])

@@ -417,3 +417,22 @@ def test_a_point_too_big_for_this_machine_is_refused_before_any_runs(args, says,
     assert r.exit_code == 2, r.output
     assert says in r.stderr and "--grid lattice.n_bases=" in r.stderr and r.stderr.count("\n") == 1, r.stderr
     assert not out.exists()
+
+
+def test_the_montage_draws_each_trunk_to_scale(tmp_path, monkeypatch):
+    """Each cell keeps its trunk's aspect (equal scales, in metres: a 45° crack looks 45°) and says
+    its size; the sheet is sized to the cells, not the cells stretched to the sheet."""
+    import bark_cli.figures as figures
+
+    drawn = []
+    monkeypatch.setattr(figures, "save_figure", lambda fig, path: drawn.append(fig) or path)
+    out = tmp_path / "s"
+    r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--grid", "growth.G=0.01,0.03", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    (fig,) = drawn
+    cells = [ax for ax in fig.axes if ax.images]
+    assert len(cells) == 2
+    for ax in cells:
+        assert ax.get_aspect() == 1.0 and "cm" in ax.get_title()
+        x0, x1, y0, y1 = ax.images[0].get_extent()
+        assert x1 < 2.0 and y1 - y0 < 2.0  # metres: a 300-base segment, not model units
