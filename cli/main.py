@@ -477,7 +477,7 @@ def strategies():
     from bark.contract.parts import how_it_runs
 
     table = Table("kind", "name", "class", "parameters", "runs")
-    for column in table.columns[:2]:
+    for column in table.columns[:3]:  # names whole, whatever the width: a reader greps and copies them
         column.no_wrap = True
     for kind in KINDS:
         for name, ep in registry.available(kind).items():
@@ -493,7 +493,7 @@ def strategies():
                 except Exception:  # noqa: BLE001 (a strategy with required parameters: known once given)
                     runs = "(once its parameters are given)"
             table.add_row(kind, name, ep.value, escape(params), escape(runs))
-    Console().print(table)
+    Console(width=None if _is_terminal(sys.stdout) else 240).print(table)  # piped: wide, nothing cut
 
 
 @cli.command(context_settings=CONTEXT)

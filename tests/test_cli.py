@@ -246,6 +246,13 @@ def test_strategies_lists_builtins(runner, monkeypatch):
     assert "base=SqrtGrowth(r0=0.2, G=0.014)" in result.output  # a nested strategy's default, not its factory
 
 
+def test_strategies_piped_keeps_every_class_name_whole(runner, monkeypatch):
+    monkeypatch.delenv("COLUMNS", raising=False)  # a pipe: no terminal, no width given
+    result = runner.invoke(cli, ["strategies"])
+    assert result.exit_code == 0 and "…" not in result.output
+    assert "bark_plugins.integrators:ImplicitOverdamped" in result.output
+
+
 def test_version(runner):
     from bark import __version__
 
