@@ -44,11 +44,10 @@ def _caption(s: PatternStatistics) -> str:
     return text + f"\n{patches(s.n_patches)}"
 
 
-def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:
-    """Fig. 6B / 7B for ``stats`` (which must have its patches) into ``path``."""
+def draw_radial(ax, stats: PatternStatistics):
+    """Fig. 6B / 7B for ``stats`` (which must have its patches) into ``ax``, a polar axes (a notebook's
+    ``fig.add_subplot(projection="polar")``); returns the scatter (for a colour bar of patch sizes)."""
     table = stats.patches
-    fig = new_figure(figsize=(5.6, 5.0), dpi=130)
-    ax = fig.add_subplot(projection="polar")
     theta = np.radians(table.orientation_deg)
     size = table.size.astype(float)
     both = np.concatenate([theta, theta + np.pi])
@@ -63,9 +62,16 @@ def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:
     ax.set_yticks(np.linspace(0.1, 1.0, 10), labels=[""] * 9 + ["1"], fontsize=7)
     ax.set_xticks(np.radians(np.arange(0, 360, 45)))
     ax.tick_params(labelsize=7)
-    cb = fig.colorbar(art, ax=ax, shrink=0.7, pad=0.1)
-    cb.set_label("patch size (leaf bases)", fontsize=8)
     ax.set_title(f"{stats.name}: orientation (angle, 90° = up the trunk) × anisotropy (radius)", fontsize=8)
+    return art
+
+
+def plot_radial(stats: PatternStatistics, path: str | Path) -> Path:
+    """Fig. 6B / 7B for ``stats`` (which must have its patches) into ``path`` (``draw_radial``)."""
+    fig = new_figure(figsize=(5.6, 5.0), dpi=130)
+    ax = fig.add_subplot(projection="polar")
+    cb = fig.colorbar(draw_radial(ax, stats), ax=ax, shrink=0.7, pad=0.1)
+    cb.set_label("patch size (leaf bases)", fontsize=8)
     fig.text(0.02, 0.02, _caption(stats), fontsize=7, family="monospace")
     return save_figure(fig, path)
 
@@ -108,12 +114,11 @@ def orientation_counts(deg) -> np.ndarray:
     return np.histogram(np.mod(np.asarray(deg, float) + width / 2, 180.0), bins=BINS, range=(0.0, 180.0))[0]
 
 
-def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
-    """Fig. 6C / 7C for ``stats`` into ``path``: patches per 18° bin of orientation (``orientation_counts``)."""
+def draw_histogram(ax, stats: PatternStatistics) -> None:
+    """Fig. 6C / 7C for ``stats`` into ``ax``, a polar axes: patches per 18° bin of orientation
+    (``orientation_counts``)."""
     counts = orientation_counts(stats.patches.orientation_deg)
     width = 180.0 / BINS
-    fig = new_figure(figsize=(5.6, 3.4), dpi=130)
-    ax = fig.add_subplot(projection="polar")
     centres = np.arange(BINS) * width  # the bins centred on 0°, 18°, ..., 90°, ...: vertical patches in one bar
     for at in (centres, [180.0]):  # the horizontal bin is drawn at both ends of the half circle (axial angles)
         ax.bar(np.radians(at), counts[: len(at)], width=np.radians(width), align="center", color="#0072B2",
@@ -125,6 +130,12 @@ def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
     ax.set_yticks(np.arange(step, top + 1, step))
     ax.tick_params(labelsize=7)
     ax.set_title(f"{stats.name}: patches per 18° of orientation (0° horizontal, 90° up the trunk)", fontsize=8)
+
+
+def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
+    """Fig. 6C / 7C for ``stats`` into ``path`` (``draw_histogram``)."""
+    fig = new_figure(figsize=(5.6, 3.4), dpi=130)
+    draw_histogram(fig.add_subplot(projection="polar"), stats)
     fig.text(0.02, 0.02, _caption(stats), fontsize=7, family="monospace")
     return save_figure(fig, path)
 

@@ -49,9 +49,21 @@ SPRINGS_UP_TO = 50_000
 
 
 def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = None) -> Path:
-    """Draw ``data`` (a ``bark_cli.pictures.PatternData``) into ``path``: lengths in metres, time in
-    years (the model's units beside them), neighbouring patches in different colours, fragments in
-    the grey the legend names."""
+    """Draw ``data`` (a ``bark_cli.pictures.PatternData``) into ``path`` (``draw_pattern``), on a
+    figure sized to the trunk's aspect within ``MIN_ASPECT`` .. ``MAX_ASPECT``."""
+    width = 2 * np.pi * data.radius
+    height = float(data.uv[:, 1].max() - data.uv[:, 1].min()) or width
+    shown = min(max(height / width, MIN_ASPECT), MAX_ASPECT)
+    fig = new_figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=150)
+    draw_pattern(fig.add_subplot(), data, min_size, title)
+    return save_figure(fig, path)
+
+
+def draw_pattern(ax, data, min_size: int = 7, title: str | None = None) -> None:
+    """Draw ``data`` (a ``bark_cli.pictures.PatternData``; ``PatternData.of(sim, min_size)``) into the
+    matplotlib axes ``ax`` — a notebook's, or ``plot_pattern``'s: lengths in metres, time in years (the
+    model's units beside them), neighbouring patches in different colours, fragments in the grey the
+    legend names."""
     from matplotlib.patches import Patch
 
     from bark.analysis.pattern import FRAGMENT_GREY
@@ -64,8 +76,6 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     height = (z_hi - z_lo) or width
     aspect = height / width
     shown = min(max(aspect, MIN_ASPECT), MAX_ASPECT)
-    fig = new_figure(figsize=(7.0, 7.0 * shown + 0.6), dpi=150)
-    ax = fig.add_subplot()
     pad = 0.01 * height
     if data.n_bases <= SPRINGS_UP_TO:
         p = data.springs
@@ -92,7 +102,6 @@ def plot_pattern(data, path: str | Path, min_size: int = 7, title: str | None = 
     ax.set_ylabel("height z (m)" + ("" if shown == aspect else f", scale ×{shown / aspect:.3g} of the horizontal"), fontsize=8)
     ax.set_title(title or f"{years(data.t):.1f} years (t = {data.t:.4g}), radius {100 * r:.1f} cm ({data.radius:.4g} length "
                  f"units), {patches(data.n_patches)} of ≥ {min_size} bases, {data.n_broken} broken springs", fontsize=8)
-    return save_figure(fig, path)
 
 
 def save_figure(fig: Figure, path: str | Path, fast: bool = True) -> Path:

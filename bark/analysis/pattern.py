@@ -308,6 +308,11 @@ class PatchTable:
         where = ["theta_deg", "z"] if self.centroid.shape[1] == 3 else ["x", "y"]
         return ["patch", "size", *where, "orientation_deg", "anisotropy", "lambda1", "lambda2"]
 
+    def to_pandas(self):
+        """The table as a ``pandas.DataFrame``, a row per patch, the columns of :attr:`columns` (pandas
+        is not a dependency of bark: install it to use this)."""
+        return data_frame(self.rows(), self.columns)
+
     def rows(self) -> list[dict]:
         """One dict per patch, keyed by :attr:`columns`."""
         c = self.centroid
@@ -361,7 +366,16 @@ def _linear(values: np.ndarray) -> Linear:
     return Linear(n, float(np.mean(values)), sd, sd / math.sqrt(n))
 
 
-@attrs.frozen(eq=False)
+def data_frame(rows, columns):
+    """``pandas.DataFrame(rows, columns=columns)``, or one line saying pandas is needed."""
+    try:
+        import pandas
+    except ImportError:
+        raise BarkError("pandas is needed for a DataFrame (pip install pandas); the rows are there without it") from None
+    return pandas.DataFrame(rows, columns=columns)
+
+
+@attrs.frozen(eq=False, repr=False)
 class PatternStatistics:
     """What the paper reports of a pattern (Fig. 6B, 7B): the number of patches, the distribution of
     their orientations and of their anisotropies, and the patches themselves (``None`` for a pattern
@@ -422,6 +436,14 @@ class PatternStatistics:
         return attrs.evolve(self, name=f"{self.name} (mirrored)", orientation=attrs.evolve(o, mean_deg=float(_mirror(o.mean_deg))),
                             patches=None if self.patches is None else self.patches.mirrored(),
                             handedness=_other_hand(self.handedness))
+
+    def __repr__(self) -> str:
+        """One line: the name, the patches, the orientation (mean ± SE, SD) and the anisotropy (mean ± SE)."""
+        o, a = self.orientation, self.anisotropy
+        text = f"PatternStatistics({self.name!r}: {self.n_patches} patches, orientation {o.mean_deg:.1f}° ± {o.se_deg:.1f}° " \
+               f"(SD {o.sd_deg:.1f}°)"
+        return text + ("" if a is None else f", anisotropy {a.mean:.3f} ± {a.se:.3f}") + \
+            ("" if self.patches is None else ", with its patch table") + ")"
 
     def as_dict(self) -> dict:
         """The figures as plain values (for JSON and tables); no per-patch rows."""

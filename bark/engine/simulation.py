@@ -88,6 +88,15 @@ class BreakLog:
             return {n: np.empty(0, dtype=float if n in ("t", "tension") else np.int64) for n in self.COLUMNS}
         return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(self.COLUMNS)}
 
+    def to_pandas(self):
+        """The log as a ``pandas.DataFrame``, a row per break, the columns of :meth:`arrays` (t in time
+        units, tension in force units; pandas is not a dependency of bark: install it to use this)."""
+        try:
+            import pandas
+        except ImportError:
+            raise BarkError("pandas is needed for a DataFrame (pip install pandas); arrays() gives the columns") from None
+        return pandas.DataFrame(self.arrays())
+
     @classmethod
     def of_arrays(cls, arrays: dict[str, np.ndarray]) -> "BreakLog":
         """The log whose ``arrays()`` are ``arrays``."""

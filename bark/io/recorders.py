@@ -69,6 +69,12 @@ class StatisticsSeries(Recorder):
     def write(self, path: str | Path) -> Path:
         return write_csv(path, self.rows, SERIES_COLUMNS)
 
+    def to_pandas(self):
+        """The series as a ``pandas.DataFrame``, a row a sample, statistics.csv's columns."""
+        from bark.analysis.pattern import data_frame
+
+        return data_frame(self.rows, SERIES_COLUMNS)
+
 
 class Frames(Recorder):
     """Frames of the unwrapped pattern along a run, for the development animation: per call, the time,

@@ -1,0 +1,61 @@
+"""bark from a notebook: DataFrames of its tables, one-line reprs, and drawings into an axes of one's own."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bark.analysis.pattern import Pattern
+from bark.engine.scene import Scene
+from bark.studies import runner
+
+
+@pytest.fixture(scope="module")
+def done():
+    scene = Scene.from_toml("vertical", {"lattice": {"n_bases": 1200}, "run": {"until_patches": 40},
+                                         "effects": {"want": ["patch-statistics", "statistics-series", "break-log"]}})
+    return runner.run(scene, None)
+
+
+def test_tables_come_as_data_frames(done):
+    sim = done.sim
+    stats = Pattern.of_simulation(sim).statistics(7)
+    patches = stats.patches.to_pandas()
+    assert isinstance(patches, pd.DataFrame) and list(patches.columns) == stats.patches.columns
+    assert len(patches) == stats.n_patches == done.summary["n_patches"]
+    breaks = sim.breaks.to_pandas()
+    assert list(breaks.columns) == ["spring", "i", "j", "step", "t", "tension"] and len(breaks) == sim.n_broken
+    assert (np.diff(breaks["t"]) >= 0).all()
+
+
+def test_pattern_statistics_print_in_one_short_line(done):
+    stats = Pattern.of_simulation(done.sim).statistics(7)
+    text = repr(stats)
+    assert "\n" not in text and len(text) < 200 and f"{stats.n_patches} patches" in text and "°" in text
+
+
+def test_every_drawing_goes_into_an_axes_of_one_s_own(done):
+    from bark_cli.figures import draw_histogram, draw_radial
+    from bark_cli.pictures import PatternData
+    from bark_cli.plot import draw_pattern, new_figure
+
+    stats = Pattern.of_simulation(done.sim).statistics(7)
+    fig = new_figure(figsize=(9, 3))
+    flat, radial, rose = fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2, projection="polar"), \
+        fig.add_subplot(1, 3, 3, projection="polar")
+    draw_pattern(flat, PatternData.of(done.sim, 7))
+    draw_radial(radial, stats)
+    draw_histogram(rose, stats)
+    assert flat.collections and radial.collections and rose.patches  # drawn where they were asked to be
+    assert len(fig.axes) == 3  # and nowhere else: no figure of their own
+
+
+def test_the_statistics_series_comes_as_a_data_frame(done):
+    from bark.io.recorders import SERIES_COLUMNS, StatisticsSeries
+
+    series = StatisticsSeries()
+    series.record(done.sim)
+    frame = series.to_pandas()
+    assert list(frame.columns) == list(SERIES_COLUMNS) and len(frame) == 1
+    assert frame["n_patches"].iloc[0] == done.summary["n_patches"]
