@@ -227,12 +227,22 @@ def test_graphml_is_the_graph_of_record(tmp_path):
     write_graphml(tmp_path / "g.graphml", sim)
     g = nx.read_graphml(tmp_path / "g.graphml", node_type=int)
     assert sim.n_broken > 20
-    assert g.number_of_nodes() == sim.state.n_bases and g.number_of_edges() == int(sim.state.intact.sum())
+    assert g.number_of_nodes() == sim.state.n_bases and g.number_of_edges() == sim.state.n_springs  # every spring
     labels = sim.patch_labels()
     for node in (0, 137, 399):
         assert g.nodes[node]["patch"] == labels[node] and g.nodes[node]["z"] == pytest.approx(sim.state.x[node, 2])
-    i, j, data = next(iter(g.edges(data=True)))
-    assert sim.state.intact[data["spring"]] and data["rest"] == pytest.approx(sim.state.rest[data["spring"]])
+        theta = np.degrees(np.arctan2(sim.state.anchor_dir[node, 1], sim.state.anchor_dir[node, 0]))
+        assert g.nodes[node]["theta0_deg"] == pytest.approx(theta)  # degrees, as patches.csv
+    intact = {frozenset((i, j)) for i, j, ok in g.edges(data="intact") if ok}
+    assert intact == set(map(frozenset, sim.graph.edges))  # the intact edges: the graph of record
+    log = sim.breaks.arrays()
+    for k in log["spring"][:5]:
+        i, j = sim.state.pairs[k]
+        data = g.edges[int(i), int(j)]
+        assert not data["intact"] and data["spring"] == k
+        assert data["broke_t"] == log["t"][log["spring"] == k][0] and data["broke_tension"] == log["tension"][log["spring"] == k][0]
+    i, j, data = next((i, j, d) for i, j, d in g.edges(data=True) if d["intact"])
+    assert np.isnan(data["broke_t"]) and data["rest"] == pytest.approx(sim.state.rest[data["spring"]])
 
 
 def test_animation_writes_one_frame_per_trigger(tmp_path):

@@ -242,19 +242,28 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
 
 
 def write_graphml(path: str | Path, sim) -> Path:
-    """The leaf-base graph (intact springs) as GraphML, for networkx, Gephi, ParaView …:
-    nodes carry their site (theta0 in (−π, π], z0), birth time, position now (x, y, z) and patch id;
-    edges their spring id, rest length and threshold (all read from the state's arrays)."""
+    """The leaf-base graph as GraphML, for networkx, Gephi, ParaView …, every spring an edge: nodes
+    carry their site (``theta0_deg``, degrees in (−180, 180], and ``z0``), birth time, position now
+    (x, y, z) and patch id; edges their spring id, rest length, threshold, whether ``intact`` and, for
+    a broken one, when it broke and its tension then (``broke_t``, ``broke_tension``: NaN for an
+    intact spring, or where the run kept no break log).  The leaf-base graph of record is the edges
+    with ``intact`` true.  Lengths in model length units, times in time units, forces in force units."""
     import networkx as nx
 
     s, labels = sim.state, sim.patch_labels()
-    theta0 = np.arctan2(s.anchor_dir[:, 1], s.anchor_dir[:, 0])
+    theta0 = np.degrees(np.arctan2(s.anchor_dir[:, 1], s.anchor_dir[:, 0]))
+    log = sim.breaks.arrays()
+    when, tension = np.full(s.n_springs, np.nan), np.full(s.n_springs, np.nan)
+    first = np.unique(log["spring"], return_index=True)[1]  # a spring breaks once; the log keeps its first
+    when[log["spring"][first]], tension[log["spring"][first]] = log["t"][first], log["tension"][first]
     g = nx.Graph()
-    g.add_nodes_from((int(q), {"theta0": float(theta0[q]), "z0": float(s.anchor[q, 2]), "born": float(s.born[q]),
+    g.add_nodes_from((int(q), {"theta0_deg": float(theta0[q]), "z0": float(s.anchor[q, 2]), "born": float(s.born[q]),
                                 "x": float(s.x[q, 0]), "y": float(s.x[q, 1]), "z": float(s.x[q, 2]),
-                                "patch": int(labels[q])}) for q in sim.graph.nodes)
-    g.add_edges_from((i, j, {"spring": k, "rest": float(s.rest[k]), "fmax": float(s.fmax[k])})
-                     for i, j, k in sim.graph.edges(data="spring"))
+                                "patch": int(labels[q])}) for q in range(s.n_bases))
+    g.add_edges_from((int(i), int(j), {"spring": k, "rest": float(s.rest[k]), "fmax": float(s.fmax[k]),
+                                       "intact": bool(s.intact[k]), "broke_t": float(when[k]),
+                                       "broke_tension": float(tension[k])})
+                     for k, (i, j) in enumerate(s.pairs.tolist()))
 
     def write(fh):
         nx.write_graphml(g, fh)
