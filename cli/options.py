@@ -213,6 +213,9 @@ class Provenance:
             return f"{ref.key} in {item}" if not ref.given else f"{ref.key} = {show(ref.value)} in {item}"
         if source == "--grid":  # one value of a swept setting
             return f"--grid {ref.section}.{ref.key}={_cli_value(ref.value)}"
+        if source in ("--points", "--range"):  # a listed point's value, given or drawn
+            how = "a point of --points" if source == "--points" else "a point drawn in its --range"
+            return f"{ref.section}.{ref.key} = {_cli_value(ref.value)} ({how})"
         option = self.aliases.get((ref.section, ref.top_key)) or option_for(ref.section, ref.top_key)
         if option is None or nested:
             return str(ref)

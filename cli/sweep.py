@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import shlex
+from pathlib import Path
 import signal
 import sys
 
@@ -55,12 +56,75 @@ def parse_grid(items: tuple[str, ...]):
     return axes, layer
 
 
+def parse_points(path: str):
+    """``--points FILE``: a CSV whose header names scene keys (``growth.G``, ...) and whose rows are
+    the points (values as ``--set`` takes them) → the axes of a listed sweep, and the tables they touch."""
+    import csv
+
+    from bark.paths import NotARegularFile, open_regular
+    from bark.studies.sweep import Axis
+
+    try:
+        with open_regular(Path(path)) as raw:
+            text = raw.read().decode("utf-8-sig")
+    except FileNotFoundError:
+        raise BarkError(f"--points {shlex.quote(path)}: no such file") from None
+    except (NotARegularFile, OSError, UnicodeDecodeError) as err:
+        raise BarkError(f"--points {shlex.quote(path)}: cannot be read ({err})") from None
+    rows = [r for r in csv.reader(line for line in text.splitlines() if line.strip() and not line.startswith("#"))]
+    if len(rows) < 2:
+        raise BarkError(f"--points {shlex.quote(path)}: expected a header of scene keys (growth.G,...) and a row a point")
+    keys, values = rows[0], rows[1:]
+    layer = {}
+    for k in keys:
+        if split_setting(f"{k}=0") is None:
+            raise BarkError(f"--points {shlex.quote(path)}: column {k!r} is not a scene key (SECTION.KEY, e.g. growth.G)")
+    for line, row in enumerate(values, start=2):
+        if len(row) != len(keys):
+            raise BarkError(f"--points {shlex.quote(path)} row {line}: {len(row)} values for {len(keys)} columns")
+    axes = [Axis(k, tuple(setting_value(row[j]) for row in values)) for j, k in enumerate(keys)]
+    for a in axes:
+        layer.setdefault(a.section, {})[a.name] = list(a.values)
+    return axes, layer
+
+
+def parse_ranges(items: tuple[str, ...]) -> dict:
+    """``--range growth.G=0.005:0.02`` (``:log`` for log-uniform) → ``{key: (low, high, log)}``."""
+    import math as m
+
+    out = {}
+    for item in items:
+        setting = split_setting(item)
+        parts = setting[2].split(":") if setting is not None else []
+        if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] != "log"):
+            raise BarkError(f"--range {shlex.quote(item)}: expected SECTION.KEY=LOW:HIGH or SECTION.KEY=LOW:HIGH:log")
+        try:
+            lo, hi = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise BarkError(f"--range {shlex.quote(item)}: LOW and HIGH must be numbers") from None
+        log = len(parts) == 3
+        if not (m.isfinite(lo) and m.isfinite(hi) and lo < hi) or (log and lo <= 0):
+            raise BarkError(f"--range {shlex.quote(item)}: needs finite LOW < HIGH" + (", both > 0 for :log" if log else ""))
+        out[f"{setting[0]}.{setting[1]}"] = (lo, hi, log)
+    return out
+
+
 @click.command(context_settings=CONTEXT)
 @click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
               help="Scene TOML file each point starts from [default: the default scene, Table 2's vertical regime].")
 @click.option("--grid", "grids", multiple=True, metavar="SECTION.KEY=V1,V2,...",
               help="A swept setting and its values (or START:STOP:N); repeat for more axes. "
                    "[default: the paper's Fig. 9: --grid growth.G=0.007,0.011,0.014 --grid mechanics.f_max=0.0028,0.005,0.008]")
+@click.option("--points", "points_file", default=None, metavar="FILE.csv",
+              help="The points themselves, instead of a grid: a CSV whose header names scene keys and whose rows are the points.")
+@click.option("--design", type=click.Choice(["random", "lhs"]), default=None,
+              help="Points drawn instead of a grid: random (uniform) or lhs (a Latin hypercube), --samples of them "
+                   "in the --range of each setting.")
+@click.option("--samples", type=click.IntRange(1, 1_000_000), default=None, help="Points a --design draws.")
+@click.option("--range", "ranges", multiple=True, metavar="SECTION.KEY=LOW:HIGH[:log]",
+              help="A setting a --design draws, and its range (:log: uniform in its logarithm); repeatable.")
+@click.option("--design-seed", type=click.IntRange(0, 2**32 - 1), default=0, show_default=True,
+              help="Seed of the --design's draws (the same seed, the same points).")
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Any other scene setting, for every point.")
 @click.option("--seeds", type=click.IntRange(1, 10_000), default=1, show_default=True, help="Runs per point, seeds 0, 1, ...")
 @click.option("--workers", type=click.IntRange(1, 4096), default=None,
@@ -69,14 +133,17 @@ def parse_grid(items: tuple[str, ...]):
               help="Run on the Dask distributed cluster whose scheduler is at ADDRESS (tcp://host:8786) instead.")
 @click.option("--out", default="bark-sweep", show_default=True, type=click.Path(file_okay=False),
               help="Folder for sweep.sqlite (the table) and montage.png. A sweep run again into it goes on where it stopped.")
+@click.option("--run-folders", is_flag=True,
+              help="Each run also writes its outputs (as bark simulate does) into --out/runs/KEY, KEY its row's key.")
 @click.option("--quiet", is_flag=True, help="No progress bar and no table.")
-def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
+def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, sets, seeds, workers, dask_address, out,
+          run_folders, quiet):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
     from bark.io.folder import held_folder
     from bark.engine.scene import merge, read_toml
-    from bark.studies.sweep import FIG9_AXES, Axis, Sweep, check_fits
+    from bark.studies.sweep import FIG9_AXES, Axis, Sweep, check_fits, design as design_axes
     from bark_cli.main import _parse_set
     from bark_cli.options import NAMER, Provenance
 
@@ -87,23 +154,41 @@ def sweep(scene_file, grids, sets, seeds, workers, dask_address, out, quiet):
     set_layer, prov.set_items = _parse_set(sets)
     base = prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {}
     base = merge(base, prov.add("--set", set_layer))
-    if grids:
+    chosen = [name for name, given in (("--grid", grids), ("--points", points_file), ("--design", design)) if given]
+    if len(chosen) > 1:
+        raise BarkError(f"{' and '.join(chosen)}: a sweep is a grid, a list of points or a design, one of them")
+    if (samples is not None or ranges) and design is None:
+        raise BarkError("--samples and --range are for a --design (random or lhs)")
+    if design is not None:
+        if samples is None or not ranges:
+            raise BarkError(f"--design {design} needs --samples N and at least one --range SECTION.KEY=LOW:HIGH")
+        axes = list(design_axes(design, parse_ranges(ranges), samples, design_seed))
+        layer = {}
+        for a in axes:
+            layer.setdefault(a.section, {})[a.name] = list(a.values)
+        source = "--range"
+    elif points_file is not None:
+        axes, layer = parse_points(points_file)
+        source = "--points"
+    elif grids:
         axes, layer = parse_grid(grids)
+        source = "--grid"
     else:
         axes, layer = [Axis(k, v) for k, v in FIG9_AXES], {}
         for k, v in FIG9_AXES:
             layer.setdefault(k.partition(".")[0], {})[k.partition(".")[2]] = list(v)
-    prov.add("--grid", layer)
-    plan = Sweep(base=base, axes=axes, seeds=range(seeds))
+        source = "--grid"
+    prov.add(source, layer)
+    plan = Sweep(base=base, axes=axes, seeds=range(seeds), listed=design is not None or points_file is not None)
     plan.points()  # every point checked: a bad value is one line before anything is written
     if dask_address is None:  # and on this machine, that it fits in memory, so many at once
         check_fits(plan, workers or 1)
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:  # one sweep at a time in a folder
-        _sweep(plan, held.path, workers, client, quiet)
+        _sweep(plan, held.path, workers, client, quiet, held.path / "runs" if run_folders else None)
 
 
-def _sweep(plan, folder, workers, client, quiet: bool) -> None:
+def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None) -> None:
     from bark.studies.sweep import WorkerDied, run_sweep
     from bark_cli.main import Signals
 
@@ -111,7 +196,7 @@ def _sweep(plan, folder, workers, client, quiet: bool) -> None:
     with Signals() as signals:  # SIGTERM and SIGHUP stop a sweep as Ctrl-C does: a run is in the table whole or not at all
         try:
             counts = run_sweep(plan, folder / "sweep.sqlite", workers=workers or 1, client=client,
-                               progress=bar.update if bar is not None else None)
+                               progress=bar.update if bar is not None else None, run_folders=run_folders)
         except WorkerDied as err:
             click.echo(f"bark: {err}", err=True)
             sys.exit(1)
@@ -194,7 +279,7 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
         rows = table.rows([p.key for p in points])
         by_key = {r["key"]: r for r in rows}
         drawn = None
-        if len(plan.axes) <= 2 and math.prod(plan.shape) <= MONTAGE_CELLS:
+        if not plan.listed and len(plan.axes) <= 2 and math.prod(plan.shape) <= MONTAGE_CELLS:
             def montage(path):  # nothing run yet: no sheet, and none of an earlier sweep's
                 if plot_montage(plan, points, by_key, table, path) is None:
                     path.unlink(missing_ok=True)
@@ -218,7 +303,9 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
             t.caption = f"the first {TABLE_ROWS} of {len(points)} runs; every one is in sweep.sqlite"
         Console(width=150).print(t)
     click.echo(f"bark: {counts['total']} runs in {folder / 'sweep.sqlite'} ({counts['ran']} run now, "
-               f"{counts['skipped']} already there)" + (f"; montage in {drawn}" if drawn else f"; no montage for more than two axes or {MONTAGE_CELLS} points"))
+               f"{counts['skipped']} already there)" + (f"; montage in {drawn}" if drawn else
+                                                         "; no montage for a list of points" if plan.listed else
+                                                         f"; no montage for more than two axes or {MONTAGE_CELLS} points"))
 
 
 def _g(v) -> str:

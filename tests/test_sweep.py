@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -50,7 +51,7 @@ def test_points_cover_the_grid_and_seeds_with_distinct_keys():
 @pytest.mark.parametrize("make,message", [
     (lambda: Axis("G", (1.0,)), "expected SECTION.KEY"),
     (lambda: Axis("growth.G", ()), "no values"),
-    (lambda: Axis("growth.G", (1.0, 1.0)), "given twice"),
+    (lambda: Sweep(base={}, axes=(Axis("growth.G", (1.0, 1.0)),)), "given twice"),
     (lambda: Sweep(base={}, axes=(Axis("growth.G", (1.0,)), Axis("growth.G", (2.0,)))), "an axis is given twice"),
     (lambda: Sweep(base={}, axes=(Axis("run.seed", (1, 2)),)), "seeds are not an axis"),
     (lambda: Sweep(base={}, axes=(Axis("growth.G", (0.01, -1.0)),)).points(), "G"),
@@ -436,3 +437,61 @@ def test_the_montage_draws_each_trunk_to_scale(tmp_path, monkeypatch):
         assert ax.get_aspect() == 1.0 and "cm" in ax.get_title()
         x0, x1, y0, y1 = ax.images[0].get_extent()
         assert x1 < 2.0 and y1 - y0 < 2.0  # metres: a 300-base segment, not model units
+
+
+# -- lists of points and designs ----------------------------------------------------------------------
+def test_a_latin_hypercube_puts_one_point_in_each_stratum_and_the_same_seed_draws_the_same_points():
+    from bark.studies.sweep import design
+
+    ranges = {"growth.G": (0.005, 0.02, False), "mechanics.f_max": (0.002, 0.01, True)}
+    axes = design("lhs", ranges, 8, seed=3)
+    assert [a.key for a in axes] == list(ranges) and all(len(a.values) == 8 for a in axes)
+    g = np.array(axes[0].values)
+    assert sorted(np.floor((g - 0.005) / (0.015 / 8)).astype(int).tolist()) == list(range(8))  # one a stratum
+    f = np.log(np.array(axes[1].values))  # log-uniform: the strata are even in the logarithm
+    assert sorted(np.floor((f - np.log(0.002)) / ((np.log(0.01) - np.log(0.002)) / 8)).astype(int).tolist()) == list(range(8))
+    assert design("lhs", ranges, 8, seed=3) == axes and design("lhs", ranges, 8, seed=4) != axes
+    rand = design("random", ranges, 50, seed=0)
+    assert all(0.005 <= v <= 0.02 for v in rand[0].values) and all(0.002 <= v <= 0.01 for v in rand[1].values)
+
+
+def test_a_list_of_points_runs_each_row_once(tmp_path):
+    csv = tmp_path / "points.csv"
+    csv.write_text("# growth constants and thresholds\ngrowth.G,mechanics.f_max\n0.01,0.004\n0.014,0.004\n0.01,0.004\n")
+    out = tmp_path / "s"
+    r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--points", str(csv), "--out", str(out), "--run-folders"])
+    assert r.exit_code == 0, r.output
+    rows = _rows(out / "sweep.sqlite")
+    assert sorted((row["growth.G"], row["mechanics.f_max"]) for row in rows) == [(0.01, 0.004), (0.014, 0.004)]  # twice = once
+    assert not (out / "montage.png").exists() and "no montage for a list of points" in r.output
+    for row in rows:  # each run's own folder, its outputs as bark simulate writes them
+        summary = json.loads((out / "runs" / row["key"] / "summary.json").read_text())
+        assert summary["settings"]["growth"]["G"] == row["growth.G"] and summary["n_patches"] == row["n_patches"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--grid", "growth.G=0.01,0.02", "--design", "lhs"], "--grid and --design"),
+    (["--design", "lhs", "--samples", "4"], "needs --samples N and at least one --range"),
+    (["--samples", "4"], "are for a --design"),
+    (["--design", "random", "--samples", "4", "--range", "growth.G=0.02:0.01"], "finite LOW < HIGH"),
+    (["--design", "random", "--samples", "4", "--range", "growth.G=0:0.01:log"], "both > 0 for :log"),
+    (["--design", "random", "--samples", "4", "--range", "growth.G=a:b"], "must be numbers"),
+    (["--design", "random", "--samples", "4", "--range", "growth.G=-1:0.01"], "growth.G"),
+])
+def test_bad_designs_are_one_line(tmp_path, args, message):
+    r = CliRunner().invoke(cli, ["sweep", *TINY_SET, *args, "--out", str(tmp_path / "s"), "--quiet"])
+    assert r.exit_code == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("growth.G\n", "a row a point"),
+    ("G,mechanics.f_max\n0.01,0.004\n", "column 'G' is not a scene key"),
+    ("growth.G,mechanics.f_max\n0.01\n", "row 2: 1 values for 2 columns"),
+    ("growth.G\nabc\n", "growth.G"),
+])
+def test_bad_point_files_are_one_line(tmp_path, text, message):
+    csv = tmp_path / "p.csv"
+    csv.write_text(text)
+    r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--points", str(csv), "--out", str(tmp_path / "s"), "--quiet"])
+    assert r.exit_code == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

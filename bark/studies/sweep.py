@@ -88,8 +88,6 @@ class Axis:
             raise BarkError(f"sweep axis {self.key!r}: expected SECTION.KEY, e.g. growth.G")
         if not self.values:
             raise BarkError(f"sweep axis {self.key}: no values")
-        if len(set(map(repr, self.values))) != len(self.values):
-            raise BarkError(f"sweep axis {self.key}: a value is given twice")
 
     @property
     def section(self) -> str:
@@ -126,16 +124,25 @@ def _canonical(obj) -> str:
 @attrs.frozen
 class Sweep:
     """A grid (the product of ``axes``) over the scene ``base`` (a scene dict, as ``read_toml``
-    gives it), each point run once per seed."""
+    gives it), each point run once per seed — or, ``listed``, the points the axes' values give side
+    by side (the k-th point takes each axis' k-th value: a list of points, a random or Latin-hypercube
+    design, :func:`design`)."""
 
     base: dict
     axes: tuple[Axis, ...] = attrs.field(converter=tuple)
     seeds: tuple[int, ...] = attrs.field(default=(0,), converter=tuple)
+    listed: bool = False
+    """The axes' values are the points, side by side (all of one length), not a grid's."""
 
     def __attrs_post_init__(self) -> None:
         keys = [a.key for a in self.axes]
         if len(set(keys)) != len(keys):
             raise BarkError(f"sweep: an axis is given twice ({', '.join(keys)})")
+        if self.listed and len({len(a.values) for a in self.axes}) > 1:
+            raise BarkError("sweep: a list of points gives every setting a value at every point")
+        for a in () if self.listed else self.axes:  # a grid's axis: each value once (a list may repeat one)
+            if len(set(map(repr, a.values))) != len(a.values):
+                raise BarkError(f"sweep axis {a.key}: a value is given twice")
         if "run.seed" in keys:
             raise BarkError("sweep: seeds are not an axis; give them as the sweep's seeds")
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
@@ -148,7 +155,8 @@ class Sweep:
 
     @property
     def shape(self) -> tuple[int, ...]:
-        return tuple(len(a.values) for a in self.axes)
+        """The grid's shape; a list of points has one dimension, its length."""
+        return (len(self.axes[0].values) if self.axes else 1,) if self.listed else tuple(len(a.values) for a in self.axes)
 
     def points(self) -> list[Point]:
         """Every run, grid point by grid point (the first axis slowest), seeds innermost; each scene
@@ -162,9 +170,10 @@ class Sweep:
 
         out = []
         for index in itertools.product(*(range(n) for n in self.shape)):
-            settings = {a.key: a.values[i] for a, i in zip(self.axes, index)}
+            at = [index[0]] * len(self.axes) if self.listed else index  # each axis' value of this point
+            settings = {a.key: a.values[i] for a, i in zip(self.axes, at)}
             overrides: dict = {}
-            for a, i in zip(self.axes, index):
+            for a, i in zip(self.axes, at):
                 overrides.setdefault(a.section, {})[a.name] = a.values[i]
             for seed in self.seeds:
                 scene = merge(merge(self.base, overrides), {"run": {"seed": seed}})
@@ -174,9 +183,35 @@ class Sweep:
         return tuple(out)
 
 
-def run_point(scene: dict, key: str) -> dict[str, Any]:
+DESIGNS = ("random", "lhs")
+"""Designs of sampled points (:func:`design`): uniform random, and Latin hypercube."""
+
+
+def design(kind: str, ranges: dict[str, tuple[float, float, bool]], n: int, seed: int = 0) -> tuple[Axis, ...]:
+    """``n`` points drawn in ``ranges`` (a scene key → ``(low, high, log)``; ``log``: uniform in the
+    logarithm), by ``kind``: ``random`` (independent uniform draws) or ``lhs`` (a Latin hypercube,
+    ``scipy.stats.qmc``: each range cut in ``n`` equal strata, one point in each), from ``seed`` —
+    as the axes of a listed :class:`Sweep`.  Values to 12 digits, as a scene file would hold them."""
+    from scipy.stats import qmc
+
+    if kind not in DESIGNS:
+        raise BarkError(f"design {kind!r}: one of {', '.join(DESIGNS)}")
+    keys = list(ranges)
+    unit = (qmc.LatinHypercube(d=len(keys), seed=seed).random(n) if kind == "lhs"
+            else np.random.default_rng(seed).random((n, len(keys))))
+    axes = []
+    for j, key in enumerate(keys):
+        lo, hi, log = ranges[key]
+        values = np.exp(np.log(lo) + unit[:, j] * (np.log(hi) - np.log(lo))) if log else lo + unit[:, j] * (hi - lo)
+        axes.append(Axis(key, tuple(float(f"{v:.12g}") for v in values)))
+    return tuple(axes)
+
+
+def run_point(scene: dict, key: str, folder: str | None = None) -> dict[str, Any]:
     """Run one point (in whatever process: a local worker or a Dask worker) and return its row and
-    its final pattern.  Pure: the same scene gives the same row, wherever it runs."""
+    its final pattern.  Pure: the same scene gives the same row, wherever it runs.  With ``folder``
+    the run also writes its outputs there, as ``bark simulate --out folder`` would (pictures drawn
+    in the worker)."""
     from bark.studies import runner
     from bark.units import unwrap
     from bark.analysis.pattern import simulation_colours
@@ -184,7 +219,7 @@ def run_point(scene: dict, key: str) -> dict[str, Any]:
 
     sc = Scene.from_dict(scene)
     start = time.perf_counter()
-    outcome = runner.run(sc, None)
+    outcome = runner.run(sc, folder, overwrite=True, checkpoint_every=0) if folder is not None else runner.run(sc, None)
     wall = time.perf_counter() - start
     sim = outcome.sim
     found = {**outcome.summary, **(outcome.summary.get("fracture") or {})}  # fracture: with the fracture-history effect
@@ -332,11 +367,13 @@ class SweepTable:
 
 
 def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=None,
-              progress: Callable[[int, int, Point | None], None] | None = None) -> dict:
+              progress: Callable[[int, int, Point | None], None] | None = None, run_folders: str | Path | None = None
+              ) -> dict:
     """Run every point of ``sweep`` not yet in ``database``; commit each as it finishes.  ``client``:
     a ``distributed.Client`` (Dask) to run on; else ``workers`` local processes.  ``progress(done,
-    total, point)`` is called at the start (point ``None``) and after each commit.  Returns counts:
-    ``total``, ``skipped`` (already in the table), ``ran``."""
+    total, point)`` is called at the start (point ``None``) and after each commit.  With
+    ``run_folders`` each run also writes its outputs into a folder of its own there, named by its key
+    (the table's ``key``).  Returns counts: ``total``, ``skipped`` (already in the table), ``ran``."""
     points = sweep.points()
     if workers < 1:
         raise BarkError("{0}: must be at least 1", Ref(None, "workers", workers))
@@ -352,7 +389,9 @@ def run_sweep(sweep: Sweep, database: str | Path, *, workers: int = 1, client=No
         by_key = {p.key: p for p in todo}
         # closing: a stop in the middle of a commit closes the runs' source at once (its workers end),
         # not when it is collected at the interpreter's exit, which would wait for them
-        with contextlib.closing(_on_dask(client, todo) if client is not None else _local(todo, workers)) as results:
+        folders = {p.key: None if run_folders is None else str(Path(run_folders) / p.key) for p in todo}
+        with contextlib.closing(_on_dask(client, todo, folders) if client is not None else _local(todo, workers, folders)) \
+                as results:
             for result in results:
                 table.commit(by_key[result["key"]], result)
                 counts["ran"] += 1
@@ -375,7 +414,7 @@ def check_fits(sweep: Sweep, workers: int) -> None:
         p.checked.check_memory(have, min(workers, len(points)))
 
 
-def _local(todo: list[Point], workers: int):
+def _local(todo: list[Point], workers: int, folders: dict):
     """Results as they finish, from ``workers`` worker processes (spawned: a clean interpreter, no
     threads or locks inherited from the caller)."""
     if not todo:
@@ -389,7 +428,7 @@ def _local(todo: list[Point], workers: int):
     try:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=_worker_start, initargs=(max(1, cores() // workers),))
-        pending = {pool.submit(run_point, p.scene, p.key) for p in todo}
+        pending = {pool.submit(run_point, p.scene, p.key, folders[p.key]) for p in todo}
     except OSError as err:  # the process limit (ulimit -u), or memory for another process
         raise OSError(err.errno, f"cannot start the sweep's worker processes ({err.strerror or err}): the "
                       "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
@@ -427,13 +466,13 @@ def _worker_start(threads: int) -> None:
     os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))
 
 
-def _on_dask(client, todo: list[Point]):
+def _on_dask(client, todo: list[Point], folders: dict):
     """Results as they finish, from the Dask cluster behind ``client`` (``distributed.as_completed``)."""
     if not todo:
         return
     from distributed import as_completed
 
-    futures = [client.submit(run_point, p.scene, p.key, key=f"bark-run-{p.key}", pure=False) for p in todo]
+    futures = [client.submit(run_point, p.scene, p.key, folders[p.key], key=f"bark-run-{p.key}", pure=False) for p in todo]
     try:
         for future in as_completed(futures):
             yield future.result()
