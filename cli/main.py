@@ -105,13 +105,14 @@ def _parse_set(items: tuple[str, ...]) -> tuple[dict, dict]:
     return out, raw
 
 
-def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kwargs: dict) -> Scene:
+def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kwargs: dict,
+                  pictures: dict | None = None) -> Scene:
     """The scene a command runs: file (or defaults) ← strategy names ← --set ← explicit options.
 
     A strategy named on the command line comes before ``--set``, so that ``--growth linear --set
     growth.G=0.05`` runs the linear law with G = 0.05 (a new strategy drops the parameters the scene
     file gave the old one, never those given here).  Errors from here on name settings as given."""
-    prov = Provenance()
+    prov = Provenance(aliases={("effects", "picture_format"): "--format", ("effects", "picture_dpi"): "--dpi"})
     NAMER.set(prov.name)
     sets, prov.set_items = _parse_set(sets)
     names = {s: {"name": n} for s, n in strategies.items() if n is not None}
@@ -124,7 +125,8 @@ def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kw
     set_stops = _command_line_stops(sets, options)
     for source, layer in (("option", names), ("--set", sets),
                           ("option", {"growth": {k: v for k, v in shortcuts.items() if v is not None}}),
-                          ("option", options)):
+                          ("option", options),
+                          ("option", {"effects": {k: v for k, v in (pictures or {}).items() if v is not None}})):
         data = merge(data, prov.add(source, layer))
     data.setdefault("run", {}).update(set_stops)  # beside the options' stop conditions, not replaced by them
     return Scene.from_dict(data)
@@ -209,8 +211,8 @@ def _pictures(signals: Signals, painter) -> dict:
 
     def submitted(kind, data_of):
         def draw(sim, scene, recorded, path):
-            wait, before = painter().submit(kind, data_of(sim, scene, recorded), path, scene.run.min_patch_size), \
-                signals.count
+            wait, before = painter().submit(kind, data_of(sim, scene, recorded), path, scene.run.min_patch_size,
+                                            scene.picture_dpi), signals.count
 
             def waited():  # a signal since it was handed over came while it was drawn: stop it now
                 with signals.draw():
@@ -284,7 +286,7 @@ def scene_of(params: dict) -> Scene:
     strategies = {kind: params[f"{kind}_name"] for kind in ("growth", "integrator", "breaker", "analyzer")}
     settings = {k: v for k, v in params.items() if "__" in k}  # the options generated from scene fields
     return resolve_scene(params["scene_file"], strategies, {"r0": params["r0"], "G": params["G"]}, params["sets"],
-                         settings)
+                         settings, {"picture_format": params["picture_format"], "picture_dpi": params["dpi"]})
 
 
 @cli.command(context_settings=CONTEXT)
@@ -314,9 +316,12 @@ def scene_of(params: dict) -> Scene:
                    "lines (0: one a step).")
 @click.option("--json", "as_json", is_flag=True, help="Print the run's summary as JSON on stdout (summary.json's "
               "content) instead of the table.")
+@click.option("--format", "picture_format", type=click.Choice(["png", "pdf", "svg"]), default=None,
+              help="Format of the still pictures (pattern.pdf, ...; the animation stays a GIF). [default: png]")
+@click.option("--dpi", type=click.IntRange(30, 1200), default=None, help="Resolution of the pictures, dots per inch. [default: 150]")
 @click.pass_context
 def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, overwrite,
-             resume, checkpoint_every, quiet, progress_every, as_json, **kwargs):
+             resume, checkpoint_every, quiet, progress_every, as_json, picture_format, dpi, **kwargs):
     """Grow the trunk and let the bark crack; write what the scene's effects ask for (by default
     pattern.png, patches.csv, breaks.csv, summary.json, state.npz, checkpoint.npz) to --out.
     Any --until-* option replaces the scene's stop conditions.  Ctrl-C or SIGTERM stops between

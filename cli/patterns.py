@@ -20,11 +20,41 @@ COMPARE_FILES = ("comparison.json", "quartets.png")
 """Every file ``bark compare`` may write into its --out."""
 
 
+def picture_options(command):
+    """``--format`` and ``--dpi``: the format and resolution of a command's pictures."""
+    command = click.option("--dpi", type=click.IntRange(30, 1200), default=150, show_default=True,
+                           help="Resolution of the pictures, dots per inch.")(command)
+    return click.option("--format", "picture_format", type=click.Choice(["png", "pdf", "svg"]), default="png",
+                        show_default=True, help="Format of the pictures.")(command)
+
+
+def in_formats(names: tuple) -> tuple:
+    """``names`` with every picture in every format: what a command owns, whichever it writes now."""
+    from bark.model.effects import PICTURE_FORMATS, in_format
+
+    return tuple(dict.fromkeys(in_format(n, fmt) for n in names for fmt in PICTURE_FORMATS))
+
+
+def pictured(writers: dict, picture_format: str, dpi: int) -> dict:
+    """``writers`` with each picture's name in ``picture_format`` and drawn at ``dpi``."""
+    from bark.model.effects import in_format
+    from bark_cli.plot import picture_dpi
+
+    def at_dpi(write):
+        def draw(path):
+            with picture_dpi(dpi):
+                return write(path)
+        return draw
+
+    return {in_format(name, picture_format): at_dpi(write) if name.endswith(".png") else write
+            for name, write in writers.items()}
+
+
 def _wrote(folder, owned: tuple, writers: dict) -> int:
     """``write_owned``, then say what was written; exit status 1 if a file could not be."""
     from bark_cli import write_owned
 
-    written = write_owned(folder, owned, writers)
+    written = write_owned(folder, in_formats(owned), writers)
     if written:
         click.echo(f"wrote {', '.join(written)} to {folder}")
     return 0 if len(written) == len(writers) else 1
@@ -70,7 +100,8 @@ def _statistics_table(stats):
               help="Patches with fewer leaf bases are left out. [default: the run's own, else 7]")
 @click.option("--out", default="bark-analysis", show_default=True, type=click.Path(file_okay=False),
               help="Folder for statistics.json, patches.csv, radial.png and histogram.png.")
-def analyze(pattern, min_size, out):
+@picture_options
+def analyze(pattern, min_size, out, picture_format, dpi):
     """Measure PATTERN (a run folder, a state .npz, a leaf-base .csv or a .toml summary): per-patch orientation and anisotropy (PCA), their
     means, SDs and standard errors; draws the radial plot and the orientation histogram (the
     paper's Fig. 6B, C / 7B, C)."""
@@ -91,7 +122,7 @@ def analyze(pattern, min_size, out):
 
             writers.update({"radial.png": lambda path: plot_radial(stats, path),
                             "histogram.png": lambda path: plot_histogram(stats, path)})
-    return _wrote(folder, ANALYZE_FILES, writers)
+    return _wrote(folder, ANALYZE_FILES, pictured(writers, picture_format, dpi))
 
 
 @click.command(context_settings=CONTEXT)
@@ -103,7 +134,8 @@ def analyze(pattern, min_size, out):
                    "for trees whose phyllotactic spiral turns the other way. Repeatable.")
 @click.option("--out", default="bark-compare", show_default=True, type=click.Path(file_okay=False),
               help="Folder for comparison.json and, for four patterns, quartets.png.")
-def compare(patterns, min_size, mirror, out):
+@picture_options
+def compare(patterns, min_size, mirror, out, picture_format, dpi):
     """Compare two or more PATTERNs (each a run folder, a state .npz, a leaf-base .csv or a .toml
     summary): Hellinger distances and
     d_P of orientation and of anisotropy (the paper's eqs. 12–15); for four, the quartet analyses
@@ -163,7 +195,7 @@ def compare(patterns, min_size, mirror, out):
         from bark_cli.figures import plot_quartets
 
         writers["quartets.png"] = lambda path: plot_quartets(result, path)
-    return _wrote(folder, COMPARE_FILES, writers)
+    return _wrote(folder, COMPARE_FILES, pictured(writers, picture_format, dpi))
 
 
 def _shared(q, names) -> str:

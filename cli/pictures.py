@@ -207,13 +207,21 @@ def writers() -> dict:
     pictures beside the run, in a ``Painter``'s processes)."""
     def writer(kind, data_of):
         def draw(sim, scene, recorded, path):
-            _draw(kind, data_of(sim, scene, recorded), str(path), scene.run.min_patch_size)
+            _draw(kind, data_of(sim, scene, recorded), str(path), scene.run.min_patch_size, scene.picture_dpi)
         return draw
 
     return {effect: (name, writer(kind, data_of)) for effect, (name, kind, data_of) in PICTURES.items()}
 
 
-def _draw(kind: str, data, path: str, min_size: int) -> None:
+def _draw(kind: str, data, path: str, min_size: int, dpi: int | None = None) -> None:
+    """Draw ``data`` as the picture ``kind`` into ``path`` (its suffix the format), at ``dpi``."""
+    from bark_cli.plot import picture_dpi
+
+    with picture_dpi(dpi):
+        _draw_kind(kind, data, path, min_size)
+
+
+def _draw_kind(kind: str, data, path: str, min_size: int) -> None:
     if kind == "pattern":
         from bark_cli.plot import plot_pattern
 
@@ -384,16 +392,16 @@ class Painter:
             finally:
                 job.done.set()
 
-    def submit(self, kind: str, data, path: Path, min_size: int):
+    def submit(self, kind: str, data, path: Path, min_size: int, dpi: int | None = None):
         """Hand ``data`` (``PatternData``, ``TreeData``, ``Frames``, ...) to a drawing process and
         return at once with a ``wait()`` that ends when the picture is written: the command writes
         its other outputs meanwhile.  ``wait`` raises what drawing raised (an ``OSError`` where the
         file system refused the file, else a ``RuntimeError`` naming it), or ``KeyboardInterrupt`` if
         a signal stopped it.  Without a drawing process, draws now."""
         if self._proc is None:
-            _draw(kind, data, str(path), min_size)
+            _draw(kind, data, str(path), min_size, dpi)
             return lambda stop=False: None
-        job = _Job(args=(kind, data, str(path), min_size))
+        job = _Job(args=(kind, data, str(path), min_size, dpi))
         self._jobs.put(job)
 
         def wait(stop: bool = False) -> None:

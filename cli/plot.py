@@ -9,6 +9,8 @@ fragments are grey.  Uses matplotlib's object API with the Agg canvas (no pyplot
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import io
 from pathlib import Path
 
@@ -104,11 +106,31 @@ def draw_pattern(ax, data, min_size: int = 7, title: str | None = None) -> None:
                  f"units), {patches(data.n_patches)} of ≥ {min_size} bases, {data.n_broken} broken springs", fontsize=8)
 
 
+NO_DATE = {"pdf": {"CreationDate": None}, "svg": {"Date": None}}
+"""What keeps a PDF's or SVG's time of writing out of it: the same figure, the same file."""
+DPI: contextvars.ContextVar[int | None] = contextvars.ContextVar("dpi", default=None)
+"""The resolution pictures are saved at (``picture_dpi``); ``None``: each figure's own."""
+
+
+@contextlib.contextmanager
+def picture_dpi(dpi: int | None):
+    """Pictures saved within are saved at ``dpi`` (dots per inch; ``None``: each figure's own)."""
+    token = DPI.set(dpi)
+    try:
+        yield
+    finally:
+        DPI.reset(token)
+
+
 def save_figure(fig: Figure, path: str | Path, fast: bool = True) -> Path:
-    """Write ``fig`` as a PNG to ``path`` atomically (drawn whole in memory first: no half-written
-    picture); ``fast``: zlib level 1 (``FAST_PNG``)."""
+    """Write ``fig`` to ``path`` atomically (drawn whole in memory first: no half-written picture), in
+    the format its suffix names (png, pdf, svg), at ``picture_dpi``'s resolution; a PNG with
+    ``fast``: zlib level 1 (``FAST_PNG``)."""
+    fmt = Path(path).suffix.lstrip(".").lower() or "png"
+    dpi = DPI.get()
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight", pil_kwargs=FAST_PNG if fast else None)
+    extra = {"pil_kwargs": FAST_PNG} if fast and fmt == "png" else {"metadata": NO_DATE[fmt]} if fmt in NO_DATE else {}
+    fig.savefig(buf, format=fmt, bbox_inches="tight", dpi=dpi if dpi is not None else "figure", **extra)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
 

@@ -13,6 +13,7 @@ import click
 
 from bark.errors import BarkError
 from bark_cli.options import setting_value, split_setting, value_text
+from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 MONTAGE_CELLS = 400
@@ -136,8 +137,9 @@ def parse_ranges(items: tuple[str, ...]) -> dict:
 @click.option("--run-folders", is_flag=True,
               help="Each run also writes its outputs (as bark simulate does) into --out/runs/KEY, KEY its row's key.")
 @click.option("--quiet", is_flag=True, help="No progress bar and no table.")
+@picture_options
 def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, sets, seeds, workers, dask_address, out,
-          run_folders, quiet):
+          run_folders, quiet, picture_format, dpi):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
@@ -185,10 +187,10 @@ def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, 
         check_fits(plan, workers or 1)
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:  # one sweep at a time in a folder
-        _sweep(plan, held.path, workers, client, quiet, held.path / "runs" if run_folders else None)
+        _sweep(plan, held.path, workers, client, quiet, held.path / "runs" if run_folders else None, (picture_format, dpi))
 
 
-def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None) -> None:
+def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, pictures=("png", 150)) -> None:
     from bark.studies.sweep import WorkerDied, run_sweep
     from bark_cli.main import Signals
 
@@ -214,7 +216,7 @@ def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None) -> None
                 bar.close()
             if client is not None:
                 client.close()
-    _finish(plan, folder, counts, quiet)
+    _finish(plan, folder, counts, quiet, pictures)
 
 
 def _dask_client(address: str):
@@ -269,8 +271,9 @@ class _bar:
         self.progress.stop()
 
 
-def _finish(plan, folder, counts: dict, quiet: bool) -> None:
+def _finish(plan, folder, counts: dict, quiet: bool, pictures=("png", 150)) -> None:
     from bark.studies.sweep import SweepTable
+    from bark.model.effects import in_format
     from bark_cli import write_owned
     from bark_cli.figures import plot_montage
 
@@ -284,10 +287,11 @@ def _finish(plan, folder, counts: dict, quiet: bool) -> None:
                 if plot_montage(plan, points, by_key, table, path) is None:
                     path.unlink(missing_ok=True)
 
-            write_owned(folder, ("montage.png",), {"montage.png": montage})
-            drawn = folder / "montage.png" if (folder / "montage.png").exists() else None
+            name = in_format("montage.png", pictures[0])
+            write_owned(folder, in_formats(("montage.png",)), pictured({"montage.png": montage}, *pictures))
+            drawn = folder / name if (folder / name).exists() else None
         else:  # no montage for more axes or cells: none of an earlier sweep's is left to mislead
-            write_owned(folder, ("montage.png",), {})
+            write_owned(folder, in_formats(("montage.png",)), {})
     if not quiet:
         from rich.console import Console
         from rich.table import Table

@@ -252,3 +252,28 @@ def test_animation_writes_one_frame_per_trigger(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["development.gif", "scene.toml", "summary.json"]
     with Image.open(out / "development.gif") as gif:
         assert gif.n_frames == 5  # due at t = 0, 2, 4, 6, 8
+
+
+def test_pictures_come_in_the_format_and_resolution_asked_for(tmp_path):
+    """--format pdf|svg writes every still picture so (the animation stays a GIF), --dpi sets a PNG's
+    size, and a run in one format leaves none of an earlier run's pictures in another."""
+    from PIL import Image
+
+    from bark_cli.main import cli
+
+    out = tmp_path / "out"
+    base = ["simulate", "--n-bases", "400", "--until-time", "20", "--quiet", "--out", str(out)]
+    sizes = {}
+    for dpi in (60, 120):
+        assert CliRunner().invoke(cli, [*base, "--dpi", str(dpi)]).exit_code == 0
+        with Image.open(out / "pattern.png") as image:
+            sizes[dpi] = image.size
+    assert sizes[120][0] == pytest.approx(2 * sizes[60][0], rel=0.05)
+    result = CliRunner().invoke(cli, [*base, "--format", "pdf"])
+    assert result.exit_code == 0, result.output
+    assert (out / "pattern.pdf").read_bytes().startswith(b"%PDF") and not (out / "pattern.png").exists()
+    result = CliRunner().invoke(cli, [*base, "--format", "svg"])
+    assert result.exit_code == 0, result.output
+    assert b"<svg" in (out / "pattern.svg").read_bytes()[:500] and not (out / "pattern.pdf").exists()
+    result = CliRunner().invoke(cli, [*base, "--format", "bmp"])
+    assert result.exit_code == 2 and "--format" in result.stderr

@@ -33,7 +33,7 @@ import numpy as np
 
 from bark.model import effects
 from bark.contract import registry
-from bark.validators import MISSING, construct, optional, positive
+from bark.validators import MISSING, construct, int_in, one_of, optional, positive
 from bark.paths import NotARegularFile, open_regular
 from bark.errors import BarkError, BarkWarning, Ref
 from bark.model.forces import Mechanics
@@ -131,6 +131,10 @@ class EffectSettings:
     tree_every: float | None = attrs.field(default=None, validator=optional(positive))
     """With the ``tree-series`` effect: simulated time between two of its pictures of the tree; none:
     a quarter of the run's ``until_time`` (five ages, from its start to its end)."""
+    picture_format: str = attrs.field(default="png", validator=one_of(*effects.PICTURE_FORMATS))
+    """The format of the run's still pictures: png, pdf or svg (pattern.pdf, ...; the animation stays a GIF)."""
+    picture_dpi: int = attrs.field(default=150, validator=int_in(30, 1200))
+    """Resolution of the pictures, dots per inch (for png; pdf and svg keep their vectors, rasters at it)."""
 
 
 MEMORY = {"fixed": 300 * 2**20, "per_base": 800, "per_spring": 400, "per_base_image": 4000}
@@ -245,6 +249,10 @@ class Scene:
     """Side of the windows of summary.json's ``windows`` (length units; ``EffectSettings.window``)."""
     tree_every: float | None = None
     """With the ``tree-series`` effect: simulated time between two pictures (``EffectSettings.tree_every``)."""
+    picture_format: str = "png"
+    """The still pictures' format (``EffectSettings.picture_format``)."""
+    picture_dpi: int = 150
+    """The pictures' resolution, dots per inch (``EffectSettings.picture_dpi``)."""
     dome: Dome = attrs.field(factory=Dome)
     """The apical dome's profile (``bark.model.tree.Dome``): drawn in tree.png."""
     leaves: Leaves = attrs.field(factory=Leaves)
@@ -336,6 +344,8 @@ class Scene:
             history_every=eff.history_every,
             window=eff.window,
             tree_every=eff.tree_every,
+            picture_format=eff.picture_format,
+            picture_dpi=eff.picture_dpi,
             **parts,
         )
 
@@ -419,7 +429,8 @@ class Scene:
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **_plain(strategy.params())}
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
-                          "history_every": self.history_every, "window": self.window, "tree_every": self.tree_every}
+                          "history_every": self.history_every, "window": self.window, "tree_every": self.tree_every,
+                          "picture_format": self.picture_format, "picture_dpi": self.picture_dpi}
         return out
 
 

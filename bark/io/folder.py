@@ -28,7 +28,7 @@ from typing import Callable
 from bark.io.checkpoint import CHECKPOINT_NAME, PREVIOUS_NAME, Damaged, read_meta
 from bark.errors import BarkError, Ref
 from bark.io.files import TMP_SUFFIX, temp_name_prefix
-from bark.model.effects import EFFECTS
+from bark.model.effects import EFFECTS, PICTURE_FORMATS, in_format
 
 try:
     import fcntl
@@ -38,9 +38,10 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 __all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
 
 RUN_FILES = ("summary.json", "scene.toml", "report.html",
-             *dict.fromkeys(f for effect in EFFECTS.values() for f in effect.files))
+             *dict.fromkeys(in_format(f, fmt) for effect in EFFECTS.values() for f in effect.files
+                            for fmt in PICTURE_FORMATS))
 """Every file a run may write: summary.json, scene.toml, the report ``bark report`` writes about it and
-each effect's files (``Effect.files``; a
+each effect's files in every picture format (``Effect.files``; a
 name may be a pattern in a folder of the run's, such as the history's ``history/tree-*.vtu``).  A fresh
 run removes these (and only these) from its folder."""
 

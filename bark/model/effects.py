@@ -20,7 +20,17 @@ import attrs
 
 from bark.errors import BarkError
 
-__all__ = ["Effect", "EFFECTS", "DEFAULT", "resolve"]
+__all__ = ["Effect", "EFFECTS", "DEFAULT", "resolve", "PICTURE_FORMATS", "in_format"]
+
+PICTURE_FORMATS = ("png", "pdf", "svg")
+"""The formats a run's still pictures may be written in (``[effects] picture_format``)."""
+
+
+def in_format(name: str, picture_format: str) -> str:
+    """A still picture's file ``name`` (``pattern.png``) in ``picture_format`` (``pattern.pdf``); an
+    animation (``.gif``) stays as it is."""
+    stem, dot, suffix = name.rpartition(".")
+    return f"{stem}.{picture_format}" if dot and suffix == "png" else name
 
 
 @attrs.frozen

@@ -43,6 +43,7 @@ from bark.errors import BarkError, NonFiniteStateError, one_line
 from bark.io.files import attempt
 from bark.io.folder import OutputFolder
 from bark.io.history import History
+from bark.model.effects import in_format
 from bark.io.recorders import Dissipation
 from bark.io.recorders import Frames, StatisticsSeries, TreeFrames
 from bark.io.output import run_summary, write_run
@@ -230,10 +231,12 @@ def _pictures_begun(pictures: dict | None, sim, scene, recorded: dict, out: Path
     for effect, files in drawn_by.items():
         if effect not in (pictures or {}):
             for name in files:
-                begun.append((name, BarkError(f"nothing installed draws {effect!r} (bark_cli's bark.pictures entry point)")))
+                begun.append((in_format(name, scene.picture_format),
+                              BarkError(f"nothing installed draws {effect!r} (bark_cli's bark.pictures entry point)")))
     for effect, (name, draw) in (pictures or {}).items():
         if not scene.has(effect):
             continue
+        name = in_format(name, scene.picture_format)  # pattern.png, or pattern.pdf ...
         try:
             wait = draw(sim, scene, recorded, out / name)
         except Exception as err:
