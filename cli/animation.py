@@ -39,8 +39,8 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
     ax.set_xlim(0, width)
     ax.set_ylim(z.min() - 0.01 * height, z.max() + 0.01 * height)
     ax.set_aspect(shown / aspect)
-    ax.set_xlabel("arc length r·θ")
-    ax.set_ylabel("height z")
+    ax.set_xlabel("arc length r·θ (length units; 1 = 0.3 m)")
+    ax.set_ylabel("height z (length units)")
     title = ax.set_title(" ", fontsize=9)
     n = max(uv.shape[0] for _, _, uv, _ in frames.frames)
     draw = _dots if n <= SPRINGS_UP_TO else _cells
@@ -51,7 +51,10 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
 
 
 def _caption(t: float, r: float, labels: np.ndarray, min_size: int) -> str:
-    return f"t = {t:.1f}   r = {r:.3f}   {patches(count_patches(labels, min_size))}"
+    from bark.units import metres, years
+
+    return (f"t = {t:.1f} ({years(t):.1f} years)   r = {r:.3f} ({100 * metres(r):.1f} cm)   "
+            f"{patches(count_patches(labels, min_size))}")
 
 
 def _dots(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.Image]:

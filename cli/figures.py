@@ -129,7 +129,8 @@ def draw_histogram(ax, stats: PatternStatistics) -> None:
     step = max(1, int(np.ceil(top / 5)))
     ax.set_yticks(np.arange(step, top + 1, step))
     ax.tick_params(labelsize=7)
-    ax.set_title(f"{stats.name}: patches per 18° of orientation (0° horizontal, 90° up the trunk)", fontsize=8)
+    ax.set_title(f"{stats.name}: patches (bar length) per 18° of orientation (0° horizontal, 90° up the trunk)",
+                 fontsize=8)
 
 
 def plot_histogram(stats: PatternStatistics, path: str | Path) -> Path:
@@ -192,13 +193,17 @@ def _pairing_panel(ax, comparison: Comparison, quantity: str) -> None:
 
 def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
     """Fig. 8D–G for four patterns into ``path``: a row per quantity, Hellinger quartet then d_P."""
-    fig = new_figure(figsize=(10.0, 9.0), dpi=120)
-    axes = fig.subplots(len(QUANTITIES), 2)
-    for row, quantity in zip(axes, QUANTITIES):
+    given = [q for q in QUANTITIES if comparison.quartets[q] is not None or comparison.pairings[q] is not None]
+    shown = given or list(QUANTITIES)  # a quantity no pattern's figures give has no row: a note says so
+    fig = new_figure(figsize=(10.0, 4.5 * len(shown) + 0.5), dpi=120, layout="constrained")
+    axes = np.atleast_2d(fig.subplots(len(shown), 2, squeeze=False))
+    for row, quantity in zip(axes, shown):
         _quartet_panel(row[0], comparison, quantity)
         _pairing_panel(row[1], comparison, quantity)
+    missing = [q for q in QUANTITIES if q not in shown]
     fig.suptitle("quartet analysis (blue, solid: the two shortest edges / each pattern's nearest, bold; orange, "
-                 "dashed: the third; grey, dotted: the three longest)", fontsize=9)
+                 "dashed: the third; grey, dotted: the three longest)"
+                 + (f"\nno {', '.join(missing)}: a pattern's figures do not give it" if missing else ""), fontsize=9)
     return save_figure(fig, path)
 
 
@@ -261,22 +266,25 @@ def plot_fracture_history(history, path: str | Path) -> Path:
     fig = new_figure(figsize=(7.0, 5.6), dpi=130)
     top, bottom = fig.subplots(2, 1, sharex=True)
     top.plot(t, s["n_broken"], color="0.3", lw=1.2, label="broken springs")
-    top.plot(t, s["n_cracks"], color="crimson", lw=1.2, label="cracks")
+    top.plot(t, s["n_cracks"], color=THIRD, lw=1.2, ls="--", label="cracks")
     if history.first_break_t is not None:
         for ax in (top, bottom):
             ax.axvspan(years(history.first_break_t), years(history.initial_fractures_t), color="gold", alpha=0.25, lw=0)
-        top.plot([years(history.initial_fractures_t)], [history.initial_fractures], "o", color="crimson", ms=4,
+        top.plot([years(history.initial_fractures_t)], [history.initial_fractures], "o", color=THIRD, ms=4,
                  label=f"initial fractures: {history.initial_fractures}")
     top.set_ylabel("count")
     top.legend(fontsize=7, frameon=False)
-    bottom.plot(t, s["n_patches"], color="tab:blue", lw=1.2)
-    bottom.set_ylabel("patches", color="tab:blue")
+    bottom.plot(t, s["n_patches"], color=NEAR, lw=1.2, label="patches")
+    bottom.set_ylabel("patches", color=NEAR)
     bottom.yaxis.set_major_locator(MaxNLocator(integer=True))
     power = bottom.twinx()
-    power.plot(t, s["dissipation"], color="tab:orange", lw=1.0)
-    power.set_ylabel("damping power per base", color="tab:orange")
+    power.plot(t, s["dissipation"], color=THIRD, lw=1.0, ls="--", label="damping power per base")
+    power.set_ylabel("damping power per base\n(force × length / time unit)", color=THIRD)
     if history.dissipation_rate is not None:
-        power.axhline(history.dissipation_rate, color="tab:orange", ls=":", lw=1.0)
+        power.axhline(history.dissipation_rate, color=THIRD, ls=":", lw=1.0,
+                      label=f"its mean over the initial fracture phase: {history.dissipation_rate:.3g}")
+    handles = [h for ax in (bottom, power) for h in ax.get_legend_handles_labels()[0]]
+    bottom.legend(handles=handles, fontsize=7, frameon=False, loc="upper left")
     bottom.set_xlabel("time (years)")
     top.set_title("fracture history (shaded: first break to the most cracks)", fontsize=9)
     return save_figure(fig, path)

@@ -58,6 +58,20 @@ class PatternData:
                    springs=np.asarray(s.pairs[s.intact]), cracks=np.asarray(s.pairs[~s.intact]),
                    n_bases=s.n_bases, radius=r, t=s.t, n_patches=sim.patch_count(min_size), n_broken=sim.n_broken)
 
+    @classmethod
+    def of_state(cls, path, min_size: int) -> "PatternData":
+        """The pattern of a run's ``state.npz`` (or a run's folder), without its simulation."""
+        from bark.analysis.pattern import patch_colours
+        from bark.model.graph import count_patches
+
+        path = Path(path)
+        with np.load(path / "state.npz" if path.is_dir() else path, allow_pickle=False) as d:
+            x, labels, pairs, intact, t = d["x"], d["labels"], d["pairs"], d["intact"], float(d["t"])
+        r = float(np.mean(np.hypot(x[:, 0], x[:, 1])))
+        return cls(uv=unwrap(x, r), labels=labels, colours=patch_colours(labels, min_size, pairs, intact),
+                   springs=pairs[intact], cracks=pairs[~intact], n_bases=len(x), radius=r, t=t,
+                   n_patches=count_patches(labels, min_size), n_broken=int((~intact).sum()))
+
 
 @attrs.frozen
 class TreeData:

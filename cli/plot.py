@@ -190,13 +190,13 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
     dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""
     from bark.studies.accuracy import METRICS
 
-    fig = new_figure(figsize=(13, 9), dpi=120)
+    fig = new_figure(figsize=(13, 9.5), dpi=120, layout="constrained")
     axes = fig.subplots(2, 2).ravel()
-    names = {
-        "error": "(a) max position error, no breaking",
-        "broken_rel_diff": "(b) |Δ broken springs| / reference",
-        "patch_count_diff": "(b) |Δ patch count|",
-        "hellinger": "(b) Hellinger distance of orientations",
+    names = {  # each panel's title and its error axis' label
+        "error": ("(a) positions, no breaking: against the reference solution", "max position error (length units)"),
+        "broken_rel_diff": ("(b) broken springs, against the fine-dt reference", "|Δ broken springs| / reference"),
+        "patch_count_diff": ("(c) patch count, against the fine-dt reference (0 drawn at 0.1)", "|Δ patches of ≥ 7 bases|"),
+        "hellinger": ("(d) orientations, against the fine-dt reference", "Hellinger distance of the orientations"),
     }
 
     methods = list(dict.fromkeys(r["method"] for r in [*pos_rows, *pat_rows]))
@@ -221,13 +221,15 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
     for ax, key in zip(axes[1:], METRICS):
         floor = 1e-4 if key != "patch_count_diff" else 0.1
         lines(ax, pat_rows, key, floor)
-        if np.isfinite(spread[key]) and spread[key] > floor:
-            ax.axhspan(floor, spread[key], color="0.85", zorder=0, label="within seed-to-seed spread")
+        if np.isfinite(spread[key]) and spread[key] > floor:  # the seeds' own spread: a line, not a band over the panel
+            ax.axhline(spread[key], color="0.35", ls="--", lw=1.0, zorder=0,
+                       label=f"seed-to-seed spread ({spread[key]:.3g}): below it, no error that matters")
     for ax, key in zip(axes, ["error", *METRICS]):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("wall time (s)")
-        ax.set_title(names[key], fontsize=10)
+        ax.set_title(names[key][0], fontsize=10)
+        ax.set_ylabel(names[key][1], fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)

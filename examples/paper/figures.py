@@ -55,27 +55,23 @@ def regime_runs(out: Path) -> dict[str, Path]:
 
 
 def fig7(out: Path, workers: int) -> None:
-    import matplotlib.image as mpimg
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    """Fig. 7: a row per regime — its pattern, radial plot and orientation histogram — drawn as
+    vectors into one figure (fig7.pdf; fig7.png beside it)."""
+    from bark.analysis.pattern import read
+    from bark_cli.figures import draw_histogram, draw_radial
+    from bark_cli.pictures import PatternData
+    from bark_cli.plot import draw_pattern, new_figure, save_figure
 
     runs = regime_runs(out)
-    cells = []
-    for name, run in runs.items():
-        bark("analyze", str(run), "--out", str(out / "analysis" / name))
-        cells.append((name, [run / "pattern.png", out / "analysis" / name / "radial.png",
-                             out / "analysis" / name / "histogram.png"]))
-    fig = Figure(figsize=(15, 4.6 * len(cells)), dpi=100)
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(len(cells), 3)
-    for row, (name, paths) in zip(axes, cells):
-        for ax, path in zip(row, paths):
-            ax.imshow(mpimg.imread(path))
-            ax.set_axis_off()
-        row[0].set_title(name, loc="left", fontsize=14)
-    fig.tight_layout()
-    fig.savefig(out / "fig7.png")
-    print(f"Fig. 7: {out / 'fig7.png'} (rows: {', '.join(runs)}; columns: pattern, radial plot, histogram)")
+    fig = new_figure(figsize=(15, 4.8 * len(runs)), layout="constrained")
+    for k, (name, run) in enumerate(runs.items()):
+        stats = read(run)
+        draw_pattern(fig.add_subplot(len(runs), 3, 3 * k + 1), PatternData.of_state(run, 7), 7, title=name)
+        draw_radial(fig.add_subplot(len(runs), 3, 3 * k + 2, projection="polar"), stats)
+        draw_histogram(fig.add_subplot(len(runs), 3, 3 * k + 3, projection="polar"), stats)
+    for name in ("fig7.pdf", "fig7.png"):
+        save_figure(fig, out / name)
+    print(f"Fig. 7: {out / 'fig7.pdf'} and .png (rows: {', '.join(runs)}; columns: pattern, radial plot, histogram)")
 
 
 def fig8(out: Path, workers: int) -> None:
