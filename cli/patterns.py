@@ -10,6 +10,7 @@ is written.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import click
 
@@ -113,8 +114,12 @@ def analyze(pattern, min_size, out, picture_format, dpi):
     _namer()
     (stats,) = _read_all([pattern], min_size)
     folder = writable_folder(out)
-    Console(width=150).print(_statistics_table([stats]))
-    writers = {"statistics.json": lambda path: write_json(path, stats.as_dict())}
+    console = Console(width=150)
+    console.print(_statistics_table([stats]))
+    network = _network(Path(pattern), stats, min_size)
+    if network is not None:
+        console.print("  beyond the paper: " + _network_line(network))
+    writers = {"statistics.json": lambda path: write_json(path, {**stats.as_dict(), "network": network})}
     if stats.patches is not None:
         writers["patches.csv"] = lambda path: write_csv(path, stats.patches.rows(), stats.patches.columns)
         if stats.n_patches:
@@ -123,6 +128,40 @@ def analyze(pattern, min_size, out, picture_format, dpi):
             writers.update({"radial.png": lambda path: plot_radial(stats, path),
                             "histogram.png": lambda path: plot_histogram(stats, path)})
     return _wrote(folder, ANALYZE_FILES, pictured(writers, picture_format, dpi))
+
+
+def _network(path: Path, stats, min_size: int | None) -> dict | None:
+    """The statistics beyond the paper's of the pattern at ``path``: its patch sizes (any pattern with
+    patches), and its crack network where it has springs (a run's folder or state file)."""
+    import json
+
+    import numpy as np
+
+    from bark.analysis.network import of_state, size_distribution
+
+    if stats.patches is None:
+        return None
+    state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
+    if min_size is None:  # the run's own, as the statistics took it
+        summary = path / "summary.json" if path.is_dir() else path.parent / "summary.json"
+        try:
+            min_size = int(json.loads(summary.read_text())["stop"]["min_patch_size"])
+        except (OSError, ValueError, KeyError, TypeError):
+            min_size = 7
+    out = size_distribution(stats.patches.size, min_size)
+    if state is not None:
+        with np.load(state, allow_pickle=False) as d:
+            if {"x", "labels", "pairs", "intact"} <= set(d.files):
+                out.update(of_state(d["x"], d["labels"], d["pairs"], d["intact"], min_size))
+    return out
+
+
+def _network_line(net: dict) -> str:
+    text = f"sizes {_fmt(net['size_mean'])} ± {_fmt(net['size_sd'])} bases, best fit {net['size_favoured'] or '—'}"
+    if "n_bar" in net:
+        text += (f"; junctions {net['n_junctions']}, n̄ {_fmt(net['n_bar'])}, v̄ {_fmt(net['v_bar'])}, T "
+                 f"{_fmt(net['t_fraction'], 2)}; crack order {_fmt(net['nematic_order'], 2)} at {_fmt(net['crack_director_deg'])}°")
+    return text
 
 
 @click.command(context_settings=CONTEXT)

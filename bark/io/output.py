@@ -125,6 +125,21 @@ def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> di
             "initial_trunk": None if old is None else region_summaries(sim, old, every[every != YOUNG], labels, False)}
 
 
+def network_summary(sim, rows: list[dict], min_size: int) -> dict | None:
+    """The pattern's statistics beyond the paper's (``bark.analysis.network``): its patch sizes, its
+    crack network's junctions and their angles, the cracks' alignment and their bias to the lattice's
+    springs — on the trunk unrolled at its mean radius; ``None`` for a lattice without two offsets."""
+    from bark.analysis.network import crack_network, size_distribution
+    from bark.units import unwrap
+
+    if len(sim.lattice.offsets) != 2:
+        return None
+    s, r = sim.state, sim.radius
+    return {**size_distribution([row["size"] for row in rows], min_size),
+            **crack_network(unwrap(s.x, r), sim.patch_labels(), s.pairs, s.intact, sim.lattice.offsets, min_size,
+                            period=2.0 * np.pi * r)}
+
+
 LAST_JOINED = 2000
 """Bases that joined last, on which summary.json's ``phyllotaxis.last_joined`` is measured."""
 
@@ -191,6 +206,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "regions": region_summaries(sim, rows, every, labels) if every is not None else None,
         "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
+        "network": network_summary(sim, rows, scene.run.min_patch_size) if rows is not None else None,
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
         **(extra or {}),
         "wall_time_s": wall_time_s,

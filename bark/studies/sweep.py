@@ -58,11 +58,15 @@ RESULT_COLUMNS = {
     "n_bases": "INTEGER", "t": "REAL", "radius": "REAL", "steps": "INTEGER", "n_broken": "INTEGER",
     "n_patches": "INTEGER", "largest_patch_share": "REAL", **dict.fromkeys(PATTERN_KEYS, "REAL"), "stop_reason": "TEXT", "first_break_t": "REAL",
     "initial_fractures": "INTEGER", "dissipation_rate": "REAL", "growth_dissipation": "REAL", "regions": "TEXT",
+    "size_mean": "REAL", "powerlaw_alpha": "REAL", "lognormal_mu": "REAL", "lognormal_sigma": "REAL",
+    "size_favoured": "TEXT", "n_bar": "REAL", "v_bar": "REAL", "t_fraction": "REAL", "nematic_order": "REAL",
+    "crack_director_deg": "REAL",
 }
 """What the table holds of each run besides its identity, by SQLite type: the keys of the run's
-summary (summary.json) of these names, and of its ``fracture`` part (the ``fracture-history`` effect;
-else empty); ``regions`` is summary.json's per-region statistics as JSON text (none for a trunk
-without regions), read in SQL by ``json_extract(regions, '$.straight.circular_sd_deg')``."""
+summary (summary.json) of these names, of its ``fracture`` part (the ``fracture-history`` effect;
+else empty) and of its ``network`` part (the statistics beyond the paper's); ``regions`` is
+summary.json's per-region statistics as JSON text (none for a trunk without regions), read in SQL
+by ``json_extract(regions, '$.straight.circular_sd_deg')``."""
 
 
 MAX_RUNS = 1_000_000
@@ -222,7 +226,8 @@ def run_point(scene: dict, key: str, folder: str | None = None) -> dict[str, Any
     outcome = runner.run(sc, folder, overwrite=True, checkpoint_every=0) if folder is not None else runner.run(sc, None)
     wall = time.perf_counter() - start
     sim = outcome.sim
-    found = {**outcome.summary, **(outcome.summary.get("fracture") or {})}  # fracture: with the fracture-history effect
+    found = {**outcome.summary, **(outcome.summary.get("fracture") or {}),  # fracture: with the fracture-history effect
+             **(outcome.summary.get("network") or {})}
     row = {k: found.get(k) for k in RESULT_COLUMNS}  # the run's own summary: its analyzer's statistics
     row["regions"] = json_text(row["regions"]) if row["regions"] is not None else None
     return {"key": key, "row": row, "wall_s": wall, "uv": unwrap(sim.state.x, sim.radius).astype(np.float32),
