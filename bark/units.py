@@ -12,7 +12,21 @@ DAYS_PER_TIME_UNIT = 88.5
 METRES_PER_LENGTH_UNIT = 0.3
 DAYS_PER_YEAR = 365.25
 
-__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "years", "metres", "unwrap"]
+__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "COLUMN_UNITS", "headed", "years", "metres", "unwrap"]
+
+COLUMN_UNITS = {"t": "tu", "radius": "lu", "z": "lu", "lambda1": "lu2", "lambda2": "lu2", "tension": "fu",
+                "dissipation": "fu_lu_per_tu"}
+"""The unit a table column carries in its name (CSV files and DataFrames): ``tu`` time units, ``lu``
+length units, ``lu2`` length units squared, ``fu`` force units (a spring's ``k`` is in force units per
+length unit), ``fu_lu_per_tu`` power; a name ending ``_deg`` is in degrees, and a name with no unit is
+a count, an index or a pure number.  In memory (``arrays()``, ``rows()``) the columns go by their
+short names."""
+
+
+def headed(columns, units: dict[str, str] = COLUMN_UNITS) -> list[str]:
+    """A table's header: each column's short name with its unit (:data:`COLUMN_UNITS`) appended,
+    ``t`` → ``t_tu``; a column with no unit as it is."""
+    return [f"{c}_{units[c]}" if c in units else c for c in columns]
 
 
 def years(t):

@@ -23,14 +23,16 @@ from PIL import Image, ImageDraw, ImageFont
 from bark.model.graph import count_patches
 from bark.io.recorders import Frames
 from bark.io.files import atomic_write
-from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, patch_colours, patches, raster_values
+from bark.analysis.pattern import rgb
+from bark.units import metres
+from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, patches, raster_values, rgba
 
 
 def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
     if not frames.frames:
         raise ValueError("no frames recorded")
-    width = max(2 * np.pi * r for _, r, _, _ in frames.frames)
-    z = np.concatenate([uv[:, 1] for _, _, uv, _ in frames.frames])
+    width = metres(max(2 * np.pi * r for _, r, _, _ in frames.frames))
+    z = metres(np.concatenate([uv[:, 1] for _, _, uv, _ in frames.frames]))
     height = float(np.ptp(z)) or width
     aspect = height / width
     shown = min(max(aspect, MIN_ASPECT), MAX_ASPECT)
@@ -39,8 +41,8 @@ def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8)
     ax.set_xlim(0, width)
     ax.set_ylim(z.min() - 0.01 * height, z.max() + 0.01 * height)
     ax.set_aspect(shown / aspect)
-    ax.set_xlabel("arc length r·θ (length units; 1 = 0.3 m)")
-    ax.set_ylabel("height z (length units)")
+    ax.set_xlabel("arc length r·θ (m)")
+    ax.set_ylabel("height z (m)")
     title = ax.set_title(" ", fontsize=9)
     n = max(uv.shape[0] for _, _, uv, _ in frames.frames)
     draw = _dots if n <= SPRINGS_UP_TO else _cells
@@ -63,15 +65,15 @@ def _dots(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.I
     fig.canvas.draw()  # the axes, their ticks and labels, once: each frame draws only its pattern and title over them
     background = fig.canvas.copy_from_bbox(fig.bbox)
     images = []
-    for t, r, uv, labels in frames.frames:
-        points.set_offsets(uv)
-        points.set_color(patch_colours(labels, min_size))
+    for k, (t, r, uv, labels) in enumerate(frames.frames):
+        points.set_offsets(metres(uv))
+        points.set_color(rgba(rgb(frames.colour_index(k, min_size))))
         title.set_text(_caption(t, r, labels, min_size))
         fig.canvas.restore_region(background)
         for artist in (points, *ax.spines.values(), title):  # the spines over the pattern, as a full draw has them
             ax.draw_artist(artist)
-        rgb = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert("RGB")
-        images.append(rgb.quantize(colors=128, method=Image.Quantize.FASTOCTREE))  # 5x median cut's speed
+        shot = Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert("RGB")
+        images.append(shot.quantize(colors=128, method=Image.Quantize.FASTOCTREE))  # 5x median cut's speed
     return images
 
 
@@ -79,7 +81,7 @@ def _cells(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.
     """Each frame's raster placed into the axes drawn once, as palette images (see the module's
     docstring): the axes' own colours first, then the patches' (``bark.analysis.pattern.PALETTE``, then the
     fragments' grey)."""
-    from bark.analysis.pattern import FRAGMENT_GREY, PALETTE, label_colours
+    from bark.analysis.pattern import FRAGMENT_GREY, PALETTE
 
     fig.canvas.draw()
     rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
@@ -98,11 +100,11 @@ def _cells(fig, ax, title, frames: Frames, n: int, min_size: int) -> list[Image.
     above = int(np.ceil(rows - ax.bbox.y1))  # the rows above the axes, where the title is written
     ink = _grey_levels(palette, np.asarray(_rgb(title.get_color())))
     images = []
-    for t, r, uv, labels in frames.frames:
+    for k, (t, r, uv, labels) in enumerate(frames.frames):
         lo, hi = float(uv[:, 1].min()), float(uv[:, 1].max())
-        cells = raster_values(uv, label_colours(labels, min_size) + len(own), 2 * np.pi * r, lo, hi)
+        cells = raster_values(uv, frames.colour_index(k, min_size) + len(own), 2 * np.pi * r, lo, hi)
         frame = background.copy()
-        (x0, y0), (x1, y1) = to_pixels([(0.0, lo), (2 * np.pi * r, hi)])
+        (x0, y0), (x1, y1) = to_pixels(metres(np.array([(0.0, lo), (2 * np.pi * r, hi)])))
         cols = np.arange(int(np.ceil(max(x0, inner.x0) - 0.5)), int(np.floor(min(x1, inner.x1) - 0.5)) + 1)
         ys = np.arange(int(np.ceil(max(y0, inner.y0) - 0.5)), int(np.floor(min(y1, inner.y1) - 0.5)) + 1)
         if cols.size and ys.size and x1 > x0 and y1 > y0:  # pixel centres inside the pattern's extent take its cells

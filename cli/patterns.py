@@ -121,7 +121,7 @@ def analyze(pattern, min_size, out, picture_format, dpi):
         console.print("  beyond the paper: " + _network_line(network))
     writers = {"statistics.json": lambda path: write_json(path, {**stats.as_dict(), "network": network})}
     if stats.patches is not None:
-        writers["patches.csv"] = lambda path: write_csv(path, stats.patches.rows(), stats.patches.columns)
+        writers["patches.csv"] = lambda path: write_csv(path, stats.patches.rows(), stats.patches.columns, stats.patches.header)
         if stats.n_patches:
             from bark_cli.figures import plot_histogram, plot_radial
 

@@ -152,14 +152,14 @@ class SeriesData:
 
     @classmethod
     def of(cls, sim, scene, frames) -> "SeriesData":
-        from bark.analysis.pattern import patch_colours
+        from bark.analysis.pattern import rgb
         from bark.model.graph import count_patches
 
         min_size = scene.run.min_patch_size
         leaves = scene.leaves if scene.has("leaves") else None
         trees = []
-        for t, x, labels in frames.frames:
-            trees.append(TreeData.at(sim, t, np.asarray(x, dtype=float), patch_colours(labels, min_size),
+        for k, (t, x, labels) in enumerate(frames.frames):
+            trees.append(TreeData.at(sim, t, np.asarray(x, dtype=float), rgb(frames.colour_index(k, min_size)),
                                      count_patches(labels, min_size), None, scene.dome, leaves))
         return cls(trees=tuple(trees))
 

@@ -177,14 +177,6 @@ def rgba(rgb: np.ndarray) -> np.ndarray:
     return np.column_stack([rgb / 255.0, np.ones(len(rgb))])
 
 
-def patch_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
-    """RGBA per base by patch label (stable from frame to frame: the animation's colouring), fragment
-    grey under ``min_size``; ``bark.analysis.pattern.patch_colours``."""
-    from bark.analysis.pattern import patch_colours as rgb
-
-    return rgba(rgb(labels, min_size))
-
-
 def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None, title=""):
     """Work-precision diagram: log-log error against wall time, one line per method, one marker per
     dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""

@@ -204,7 +204,7 @@ def _series(path: Path) -> str:
     def column(name):
         return [float(r[name]) if r.get(name) not in (None, "", "nan") else None for r in rows]
 
-    t = [years(v) for v in column("t")]
+    t = [years(v) for v in column("t_tu")]
     fig = make_subplots(rows=1, cols=3, subplot_titles=("patches", "broken springs", "mean orientation (°)"))
     import plotly.graph_objects as go
 

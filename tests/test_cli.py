@@ -102,7 +102,7 @@ def test_csv_tables_agree_with_summary(small_run):
     with open(out / "breaks.csv", newline="") as fh:
         breaks = list(csv.DictReader(fh))
     assert len(breaks) == summary["n_broken"]
-    assert set(breaks[0]) == {"spring", "i", "j", "step", "t", "tension"}
+    assert set(breaks[0]) == {"spring", "i", "j", "step", "t_tu", "tension_fu"}
     assert len({row["spring"] for row in breaks}) == len(breaks)
     with open(out / "patches.csv", newline="") as fh:
         patches = list(csv.DictReader(fh))

@@ -13,6 +13,7 @@ from bark import Stop
 from bark.model.effects import DEFAULT, EFFECTS, resolve
 from bark.errors import BarkError
 from bark.engine.scene import Scene
+from bark.studies import runner
 from bark_cli.main import cli
 from conftest import REPO_ROOT
 
@@ -172,7 +173,7 @@ def test_statistics_series_runs_the_analyzers_on_their_trigger(tmp_path):
 
     rows = list(csv.DictReader((out / "statistics.csv").read_text().splitlines()))
     # each row at the first step at or past its due time (0, 2, 4, 6, 8; steps are at most 0.3 long)
-    t = np.array([float(r["t"]) for r in rows])
+    t = np.array([float(r["t_tu"]) for r in rows])
     due = np.array([0.0, 2.0, 4.0, 6.0, 8.0])
     assert len(t) == len(due) and np.all((t >= due - 1e-9) & (t - due < 0.3))
     assert [int(r["n_broken"]) for r in rows] == sorted(int(r["n_broken"]) for r in rows)
@@ -252,6 +253,25 @@ def test_animation_writes_one_frame_per_trigger(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["development.gif", "scene.toml", "summary.json"]
     with Image.open(out / "development.gif") as gif:
         assert gif.n_frames == 5  # due at t = 0, 2, 4, 6, 8
+
+
+def test_the_animation_ends_in_the_colours_of_the_pattern(tmp_path):
+    """The development animation's frames are coloured through the run (``lineage_colours``): the
+    last, the run's end, as pattern.png colours it."""
+    from bark.analysis.pattern import rgb, simulation_colours
+
+    scene = Scene.from_dict({"lattice": {"n_bases": 1200}, "growth": {"G": 0.03},
+                             "effects": {"want": ["anchors", "damping", "fracture", "animation"], "frame_every": 4.0},
+                             "run": {"until_time": 16.0, "until_patches": None}})
+    seen = {}
+
+    def keep(sim, scene, recorded, path):  # the picture writer sees what the GIF is drawn from
+        seen["frames"] = recorded["frames"]
+
+    done = runner.run(scene, tmp_path / "run", pictures={"animation": ("development.gif", keep)})
+    frames = seen["frames"]
+    assert len(frames.colours) == len(frames.frames) == 5 and done.sim.patch_count(7) > 3
+    np.testing.assert_array_equal(rgb(frames.colour_index(4, 7)), simulation_colours(done.sim, 7))
 
 
 def test_pictures_come_in_the_format_and_resolution_asked_for(tmp_path):

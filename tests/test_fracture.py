@@ -96,18 +96,19 @@ def test_the_effect_writes_the_history_that_matches_the_run(tmp_path):
                              "run": {"until_time": 14.0, "until_patches": None}})
     out = runner.run(scene, tmp_path / "run")
     rows = _read(tmp_path / "run" / "fracture.csv")
-    breaks = np.array([float(r["t"]) for r in _read(tmp_path / "run" / "breaks.csv")])
-    t = np.array([float(r["t"]) for r in rows])
+    breaks = np.array([float(r["t_tu"]) for r in _read(tmp_path / "run" / "breaks.csv")])
+    t = np.array([float(r["t_tu"]) for r in rows])
     assert np.all(np.diff(t) > 0) and t[-1] == out.sim.state.t
     for r in rows:  # broken springs by each sample, from the break log
-        assert int(r["n_broken"]) == np.count_nonzero(breaks <= float(r["t"]))
+        assert int(r["n_broken"]) == np.count_nonzero(breaks <= float(r["t_tu"]))
     assert int(rows[-1]["n_patches"]) == out.sim.patch_count(scene.run.min_patch_size)
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())["fracture"]
     assert summary["first_break_t"] == breaks[0]
     assert summary["initial_fractures"] >= max(int(r["n_cracks"]) for r in rows) > 0
     assert breaks[0] <= summary["initial_fractures_t"] <= t[-1]
     assert summary["dissipation_rate"] > 0 and summary["growth_dissipation"] > 0
-    assert all(np.isfinite(float(r["dissipation"])) and float(r["dissipation"]) >= 0 for r in rows)
+    power = [float(r["dissipation_fu_lu_per_tu"]) for r in rows]
+    assert all(np.isfinite(p) and p >= 0 for p in power)
 
 
 def test_the_history_of_a_growing_trunk_counts_bases_from_their_join():

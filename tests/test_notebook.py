@@ -22,11 +22,11 @@ def test_tables_come_as_data_frames(done):
     sim = done.sim
     stats = Pattern.of_simulation(sim).statistics(7)
     patches = stats.patches.to_pandas()
-    assert isinstance(patches, pd.DataFrame) and list(patches.columns) == stats.patches.columns
+    assert isinstance(patches, pd.DataFrame) and list(patches.columns) == stats.patches.header
     assert len(patches) == stats.n_patches == done.summary["n_patches"]
     breaks = sim.breaks.to_pandas()
-    assert list(breaks.columns) == ["spring", "i", "j", "step", "t", "tension"] and len(breaks) == sim.n_broken
-    assert (np.diff(breaks["t"]) >= 0).all()
+    assert list(breaks.columns) == ["spring", "i", "j", "step", "t_tu", "tension_fu"] and len(breaks) == sim.n_broken
+    assert (np.diff(breaks["t_tu"]) >= 0).all()
 
 
 def test_pattern_statistics_print_in_one_short_line(done):
@@ -57,5 +57,5 @@ def test_the_statistics_series_comes_as_a_data_frame(done):
     series = StatisticsSeries()
     series.record(done.sim)
     frame = series.to_pandas()
-    assert list(frame.columns) == list(SERIES_COLUMNS) and len(frame) == 1
+    assert list(frame.columns) == ["t_tu", "radius_lu", *SERIES_COLUMNS[2:]] and len(frame) == 1
     assert frame["n_patches"].iloc[0] == done.summary["n_patches"]

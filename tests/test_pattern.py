@@ -519,6 +519,65 @@ def test_label_colours_index_the_colours_that_follow_the_labels(labels, min_size
 
 
 @settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 6), min_size=st.integers(1, 9))
+def test_the_frames_of_a_run_keep_their_colours_and_end_on_the_pattern_s(seed, frames, min_size):
+    """``lineage_colours`` on a run's frames (bases appended, springs only breaking): the last frame
+    is coloured as ``patch_colours`` colours the end, fragments are grey in every frame, a frame
+    nothing broke since keeps its colours, and neighbouring patches of a frame differ."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from bark.analysis.pattern import FRAGMENT_GREY, PALETTE, lineage_colours, patch_colours, rgb
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    pairs = np.array([(i, i + d) for d in (1, 20, 21) for i in range(n - d)])
+    broke = np.sort(rng.uniform(0, 1, len(pairs)) ** 0.5)[rng.permutation(len(pairs))]  # when each breaks
+    times = np.sort(rng.uniform(0.3, 1.0, frames))
+    counts = np.sort(rng.integers(200, n + 1, frames))
+    counts[-1] = n
+    for k in range(frames - 1, 0, -1):
+        if rng.random() < 0.3:  # a frame the next repeats: nothing broke or joined between them
+            times[k - 1], counts[k - 1] = times[k], counts[k]
+    labels_along, intact_along = [], []
+    for t, m in zip(times, counts):
+        intact = broke > t
+        keep = intact & (pairs < m).all(axis=1)
+        p = pairs[keep]
+        labels_along.append(connected_components(coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(m, m)),
+                                                  directed=False)[1])
+        intact_along.append(intact)
+    colours = lineage_colours(labels_along, min_size, pairs, intact_along[-1])
+    np.testing.assert_array_equal(rgb(colours[-1]), patch_colours(labels_along[-1], min_size, pairs, intact_along[-1]))
+    for k, (labels, index) in enumerate(zip(labels_along, colours)):
+        small = np.bincount(labels)[labels] < min_size
+        assert (index[small] == len(PALETTE)).all() and (index[~small] < len(PALETTE)).all()
+        inside = (pairs < labels.size).all(axis=1)
+        differ = _neighbours_differ(labels, pairs[inside], intact_along[k][inside], rgb(index), min_size)[0]
+        if not differ:  # only where a patch's neighbours hold every colour
+            broken = pairs[inside & ~intact_along[k]]
+            sizes, across = np.bincount(labels), labels[broken]
+            clash = across[(across[:, 0] != across[:, 1]) & (index[broken[:, 0]] == index[broken[:, 1]])]
+            for a in (min(pair, key=lambda q: (sizes[q], q)) for pair in clash.tolist()):  # the one recoloured
+                around = np.concatenate([across[across[:, 0] == a, 1], across[across[:, 1] == a, 0]])
+                assert len({int(index[labels == q][0]) for q in around if sizes[q] >= min_size}) == len(PALETTE)
+        if k and labels.size == labels_along[k - 1].size and (labels == labels_along[k - 1]).all():
+            np.testing.assert_array_equal(index, colours[k - 1])
+    assert (rgb(colours[0])[np.bincount(labels_along[0])[labels_along[0]] < min_size] == FRAGMENT_GREY).all()
+
+
+def test_a_split_leaves_the_larger_piece_its_colour():
+    from bark.analysis.pattern import lineage_colours
+
+    pairs = np.array([(i, i + 1) for i in range(29)])
+    intact = np.ones(29, bool)
+    intact[9] = False  # bases 0-9 and 10-29 at the end; one patch before
+    colours = lineage_colours([np.zeros(30, np.int64), np.r_[np.zeros(10, np.int64), np.ones(20, np.int64)]], 7,
+                              pairs, intact)
+    assert (colours[0] == colours[1][15]).all() and colours[1][0] != colours[1][15]
+
+
+@settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), patches=st.integers(1, 40), on_trunk=st.booleans(),
        min_size=st.integers(1, 9))
 def test_the_patch_table_is_its_definitions_patch_by_patch(seed, patches, on_trunk, min_size):

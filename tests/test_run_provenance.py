@@ -11,8 +11,11 @@ import pytest
 from click.testing import CliRunner
 
 from bark.engine.scene import SHIPPED
+from bark.units import COLUMN_UNITS
 from bark_cli.main import cli
 
+UNITS_IN = {"statistics.csv": ("t_tu", "radius_lu"), "breaks.csv": ("t_tu", "tension_fu"),
+            "fracture.csv": ("t_tu", "dissipation_fu_lu_per_tu"), "patches.csv": ("z_lu", "lambda1_lu2", "lambda2_lu2")}
 SCHEMA = json.loads((SHIPPED.parent / "schemas" / "summary.schema.json").read_text())
 
 
@@ -36,6 +39,10 @@ def test_every_summary_json_validates_against_the_shipped_schema(tmp_path, args)
     result = CliRunner().invoke(cli, ["simulate", *args, "--out", str(out), "--quiet"])
     assert result.exit_code == 0, result.output
     jsonschema.Draft202012Validator(SCHEMA).validate(_summary(out))
+    for table in out.glob("*.csv"):  # and every CSV names the units of its columns
+        header = table.read_text().splitlines()[0].split(",")
+        assert not set(header) & set(COLUMN_UNITS), f"{table.name}: {header}"
+        assert set(UNITS_IN.get(table.name, ())) <= set(header), f"{table.name}: {header}"
 
 
 def test_a_run_records_its_version_commit_command_and_start_and_a_resume_adds_itself(tmp_path):

@@ -39,9 +39,10 @@ import numpy as np
 from bark.analysis.circular import axial_difference, axial_mean, axial_sd, axial_se
 from bark.errors import BarkError
 from bark.paths import is_zip, open_regular
+from bark.units import headed
 
 __all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
-           "PALETTE", "FRAGMENT_GREY", "simulation_colours", "spiral_handedness"]
+           "PALETTE", "FRAGMENT_GREY", "simulation_colours", "lineage_colours", "spiral_handedness"]
 
 MIN_PATCH_SIZE = 7
 """Patches with fewer leaf bases are fragments, left out of the statistics (the paper: 7)."""
@@ -308,10 +309,16 @@ class PatchTable:
         where = ["theta_deg", "z"] if self.centroid.shape[1] == 3 else ["x", "y"]
         return ["patch", "size", *where, "orientation_deg", "anisotropy", "lambda1", "lambda2"]
 
+    @property
+    def header(self) -> list[str]:
+        """patches.csv's header: :attr:`columns` with their units on the trunk (``z_lu``,
+        ``lambda1_lu2``: ``bark.units.headed``); in a plane the input's own units, unnamed."""
+        return headed(self.columns) if self.centroid.shape[1] == 3 else self.columns
+
     def to_pandas(self):
-        """The table as a ``pandas.DataFrame``, a row per patch, the columns of :attr:`columns` (pandas
-        is not a dependency of bark: install it to use this)."""
-        return data_frame(self.rows(), self.columns)
+        """The table as a ``pandas.DataFrame``, a row per patch, patches.csv's columns (:attr:`header`;
+        pandas is not a dependency of bark: install it to use this)."""
+        return data_frame(self.rows(), self.columns, self.header)
 
     def rows(self) -> list[dict]:
         """One dict per patch, keyed by :attr:`columns`."""
@@ -366,13 +373,17 @@ def _linear(values: np.ndarray) -> Linear:
     return Linear(n, float(np.mean(values)), sd, sd / math.sqrt(n))
 
 
-def data_frame(rows, columns):
-    """``pandas.DataFrame(rows, columns=columns)``, or one line saying pandas is needed."""
+def data_frame(rows, columns, header=None):
+    """``pandas.DataFrame(rows, columns=columns)`` headed ``header`` (default: ``columns``), or one
+    line saying pandas is needed.  ``rows`` are dicts, or a dict of equal-length columns."""
     try:
         import pandas
     except ImportError:
         raise BarkError("pandas is needed for a DataFrame (pip install pandas); the rows are there without it") from None
-    return pandas.DataFrame(rows, columns=columns)
+    frame = pandas.DataFrame(rows, columns=columns)
+    if header is not None:
+        frame.columns = list(header)
+    return frame
 
 
 @attrs.frozen(eq=False, repr=False)
@@ -584,8 +595,12 @@ def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = 
     the graph of neighbours is coloured greedily (``networkx.greedy_color``, largest first; a map
     needs few colours).  Without them a patch's colour follows its label, stable from frame to frame
     of an animation."""
-    return np.vstack([PALETTE, FRAGMENT_GREY])[_colour_of_label(labels, min_size, pairs, intact)][
-        np.asarray(labels, dtype=np.int64)]
+    return rgb(_colour_of_label(labels, min_size, pairs, intact)[np.asarray(labels, dtype=np.int64)])
+
+
+def rgb(index: np.ndarray) -> np.ndarray:
+    """The RGB colours (uint8) of colour indices into ``PALETTE`` followed by ``FRAGMENT_GREY``."""
+    return np.vstack([PALETTE, FRAGMENT_GREY])[np.asarray(index, dtype=np.int64)]
 
 
 def label_colours(labels: np.ndarray, min_size: int) -> np.ndarray:
@@ -615,6 +630,60 @@ def _colour_of_label(labels: np.ndarray, min_size: int, pairs: np.ndarray | None
             index[label] = colour % len(PALETTE)
     index[sizes < min_size] = len(PALETTE)
     return index
+
+
+def lineage_colours(labels_along: list[np.ndarray], min_size: int, pairs: np.ndarray,
+                    intact: np.ndarray) -> list[np.ndarray]:
+    """The colours of a run's frames (each base's index into ``PALETTE`` followed by
+    ``FRAGMENT_GREY``), one array per frame of ``labels_along``, the last frame the run's end with
+    its springs ``pairs`` and their ``intact`` mask.  The last frame is coloured as
+    :func:`patch_colours` colours the end (so an animation ends on ``pattern.png``); an earlier
+    patch takes the colour of the patch at the end that most of its bases belong to, so a patch
+    keeps its colour from frame to frame and a split leaves the larger piece its colour.  Where two
+    neighbouring patches of a frame come to share one, the smaller takes the first colour none of
+    its neighbours has.  Bases only join a run (a frame's bases are the first of the end's), and a
+    spring joining two patches of a frame is broken by then."""
+    last = np.asarray(labels_along[-1], dtype=np.int64)
+    end = _colour_of_label(last, min_size, pairs, intact)
+    counted = np.bincount(last, minlength=1) >= min_size  # the end's patches (fragments have no colour to pass on)
+    pairs = np.asarray(pairs, dtype=np.int64)
+    out = []
+    for labels in labels_along:
+        labels = np.asarray(labels, dtype=np.int64)
+        index = _colour_of_label(labels, min_size)  # what no patch at the end gives: the label's own
+        if labels.size:
+            sizes, later = np.bincount(labels), last[:labels.size]
+            keep = counted[later] & (sizes[labels] >= min_size)
+            span = int(last.max()) + 1
+            key, counts = np.unique(labels[keep] * span + later[keep], return_counts=True)
+            was, becomes = np.divmod(key, span)
+            order = np.lexsort((-counts, was))  # per patch of the frame, the end's patch with most of its bases first
+            was, becomes = was[order], becomes[order]
+            first = np.r_[True, was[1:] != was[:-1]] if was.size else np.zeros(0, bool)
+            index[was[first]] = end[becomes[first]]
+            _separate_neighbours(index, labels, sizes, pairs[(pairs < labels.size).all(axis=1)], min_size)
+        out.append(index[labels])
+    return out
+
+
+def _separate_neighbours(index: np.ndarray, labels: np.ndarray, sizes: np.ndarray, pairs: np.ndarray,
+                         min_size: int) -> None:
+    """Recolour (in ``index``, a colour per label) the smaller of any two neighbouring patches of
+    ``labels`` sharing a colour with the first colour none of its neighbours has."""
+    import networkx as nx
+
+    across = labels[pairs]
+    across = across[(across[:, 0] != across[:, 1]) & (sizes[across] >= min_size).all(axis=1)]
+    if not across.size:
+        return
+    graph = nx.Graph(np.unique(np.sort(across, axis=1), axis=0).tolist())
+    clashes = sorted({min(a, b, key=lambda q: (sizes[q], q)) for a, b in graph.edges if index[a] == index[b]},
+                     key=lambda q: (sizes[q], q))
+    for label in clashes:
+        taken = {int(index[q]) for q in graph[label]}
+        if int(index[label]) in taken:
+            free = [c for c in range(len(PALETTE)) if c not in taken]
+            index[label] = free[0] if free else index[label]
 
 
 def simulation_colours(sim, min_size: int) -> np.ndarray:

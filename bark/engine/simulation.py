@@ -23,6 +23,7 @@ from bark.model.forces import ForceField, Mechanics, spring_geometry
 from bark.model.lattice import Lattice
 from bark.model.state import State, cylinder_points, grown
 from bark.model.tree import Packing
+from bark.units import headed
 from bark.engine.stepping import Clock, Numerics
 from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
 
@@ -89,13 +90,14 @@ class BreakLog:
         return {n: np.concatenate([c[k] for c in self._chunks]) for k, n in enumerate(self.COLUMNS)}
 
     def to_pandas(self):
-        """The log as a ``pandas.DataFrame``, a row per break, the columns of :meth:`arrays` (t in time
-        units, tension in force units; pandas is not a dependency of bark: install it to use this)."""
+        """The log as a ``pandas.DataFrame``, a row per break, breaks.csv's columns: those of
+        :meth:`arrays` with their units (``t_tu``, ``tension_fu``: ``bark.units.headed``; pandas is not
+        a dependency of bark: install it to use this)."""
         try:
             import pandas
         except ImportError:
             raise BarkError("pandas is needed for a DataFrame (pip install pandas); arrays() gives the columns") from None
-        return pandas.DataFrame(self.arrays())
+        return pandas.DataFrame(dict(zip(headed(self.COLUMNS), self.arrays().values())))
 
     @classmethod
     def of_arrays(cls, arrays: dict[str, np.ndarray]) -> "BreakLog":

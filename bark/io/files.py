@@ -110,15 +110,16 @@ def _sync_folder(folder: Path) -> None:
         os.close(fd)
 
 
-def write_csv(path: str | Path, rows: list[dict[str, Any]], columns: list[str]) -> Path:
-    """A CSV of ``rows`` (dicts; keys not in ``columns`` left out, missing ones empty)."""
-    return _write_rows(path, columns, ([row.get(c, "") for c in columns] for row in rows))
+def write_csv(path: str | Path, rows: list[dict[str, Any]], columns: list[str], header: list[str] | None = None) -> Path:
+    """A CSV of ``rows`` (dicts; keys not in ``columns`` left out, missing ones empty), headed
+    ``header`` (default: ``columns``; ``bark.units.headed`` adds their units)."""
+    return _write_rows(path, header or columns, ([row.get(c, "") for c in columns] for row in rows))
 
 
-def write_columns(path: str | Path, columns: dict[str, list]) -> Path:
+def write_columns(path: str | Path, columns: dict[str, list], header: list[str] | None = None) -> Path:
     """A CSV of equal-length ``columns`` (name: values), as :func:`write_csv` writes the same rows,
     with no dict made per row (a break log has tens of thousands)."""
-    return _write_rows(path, list(columns), zip(*columns.values()))
+    return _write_rows(path, header or list(columns), zip(*columns.values()))
 
 
 def _write_rows(path: str | Path, header: list[str], rows) -> Path:

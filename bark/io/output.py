@@ -20,7 +20,7 @@ import numpy as np
 
 from bark.contract.strategies import pattern_of
 from bark.io.files import atomic_write, attempt, write_columns, write_csv, write_json, write_npz
-from bark.units import metres
+from bark.units import headed, metres
 
 __all__ = ["run_summary", "write_run", "write_graphml"]
 
@@ -39,6 +39,13 @@ def patch_columns(rows: list[dict]) -> list[str]:
     where = ["theta_deg", "z"] if "theta_deg" in first else ["x", "y"] if "x" in first else []
     known = ["patch", "size", *where, "orientation_deg", "anisotropy", "lambda1", "lambda2"]
     return [c for c in known if c in first] + [c for c in first if c not in known]
+
+
+def patch_header(rows: list[dict]) -> list[str]:
+    """patches.csv's header for ``rows``: :func:`patch_columns` with their units on the trunk
+    (``z_lu``, ``lambda1_lu2``); a pattern in a plane is in the input's own units, unnamed."""
+    columns = patch_columns(rows)
+    return headed(columns) if "theta_deg" in columns else columns
 
 
 PATTERN_KEYS = ("mean_orientation_deg", "circular_sd_deg", "orientation_se_deg", "mean_anisotropy", "anisotropy_sd",
@@ -229,11 +236,12 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
     if scene.has("patch-statistics"):
         measured = pattern_of(analyses.values())
         rows = measured.patches if measured is not None else []
-        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows)), failed,
+        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows), patch_header(rows)), failed,
                 (out / "patches.csv",))
     if scene.has("break-log"):
-        attempt("breaks.csv", lambda: write_columns(out / "breaks.csv", {name: v.tolist() for name, v in sim.breaks.arrays().items()}),
-                failed, (out / "breaks.csv",))
+        log = sim.breaks
+        attempt("breaks.csv", lambda: write_columns(out / "breaks.csv", {name: v.tolist() for name, v in log.arrays().items()},
+                                                    headed(log.COLUMNS)), failed, (out / "breaks.csv",))
     s = sim.state
     if scene.has("state-snapshot"):
         attempt("state.npz", lambda: write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases

@@ -11,7 +11,7 @@ import numpy as np
 from bark.analysis.fracture import COLUMNS, FractureHistory, history
 from bark.contract.strategies import pattern_of
 from bark.io.files import write_csv
-from bark.units import unwrap
+from bark.units import headed, unwrap
 
 __all__ = ["Recorder", "StatisticsSeries", "Frames", "TreeFrames", "Dissipation", "SERIES_COLUMNS"]
 
@@ -67,16 +67,39 @@ class StatisticsSeries(Recorder):
         self.rows = [dict(zip(SERIES_COLUMNS, vals)) for vals in zip(*cols)]
 
     def write(self, path: str | Path) -> Path:
-        return write_csv(path, self.rows, SERIES_COLUMNS)
+        return write_csv(path, self.rows, SERIES_COLUMNS, headed(SERIES_COLUMNS))
 
     def to_pandas(self):
-        """The series as a ``pandas.DataFrame``, a row a sample, statistics.csv's columns."""
+        """The series as a ``pandas.DataFrame``, a row a sample, statistics.csv's columns (``t_tu``,
+        ``radius_lu``, ...: ``bark.units.headed``)."""
         from bark.analysis.pattern import data_frame
 
-        return data_frame(self.rows, SERIES_COLUMNS)
+        return data_frame(self.rows, SERIES_COLUMNS, headed(SERIES_COLUMNS))
 
 
-class Frames(Recorder):
+class _Coloured(Recorder):
+    """A recorder of frames whose last item is each base's patch label: it colours the patches of
+    its frames once the run is finished, consistently through them (``colour_index``)."""
+
+    frames: list[tuple]
+    colours: list[np.ndarray]
+    """Per frame, each base's colour (``bark.analysis.pattern.lineage_colours``), once finished."""
+
+    def finish(self, sim, min_size: int) -> None:
+        from bark.analysis.pattern import lineage_colours
+
+        self.colours = lineage_colours([f[-1] for f in self.frames], min_size, sim.state.pairs,
+                                       sim.state.intact) if self.frames else []
+
+    def colour_index(self, k: int, min_size: int) -> np.ndarray:
+        """Frame ``k``'s colours (indices into ``PALETTE`` followed by ``FRAGMENT_GREY``): as
+        finished, else (frames never finished) each patch's label's."""
+        from bark.analysis.pattern import label_colours
+
+        return self.colours[k] if self.colours else label_colours(self.frames[k][-1], min_size)
+
+
+class Frames(_Coloured):
     """Frames of the unwrapped pattern along a run, for the development animation: per call, the time,
     the mean radius, each base's unwrapped position (float32) and patch label (int32).  Drawing them
     is the CLI's (``bark_cli.animation``)."""
@@ -85,6 +108,7 @@ class Frames(Recorder):
 
     def __init__(self) -> None:
         self.frames: list[tuple[float, float, np.ndarray, np.ndarray]] = []
+        self.colours: list[np.ndarray] = []
 
     def record(self, sim) -> None:
         if self.frames and self.frames[-1][0] == sim.state.t:
@@ -108,7 +132,7 @@ class Frames(Recorder):
                        for t, r, a, b in zip(arrays["t"], arrays["r"], starts, ends)]
 
 
-class TreeFrames(Recorder):
+class TreeFrames(_Coloured):
     """The tree at several ages, for the tree-series picture (Fig. 10): per call, the time, each base's
     position (float32) and patch label (int32).  Drawing them is the CLI's (``bark_cli.pictures``)."""
 
@@ -117,6 +141,7 @@ class TreeFrames(Recorder):
 
     def __init__(self) -> None:
         self.frames: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self.colours: list[np.ndarray] = []
 
     def record(self, sim) -> None:
         if self.frames and self.frames[-1][0] == sim.state.t:
@@ -181,7 +206,7 @@ class Dissipation(Recorder):
 
     def write(self, path):
         """The history ``analyse`` made, as ``fracture.csv`` at ``path``."""
-        return write_csv(path, self.result.rows(), COLUMNS)
+        return write_csv(path, self.result.rows(), COLUMNS, headed(COLUMNS))
 
 
 def growth_dissipation(sim, t: float) -> float:

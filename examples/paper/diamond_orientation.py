@@ -96,10 +96,10 @@ def main() -> None:
     sim = outcome.sim
     with open(Path(args.out) / "statistics.csv", newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if r["mean_orientation_deg"] not in ("", "nan")]
-    t = np.array([float(r["t"]) for r in rows])
+    t = np.array([float(r["t_tu"]) for r in rows])
     n = np.array([float(r["n_patches"]) for r in rows])
     mean = np.array([float(r["mean_orientation_deg"]) for r in rows])
-    radius = np.array([float(r["radius"]) for r in rows])
+    radius = np.array([float(r["radius_lu"]) for r in rows])
     para = {k: np.array([parastichy_orientations(sim, r)[k] for r in radius]) for k in sim.lattice.offsets}
 
     many = n >= 10  # a mean over fewer patches says little
