@@ -620,12 +620,9 @@ def _colour_of_label(labels: np.ndarray, min_size: int, pairs: np.ndarray | None
         import networkx as nx
 
         pairs = np.asarray(pairs, dtype=np.int64)
-        big = sizes >= min_size
-        across = labels[pairs[~np.asarray(intact, dtype=bool)]]
-        across = across[(across[:, 0] != across[:, 1]) & big[across[:, 0]] & big[across[:, 1]]]
         graph = nx.Graph()
-        graph.add_nodes_from(np.flatnonzero(big).tolist())
-        graph.add_edges_from(np.unique(np.sort(across, axis=1), axis=0).tolist())
+        graph.add_nodes_from(np.flatnonzero(sizes >= min_size).tolist())
+        graph.add_edges_from(_neighbouring(labels, sizes, pairs[~np.asarray(intact, dtype=bool)], min_size).tolist())
         for label, colour in nx.greedy_color(graph, strategy="smallest_last").items():  # planar: <= 6
             index[label] = colour % len(PALETTE)
     index[sizes < min_size] = len(PALETTE)
@@ -672,11 +669,10 @@ def _separate_neighbours(index: np.ndarray, labels: np.ndarray, sizes: np.ndarra
     ``labels`` sharing a colour with the first colour none of its neighbours has."""
     import networkx as nx
 
-    across = labels[pairs]
-    across = across[(across[:, 0] != across[:, 1]) & (sizes[across] >= min_size).all(axis=1)]
+    across = _neighbouring(labels, sizes, pairs, min_size)
     if not across.size:
         return
-    graph = nx.Graph(np.unique(np.sort(across, axis=1), axis=0).tolist())
+    graph = nx.Graph(across.tolist())
     clashes = sorted({min(a, b, key=lambda q: (sizes[q], q)) for a, b in graph.edges if index[a] == index[b]},
                      key=lambda q: (sizes[q], q))
     for label in clashes:
@@ -684,6 +680,14 @@ def _separate_neighbours(index: np.ndarray, labels: np.ndarray, sizes: np.ndarra
         if int(index[label]) in taken:
             free = [c for c in range(len(PALETTE)) if c not in taken]
             index[label] = free[0] if free else index[label]
+
+
+def _neighbouring(labels: np.ndarray, sizes: np.ndarray, pairs: np.ndarray, min_size: int) -> np.ndarray:
+    """The pairs of patches (labels, each pair once, smaller first) of at least ``min_size`` bases
+    that springs ``pairs`` join: neighbours, where the springs are broken ones."""
+    across = labels[pairs]
+    across = across[(across[:, 0] != across[:, 1]) & (sizes[across] >= min_size).all(axis=1)]
+    return np.unique(np.sort(across, axis=1), axis=0)
 
 
 def simulation_colours(sim, min_size: int) -> np.ndarray:
