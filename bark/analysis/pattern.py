@@ -313,7 +313,7 @@ class PatchTable:
     def header(self) -> list[str]:
         """patches.csv's header: :attr:`columns` with their units on the trunk (``z_lu``,
         ``lambda1_lu2``: ``bark.units.headed``); in a plane the input's own units, unnamed."""
-        return headed(self.columns) if self.centroid.shape[1] == 3 else self.columns
+        return patch_header(self.columns)
 
     def to_pandas(self):
         """The table as a ``pandas.DataFrame``, a row per patch, patches.csv's columns (:attr:`header`;
@@ -371,6 +371,12 @@ def _linear(values: np.ndarray) -> Linear:
         return Linear(0, math.nan, math.nan, math.nan)
     sd = float(np.std(values, ddof=1)) if n > 1 else math.nan
     return Linear(n, float(np.mean(values)), sd, sd / math.sqrt(n))
+
+
+def patch_header(columns: list[str]) -> list[str]:
+    """A patch table's header for its ``columns``: their units on the trunk (centroid ``theta_deg,
+    z``: ``z_lu``, ``lambda1_lu2``); a pattern in a plane is in the input's own units, unnamed."""
+    return headed(columns) if "theta_deg" in columns else columns
 
 
 def data_frame(rows, columns, header=None):

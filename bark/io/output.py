@@ -41,13 +41,6 @@ def patch_columns(rows: list[dict]) -> list[str]:
     return [c for c in known if c in first] + [c for c in first if c not in known]
 
 
-def patch_header(rows: list[dict]) -> list[str]:
-    """patches.csv's header for ``rows``: :func:`patch_columns` with their units on the trunk
-    (``z_lu``, ``lambda1_lu2``); a pattern in a plane is in the input's own units, unnamed."""
-    columns = patch_columns(rows)
-    return headed(columns) if "theta_deg" in columns else columns
-
-
 PATTERN_KEYS = ("mean_orientation_deg", "circular_sd_deg", "orientation_se_deg", "mean_anisotropy", "anisotropy_sd",
                 "anisotropy_se", "fraction_within_45_deg")
 """The pattern statistics summary.json takes from the analyzer's summary (``bark.analysis.patches.pattern_summary``)."""
@@ -236,7 +229,8 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
     if scene.has("patch-statistics"):
         measured = pattern_of(analyses.values())
         rows = measured.patches if measured is not None else []
-        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows), patch_header(rows)), failed,
+        from bark.analysis.pattern import patch_header
+        attempt("patches.csv", lambda: write_csv(out / "patches.csv", rows, patch_columns(rows), patch_header(patch_columns(rows))), failed,
                 (out / "patches.csv",))
     if scene.has("break-log"):
         log = sim.breaks
