@@ -530,6 +530,10 @@ from bark_cli.sweep import sweep  # noqa: E402
 
 cli.add_command(sweep)
 
+from bark_cli.fit import fit  # noqa: E402
+
+cli.add_command(fit)
+
 from bark_cli.report import report  # noqa: E402
 
 cli.add_command(report)

@@ -131,29 +131,11 @@ def analyze(pattern, min_size, out, picture_format, dpi):
 
 
 def _network(path: Path, stats, min_size: int | None) -> dict | None:
-    """The statistics beyond the paper's of the pattern at ``path``: its patch sizes (any pattern with
-    patches), and its crack network where it has springs (a run's folder or state file)."""
-    import json
+    """The statistics beyond the paper's of the pattern at ``path`` (``bark.analysis.network.of_pattern``);
+    ``None`` for a published summary, which has no patches."""
+    from bark.analysis.network import of_pattern
 
-    import numpy as np
-
-    from bark.analysis.network import of_state, size_distribution
-
-    if stats.patches is None:
-        return None
-    state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
-    if min_size is None:  # the run's own, as the statistics took it
-        summary = path / "summary.json" if path.is_dir() else path.parent / "summary.json"
-        try:
-            min_size = int(json.loads(summary.read_text())["stop"]["min_patch_size"])
-        except (OSError, ValueError, KeyError, TypeError):
-            min_size = 7
-    out = size_distribution(stats.patches.size, min_size)
-    if state is not None:
-        with np.load(state, allow_pickle=False) as d:
-            if {"x", "labels", "pairs", "intact"} <= set(d.files):
-                out.update(of_state(d["x"], d["labels"], d["pairs"], d["intact"], min_size))
-    return out
+    return None if stats.patches is None else of_pattern(path, stats.patches.size, min_size)
 
 
 def _network_line(net: dict) -> str:

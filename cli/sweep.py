@@ -89,8 +89,9 @@ def parse_points(path: str):
     return axes, layer
 
 
-def parse_ranges(items: tuple[str, ...]) -> dict:
-    """``--range growth.G=0.005:0.02`` (``:log`` for log-uniform) → ``{key: (low, high, log)}``."""
+def parse_ranges(items: tuple[str, ...], option: str = "--range") -> dict:
+    """``--range growth.G=0.005:0.02`` (``:log`` for log-uniform; or any ``option`` of that form) →
+    ``{key: (low, high, log)}``."""
     import math as m
 
     out = {}
@@ -98,15 +99,18 @@ def parse_ranges(items: tuple[str, ...]) -> dict:
         setting = split_setting(item)
         parts = setting[2].split(":") if setting is not None else []
         if len(parts) not in (2, 3) or (len(parts) == 3 and parts[2] != "log"):
-            raise BarkError(f"--range {shlex.quote(item)}: expected SECTION.KEY=LOW:HIGH or SECTION.KEY=LOW:HIGH:log")
+            raise BarkError(f"{option} {shlex.quote(item)}: expected SECTION.KEY=LOW:HIGH or SECTION.KEY=LOW:HIGH:log")
         try:
             lo, hi = float(parts[0]), float(parts[1])
         except ValueError:
-            raise BarkError(f"--range {shlex.quote(item)}: LOW and HIGH must be numbers") from None
+            raise BarkError(f"{option} {shlex.quote(item)}: LOW and HIGH must be numbers") from None
         log = len(parts) == 3
         if not (m.isfinite(lo) and m.isfinite(hi) and lo < hi) or (log and lo <= 0):
-            raise BarkError(f"--range {shlex.quote(item)}: needs finite LOW < HIGH" + (", both > 0 for :log" if log else ""))
-        out[f"{setting[0]}.{setting[1]}"] = (lo, hi, log)
+            raise BarkError(f"{option} {shlex.quote(item)}: needs finite LOW < HIGH" + (", both > 0 for :log" if log else ""))
+        key = f"{setting[0]}.{setting[1]}"
+        if key in out:
+            raise BarkError(f"{option} {key}: given twice")
+        out[key] = (lo, hi, log)
     return out
 
 

@@ -394,12 +394,12 @@ def test_a_sweep_stopped_halfway_goes_on_without_running_a_finished_point_again(
 
 @pytest.mark.parametrize("preset", [None, "5"])
 def test_a_local_worker_takes_its_share_of_the_cores_unless_the_user_set_it(monkeypatch, preset):
-    from bark.studies import sweep
+    from bark.studies import pool
 
     monkeypatch.setattr(signal, "signal", lambda *a: None)  # the worker's set-up, not this process's
     environment = {k: v for k, v in os.environ.items() if k != "NUMBA_NUM_THREADS"}
     monkeypatch.setattr(os, "environ", {**environment, **({"NUMBA_NUM_THREADS": preset} if preset else {})})
-    sweep._worker_start(3)
+    pool.worker_start(3)
     assert os.environ["NUMBA_NUM_THREADS"] == (preset or "3")
 
 

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-__all__ = ["size_distribution", "crack_network", "of_state", "SIZE_KEYS", "NETWORK_KEYS"]
+__all__ = ["size_distribution", "crack_network", "of_state", "of_pattern", "SIZE_KEYS", "NETWORK_KEYS"]
 
 T_ANGLE = 150.0
 """A junction of three patches whose largest angle reaches this (degrees) is a T-junction."""
@@ -240,3 +240,27 @@ def of_state(x: np.ndarray, labels: np.ndarray, pairs: np.ndarray, intact: np.nd
         return dict.fromkeys(NETWORK_KEYS)
     return crack_network(np.column_stack([r * theta, x[:, 2]]), labels, pairs, intact, offsets, s_min,
                          period=2.0 * np.pi * r)
+
+
+def of_pattern(path, patch_sizes, min_size: int | None) -> dict:
+    """The statistics beyond the paper's of the pattern at ``path`` (as ``bark.analysis.pattern.read``
+    takes it) whose patches have ``patch_sizes`` bases: the sizes' statistics always, and the crack
+    network's where the pattern has springs (a run's folder or state file).  ``min_size`` ``None``:
+    the run's own (its summary.json), else 7."""
+    import json
+    from pathlib import Path
+
+    path = Path(path)
+    state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
+    if min_size is None:  # the run's own, as the statistics took it
+        summary = path / "summary.json" if path.is_dir() else path.parent / "summary.json"
+        try:
+            min_size = int(json.loads(summary.read_text())["stop"]["min_patch_size"])
+        except (OSError, ValueError, KeyError, TypeError):
+            min_size = 7
+    out = size_distribution(patch_sizes, min_size)
+    if state is not None:
+        with np.load(state, allow_pickle=False) as d:
+            if {"x", "labels", "pairs", "intact"} <= set(d.files):
+                out.update(of_state(d["x"], d["labels"], d["pairs"], d["intact"], min_size))
+    return out

@@ -32,7 +32,6 @@ import hashlib
 import itertools
 import json
 import math
-import os
 import sqlite3
 import time
 from pathlib import Path
@@ -44,8 +43,7 @@ import numpy as np
 from bark.errors import BarkError, Ref
 from bark.io.files import json_text
 from bark.io.output import PATTERN_KEYS
-from bark.engine.stepping import cores
-from bark.engine.kernels import numba_env
+from bark.studies.pool import LocalPool, WorkerDied
 
 __all__ = ["WorkerDied", "Axis", "Sweep", "Point", "SweepTable", "run_point", "run_sweep", "check_fits", "FIG9_AXES", "RESULT_COLUMNS"]
 
@@ -72,11 +70,6 @@ by ``json_extract(regions, '$.straight.circular_sd_deg')``."""
 MAX_RUNS = 1_000_000
 """Most runs one sweep (one table) may hold: every point is checked before the first runs (about
 0.2 ms each), and a million runs of even a second are eleven days of one core."""
-
-
-class WorkerDied(RuntimeError):
-    """A local worker process died in the middle of a run (killed, out of memory); the runs that
-    finished before are committed."""
 
 
 @attrs.frozen
@@ -420,55 +413,28 @@ def check_fits(sweep: Sweep, workers: int) -> None:
 
 
 def _local(todo: list[Point], workers: int, folders: dict):
-    """Results as they finish, from ``workers`` worker processes (spawned: a clean interpreter, no
-    threads or locks inherited from the caller)."""
+    """Results as they finish, from ``workers`` local worker processes (``bark.studies.pool``)."""
     if not todo:
         return
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
-
-    workers = min(workers, len(todo))
-    numba_env.thread_count()  # a value numba would fail on is dropped here, once, not in every worker
+    pool = LocalPool(min(workers, len(todo)), "sweep")
     try:
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_worker_start, initargs=(max(1, cores() // workers),))
         pending = {pool.submit(run_point, p.scene, p.key, folders[p.key]) for p in todo}
-    except OSError as err:  # the process limit (ulimit -u), or memory for another process
-        raise OSError(err.errno, f"cannot start the sweep's worker processes ({err.strerror or err}): the "
-                      "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
-    try:
         while pending:
-            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            finished = pool.wait_any(pending)
+            pending -= finished
             failed = None
             for f in finished:  # every run that finished is handed on before a failure is raised
                 if f.exception() is None:
                     yield f.result()
                 else:
                     failed = f.exception()
-            if isinstance(failed, BrokenProcessPool):
+            if pool.died(failed):
                 raise WorkerDied("a sweep worker died (killed, or out of memory): the runs finished before are in "
                                  "the table; the same sweep run again goes on from there")
             if failed is not None:
                 raise failed
-    except (KeyboardInterrupt, GeneratorExit):  # stopped (a signal, the caller closing this generator): the
-        for worker in list((getattr(pool, "_processes", None) or {}).values()):  # runs in flight are lost
-            worker.terminate()                                                    # either way, not waited for
-        raise
-    finally:
-        pool.shutdown(wait=False, cancel_futures=True)
-
-
-def _worker_start(threads: int) -> None:
-    """A local worker leaves signals to the sweep: Ctrl-C stops the sweep (which stops handing out
-    runs), not the runs in flight mid-step with a traceback each.  Its kernels' threads are its share
-    of the cores (``NUMBA_NUM_THREADS``, read when numba is imported, unless the user has set it), so
-    that workers do not contend for them."""
-    import signal
-
-    for sig in (signal.SIGINT, signal.SIGHUP):
-        signal.signal(sig, signal.SIG_IGN)
-    os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))
+    finally:  # finished, or stopped (a signal, the caller closing this generator): runs in flight are lost
+        pool.close()
 
 
 def _on_dask(client, todo: list[Point], folders: dict):

@@ -8,6 +8,8 @@ run)::
     python examples/paper/figures.py fractures  # initial fractures against the dissipation rate
     python examples/paper/figures.py fig11      # the whole tree's regions over c × b × jitter
     python examples/paper/figures.py packing    # Ridley's packing: what each leaf-size law keeps
+    python examples/paper/figures.py recovery   # bark fit finds known (G, f_max) again: 5 points
+    python examples/paper/figures.py fit        # posteriors for the two photographs' summaries
 
 Options: ``--out DIR`` (default ``runs/paper``), ``--workers N`` (sweeps).  Runs already there are
 reused: ``bark sweep`` skips finished points, and a regime's run folder with its summary is kept.
@@ -212,7 +214,60 @@ def packing(out: Path, workers: int) -> None:
           f"{100 * metres(radius[0]):.1f} → {100 * metres(radius[1]):.1f} cm)")
 
 
-FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11, "packing": packing}
+RECOVERY = ((0.014, 0.0028), (0.011, 0.005), (0.007, 0.008), (0.009, 0.004), (0.0125, 0.0065))
+"""True (G, f_max) of the recovery study: Table 2's three regimes and two points between them."""
+FIT = ("--population", "100", "--generations", "4")
+"""The fits' size: 100 accepted runs a generation, four generations."""
+TABLE2 = {"vertical": (0.014, 0.0028), "reticulate": (0.011, 0.005), "diamond": (0.007, 0.008),
+          "43 %": (0.01099, 0.005036)}
+"""Table 2's regimes and the paper's reticulate fit, 43 % of the way from the first to the third."""
+
+
+def _marks(points: dict) -> list[str]:
+    return [a for label, (g, f) in points.items() for a in ("--mark", f"{label}:growth.G={g},mechanics.f_max={f}")]
+
+
+def recovery(out: Path, workers: int) -> None:
+    """Calibration checked: a pattern grown at each known (G, f_max) of :data:`RECOVERY` (3000 bases,
+    the reticulate scene, a seed of its own), fitted by ``bark fit`` over the default priors; prints
+    whether each true value lies in its 90 % credible interval, and the intervals' widths."""
+    rows, covered = [], 0
+    for i, (g, f) in enumerate(RECOVERY):
+        observed, fitted = out / "recovery" / f"observed-{i}", out / "recovery" / f"fit-{i}"
+        if not (observed / "summary.json").is_file():
+            bark("simulate", "--scene", "reticulate", "--set", f"growth.G={g}", "--set", f"mechanics.f_max={f}",
+                 "--seed", str(1000 + i), "--out", str(observed), "--quiet")
+        if not (fitted / "fit.json").is_file():
+            bark("fit", str(observed), "--scene", "reticulate", *FIT, "--seed", str(i), "--workers", str(workers),
+                 *_marks({"truth": (g, f)}), "--out", str(fitted), "--quiet")
+        post = json.loads((fitted / "fit.json").read_text())["posterior"]
+        for key, true in (("growth.G", g), ("mechanics.f_max", f)):
+            lo, hi = post[key]["ci90"]
+            covered += lo <= true <= hi
+            rows.append(f"{i}  {key:16s} true {true:<8g} 90 % CI {lo:.5f} – {hi:.5f}  width {hi - lo:.5f}  "
+                        f"{'covered' if lo <= true <= hi else 'MISSED'}")
+    print("\n".join(rows))
+    print(f"{covered} of {2 * len(RECOVERY)} intervals cover the true value")
+
+
+def fit(out: Path, workers: int) -> None:
+    """The posteriors over (G, f_max) of the two photographs' published summaries (the reticulate one
+    in a mirror: its spiral turns the other way from the scene's), Table 2's regimes and the 43 %
+    point marked on corner.png and placed in fit.json."""
+    for name in ("reticulate", "elongated"):
+        fitted = out / "fit" / name
+        if not (fitted / "fit.json").is_file():
+            bark("fit", str(HERE / f"observed-{name}.toml"), "--scene", "reticulate", *FIT, "--workers", str(workers),
+                 *(("--mirror",) if name == "reticulate" else ()), *_marks(TABLE2), "--out", str(fitted), "--quiet")
+        report = json.loads((fitted / "fit.json").read_text())
+        print(f"{name}: " + ", ".join(f"{k} {v['mean']:.4g} [{v['ci90'][0]:.4g}, {v['ci90'][1]:.4g}]"
+                                      for k, v in report["posterior"].items()))
+        for label, entry in report["marks"].items():
+            print(f"    {label}: {100 * entry['hpd_level']:.0f} % of the posterior is more probable")
+
+
+FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11, "packing": packing,
+           "recovery": recovery, "fit": fit}
 
 
 def main(argv: list[str] | None = None) -> None:

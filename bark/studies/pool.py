@@ -1,0 +1,98 @@
+"""Where a study's runs go: local worker processes, or the workers of a Dask distributed cluster.
+
+Both pools take a module-level function and its arguments (``submit``) and say which of the futures
+given have finished (``wait_any``); a sweep and a fit submit pure functions, so the results do not
+depend on which pool, or which of its workers, ran them.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+class WorkerDied(RuntimeError):
+    """A local worker process died in the middle of a run (killed, out of memory); what finished
+    before is kept."""
+
+
+class LocalPool:
+    """``workers`` local processes, spawned (a clean interpreter: no threads or locks inherited from
+    the caller) and started once for the whole study; each takes its share of the cores for its
+    kernels' threads (:func:`worker_start`)."""
+
+    def __init__(self, workers: int, what: str = "study") -> None:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        from bark.engine.kernels import numba_env
+        from bark.engine.stepping import cores
+
+        numba_env.thread_count()  # a value numba would fail on is dropped here, once, not in every worker
+        self.slots, self.what = workers, what
+        try:
+            self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                                            initializer=worker_start, initargs=(max(1, cores() // workers),))
+        except OSError as err:  # the process limit (ulimit -u), or memory for another process
+            raise OSError(err.errno, f"cannot start the {what}'s worker processes ({err.strerror or err}): the "
+                          "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
+
+    def submit(self, fn, *args):
+        try:
+            return self.pool.submit(fn, *args)
+        except OSError as err:
+            raise OSError(err.errno, f"cannot start the {self.what}'s worker processes ({err.strerror or err}): the "
+                          "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
+
+    def wait_any(self, futures) -> set:
+        from concurrent.futures import FIRST_COMPLETED, wait
+
+        return wait(futures, return_when=FIRST_COMPLETED)[0]
+
+    @staticmethod
+    def died(error: BaseException | None) -> bool:
+        """Whether ``error`` (a future's) says its worker died."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        return isinstance(error, BrokenProcessPool)
+
+    def close(self) -> None:
+        """Stop at once: the runs in flight are lost either way, not waited for."""
+        for worker in list((getattr(self.pool, "_processes", None) or {}).values()):
+            worker.terminate()
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+
+class DaskPool:
+    """The workers of a Dask distributed cluster (``client``, a ``distributed.Client``): Dask
+    schedules, bark submits."""
+
+    def __init__(self, client) -> None:
+        self.client = client
+        self.slots = max(1, sum(client.nthreads().values()))
+
+    def submit(self, fn, *args, key: str | None = None):
+        return self.client.submit(fn, *args, pure=False, **({"key": key} if key else {}))
+
+    def wait_any(self, futures) -> set:
+        from distributed import wait
+
+        return set(wait(list(futures), return_when="FIRST_COMPLETED").done)
+
+    @staticmethod
+    def died(error: BaseException | None) -> bool:
+        return False  # Dask runs a task again on another worker
+
+    def close(self) -> None:
+        pass
+
+
+def worker_start(threads: int) -> None:
+    """A local worker leaves signals to the study: Ctrl-C stops the study (which stops handing out
+    runs), not the runs in flight mid-step with a traceback each.  Its kernels' threads are its share
+    of the cores (``NUMBA_NUM_THREADS``, read when numba is imported, unless the user has set it), so
+    that workers do not contend for them."""
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_IGN)
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))

@@ -1,0 +1,292 @@
+"""bark fit: priors and statistics checked, the same posterior for the same seed wherever the runs go,
+a fit stopped and run again, the posterior's summaries, and the command's bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from bark.engine.scene import merge, read_toml
+from bark.errors import BarkError
+from bark.studies import fit as F
+from bark.studies.fit import Fit, Observed, Prior, compared, load_fit, run_fit, weighted_quantiles
+from bark_cli.main import cli
+from tests.conftest import assert_clean_outcome
+
+pytest.importorskip("pyabc")
+
+TINY_SET = ["--set", "lattice.n_bases=400", "--set", "run.until_patches=10"]
+"""Runs of a twentieth of a second: the reticulate scene on 400 bases, stopped at 10 patches."""
+TINY = {"lattice": {"n_bases": 400}, "run": {"until_patches": 10}}
+PRIORS = (Prior("growth.G", 0.007, 0.014), Prior("mechanics.f_max", 0.0028, 0.008))
+OBSERVED = Observed(name="made up", values={"orientation": 140.0, "sd": 20.0, "anisotropy": 0.65})
+SUMMARY = Path(__file__).resolve().parent.parent / "examples" / "paper" / "observed-reticulate.toml"
+
+
+def _fit(**kw) -> Fit:
+    return Fit(**{"observed": OBSERVED, "base": merge(read_toml("reticulate"), TINY), "priors": PRIORS,
+                  "population": 6, "generations": 2, "seed": 3, **kw})
+
+
+# -- what a fit is made of ----------------------------------------------------------------------------
+@pytest.mark.parametrize("make,message", [
+    (lambda: Prior("G", 0.0, 1.0), "expected SECTION.KEY"),
+    (lambda: Prior("growth.G", 0.02, 0.01), "LOW < HIGH"),
+    (lambda: Prior("growth.G", 0.01, 0.01), "LOW < HIGH"),
+    (lambda: Prior("growth.G", float("nan"), 0.01), "finite"),
+    (lambda: Prior("growth.G", 0.0, float("inf")), "finite"),
+    (lambda: Prior("growth.G", -1e308, 1e308), None),
+    (lambda: Prior("growth.G", 0.0, 0.01, log=True), "LOW > 0"),
+    (lambda: Prior("run.seed", 0, 10), "not a setting to fit"),
+    (lambda: _fit(priors=()), "at least one prior"),
+    (lambda: _fit(priors=(PRIORS[0], PRIORS[0])), "given twice"),
+    (lambda: _fit(statistics=("nonsense",)), "no statistic 'nonsense'"),
+    (lambda: _fit(statistics=("n_bar",)), "has no n_bar"),
+    (lambda: _fit(observed=Observed(name="x", values={})), "none of the statistics"),
+    (lambda: _fit(population=1), "population"),
+    (lambda: _fit(generations=0), "generations"),
+    (lambda: _fit(min_acceptance=1.0), "acceptance"),
+    (lambda: _fit(seed=-1), "seed"),
+    (lambda: _fit(priors=(Prior("growth.G", -0.01, 0.01),)).check(), "G"),
+    (lambda: _fit(priors=(Prior("mechanics.nonsense", 0.1, 0.2),)).check(), "nonsense"),
+])
+def test_bad_priors_and_fits_are_one_line(make, message):
+    if message is None:  # a wide prior is allowed: what it makes of a scene is the scene's to check
+        make()
+        return
+    with pytest.raises(BarkError, match=message):
+        make()
+
+
+def test_orientation_is_compared_as_an_axis_and_a_missing_statistic_as_nan():
+    near = compared({"orientation": 1.0}, ["orientation"])
+    far = compared({"orientation": 179.0}, ["orientation"])
+    assert math.dist(near.values(), far.values()) == pytest.approx(2 * math.sin(math.radians(2)), rel=1e-12)
+    assert list(compared({"orientation": 90.0, "sd": 5.0}, ["orientation", "sd"])) == ["orientation_cos2", "orientation_sin2", "sd"]
+    assert math.isnan(compared({"sd": None}, ["sd"])["sd"])
+
+
+def test_the_observed_pattern_brings_the_statistics_it_has(tmp_path):
+    summary = Observed.read(SUMMARY)
+    assert summary.available() == ("orientation", "sd")
+    assert summary.values["orientation"] == 47.0 and summary.values["sd"] == 34.4
+    assert Observed.read(SUMMARY, mirror=True).values["orientation"] == pytest.approx(133.0)
+    r = CliRunner().invoke(cli, ["simulate", "--scene", "reticulate", *TINY_SET, "--out", str(tmp_path / "run"), "--quiet"])
+    assert r.exit_code == 0, r.output
+    run = Observed.read(tmp_path / "run")
+    summary_json = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert run.values["orientation"] == pytest.approx(summary_json["mean_orientation_deg"], abs=1e-9)
+    assert run.values["sd"] == pytest.approx(summary_json["circular_sd_deg"], abs=1e-9)
+    assert run.values["nematic_order"] == pytest.approx(summary_json["network"]["nematic_order"], abs=1e-9)
+    assert {"orientation", "sd", "anisotropy", "size_mean", "nematic_order"} <= set(run.available())
+
+
+def test_a_run_of_the_fit_measures_what_the_run_folder_says(tmp_path):
+    """The statistics a fit's run measures in memory are those ``bark simulate`` writes for the same scene."""
+    scene = merge(read_toml("reticulate"), {**TINY, "run": {**TINY["run"], "seed": 5}})
+    got = F.simulate_statistics(scene, F.STATISTICS)
+    r = CliRunner().invoke(cli, ["simulate", "--scene", "reticulate", *TINY_SET, "--seed", "5", "--out", str(tmp_path / "r"),
+                                 "--quiet"])
+    assert r.exit_code == 0, r.output
+    want = Observed.read(tmp_path / "r").values
+    assert got.keys() == want.keys()
+    for k in got:
+        assert (got[k] is None and want[k] is None) or got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-12), k
+
+
+def test_a_statistic_a_run_lacks_makes_it_far_not_undefined():
+    import pyabc
+
+    distance = F._distance_class()(p=1)
+    x0 = {"a": 1.0, "b": 2.0}
+    pyabc.PNormDistance.initialize(distance, t=0, get_sample=lambda: None, x_0=x0, total_sims=0)  # no scales fitted
+    distance.scale_weights[0] = np.array([1.0, 1.0])
+    assert distance({"a": 1.5, "b": 2.0}, x0, t=0) == pytest.approx(0.5)
+    assert distance({"a": 1.5, "b": math.nan}, x0, t=0) == pytest.approx(0.5 + F.MISSING)
+    distance.scale_weights[0] = np.array([1.0, 0.0])  # a statistic every run has alike weighs nothing, missing or not
+    assert distance({"a": 1.5, "b": math.nan}, x0, t=0) == pytest.approx(0.5)
+
+
+def test_weighted_quantiles_and_the_highest_density_level():
+    x = np.arange(1.0, 101.0)
+    w = np.ones_like(x)
+    assert weighted_quantiles(x, w, (0.5,))[0] == pytest.approx(50.5)
+    assert weighted_quantiles(x, w, (0.05, 0.95)) == pytest.approx([5.5, 95.5])
+    w2 = np.where(x > 50, 3.0, 1.0)  # three quarters of the weight above 50
+    assert weighted_quantiles(x, w2, (0.25,))[0] == pytest.approx(50.5, abs=0.6)
+
+
+# -- a fit run ----------------------------------------------------------------------------------------
+@pytest.mark.slow  # worker processes started: seconds
+def test_the_same_seed_gives_the_same_posterior_on_any_number_of_workers_and_after_a_stop(tmp_path):
+    one = run_fit(_fit(), tmp_path / "one.db", workers=1)
+    assert one.stop_reason == "generations" and [g.t for g in one.generations] == [0, 1]
+    assert all(g.accepted == 6 and g.runs >= 6 for g in one.generations)
+    first = run_fit(_fit(generations=1), tmp_path / "two.db", workers=2)  # stopped after its first generation ...
+    assert first.ran == 1
+    two = run_fit(_fit(), tmp_path / "two.db", workers=2)  # ... and run again: only the second is run
+    assert two.ran == 1
+    assert two.generations == one.generations
+    for a, b in zip(one.posterior(), two.posterior()):
+        np.testing.assert_array_equal(a, b)
+    again = run_fit(_fit(), tmp_path / "two.db", workers=2)
+    assert again.ran == 0
+    other = run_fit(_fit(seed=4), tmp_path / "three.db", workers=1)
+    assert not np.array_equal(other.posterior()[0], one.posterior()[0])
+    est = one.estimates()
+    for p in PRIORS:
+        lo, hi = est[p.key]["ci90"]
+        assert p.low <= lo <= est[p.key]["median"] <= hi <= p.high
+    x, w = one.posterior()
+    assert x.shape == (6, 2) and w.sum() == pytest.approx(1.0)
+    best = x[np.argmax(w)]
+    assert one.hpd_level(dict(zip(one.fit.keys, best))) < 0.5
+    assert one.hpd_level({"growth.G": 1.0, "mechanics.f_max": 1.0}) == pytest.approx(1.0)
+
+
+def test_a_database_of_other_settings_or_of_another_program_is_refused(tmp_path):
+    import sqlite3
+
+    with sqlite3.connect(tmp_path / "other.db") as con:
+        con.execute("CREATE TABLE runs (x INTEGER)")
+    with pytest.raises(BarkError, match="not a fit's database"):
+        run_fit(_fit(), tmp_path / "other.db")
+    (tmp_path / "junk.db").write_bytes(b"not sqlite at all, just some bytes" * 100)
+    with pytest.raises(BarkError, match="not a fit's database"):
+        run_fit(_fit(), tmp_path / "junk.db")
+
+
+@pytest.mark.slow  # a fit of a few generations on worker processes
+def test_a_settings_change_is_refused_and_a_dask_cluster_gives_the_local_posterior(tmp_path):
+    distributed = pytest.importorskip("distributed")
+    local = run_fit(_fit(), tmp_path / "local.db", workers=2)
+    with pytest.raises(BarkError, match="other settings"):
+        run_fit(_fit(population=7), tmp_path / "local.db")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        dask = run_fit(_fit(), tmp_path / "dask.db", client=client)
+    assert dask.generations == local.generations
+    for a, b in zip(local.posterior(), dask.posterior()):
+        np.testing.assert_array_equal(a, b)
+
+
+# -- the command --------------------------------------------------------------------------------------
+CLI_FIT = ["--scene", "reticulate", *TINY_SET, "--population", "6", "--generations", "2", "--predictive", "4", "--quiet"]
+
+
+@pytest.mark.slow  # a whole fit with its pictures
+def test_bark_fit_writes_its_summary_posterior_and_pictures(tmp_path):
+    out = tmp_path / "fit"
+    r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *CLI_FIT, "--mirror", "--mark", "reticulate:growth.G=0.011,mechanics.f_max=0.005",
+                                 "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in out.iterdir()) == ["corner.png", "fit.db", "fit.json", "posterior.csv", "predictive.png"]
+    report = json.loads((out / "fit.json").read_text())
+    assert report["statistics"] == ["orientation", "sd"]
+    assert report["observed"]["statistics"]["orientation"] == pytest.approx(133.0)
+    assert [g["t"] for g in report["generations"]] == [0, 1]
+    assert report["runs"] == sum(g["runs"] for g in report["generations"])
+    assert set(report["posterior"]) == {"growth.G", "mechanics.f_max"}
+    assert 0.0 <= report["marks"]["reticulate"]["hpd_level"] <= 1.0
+    assert len(report["predictive"]) == 4 and set(report["predictive"][0]["statistics"]) == {"orientation", "sd"}
+    lines = (out / "posterior.csv").read_text().splitlines()
+    assert lines[0] == "growth.G,mechanics.f_max,weight" and len(lines) == 7
+    assert sum(float(line.split(",")[2]) for line in lines[1:]) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--prior", "growth.G=0.01"], "--prior growth.G=0.01: expected SECTION.KEY=LOW:HIGH"),
+    (["--prior", "growth.G=a:b"], "must be numbers"),
+    (["--prior", "growth.G=0.02:0.01"], "finite LOW < HIGH"),
+    (["--prior", "growth.G=nan:0.01"], "finite LOW < HIGH"),
+    (["--prior", "growth.G=-1e308:1e308", "--prior", "growth.G=0:1"], "given twice"),
+    (["--prior", "growth.G=0:0.01:log"], "both > 0"),
+    (["--prior", "growth.G=0.01:0.02", "--set", "growth.G=0.01"], "fitted or set, not both"),
+    (["--prior", "run.seed=0:5"], "not a setting to fit"),
+    (["--prior", "growth.G=-1:0.02"], "G"),
+    (["--statistics", "sd,bogus"], "no statistic 'bogus'"),
+    (["--statistics", "anisotropy"], "has no anisotropy"),
+    (["--mark", "nolabel"], "--mark nolabel: expected LABEL:"),
+    (["--mark", "a:growth.G=0.01"], "give a value for each fitted setting"),
+    (["--mark", "a:growth.G=inf,mechanics.f_max=0.005"], "expected LABEL:"),
+    (["--workers", "2", "--dask", "tcp://127.0.0.1:1"], "not both"),
+    (["--population", "1"], "--population"),
+    (["--min-acceptance", "1"], "--min-acceptance"),
+])
+def test_bad_input_to_bark_fit_is_one_line_and_writes_nothing(tmp_path, args, message):
+    out = tmp_path / "fit"
+    r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *TINY_SET, *args, "--out", str(out)])
+    assert_clean_outcome(r, out)
+    assert r.exit_code == 2 and message in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("observed", ["missing.csv", "folder-without-a-run", "odd name ünï.toml"])
+def test_an_observed_pattern_that_is_not_one_is_one_line(tmp_path, observed):
+    (tmp_path / "folder-without-a-run").mkdir()
+    (tmp_path / "odd name ünï.toml").write_text("[pattern]\nn_patches = 'many'\n")
+    r = CliRunner().invoke(cli, ["fit", str(tmp_path / observed), "--out", str(tmp_path / "fit")])
+    assert_clean_outcome(r, tmp_path / "fit")
+    assert r.exit_code == 2
+
+
+@pytest.mark.slow  # a fit of whole processes, stopped from outside
+def test_a_fit_stopped_by_a_signal_goes_on_from_its_last_generation(tmp_path):
+    out = tmp_path / "fit"
+    args = [sys.executable, "-m", "bark_cli", "fit", str(SUMMARY), *[a for a in CLI_FIT if a != "--quiet"],
+            "--generations", "3", "--predictive", "0", "--out", str(out)]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        line = proc.stderr.readline()  # the first generation's line: it is in fit.db
+        assert line.startswith("bark: generation 0:"), line + proc.communicate()[1]
+        os.kill(proc.pid, signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    if proc.returncode == 0:  # it had finished before the signal came: nothing to test on this machine
+        pytest.skip("the fit ended before the signal")
+    assert proc.returncode == 128 + signal.SIGTERM and "stopped by SIGTERM" in err and "the same command goes on" in err, err
+    kept = len(load_fit(None, out / "fit.db").generations)
+    assert 1 <= kept < 3
+    r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *CLI_FIT, "--generations", "3", "--predictive", "0", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    whole = CliRunner().invoke(cli, ["fit", str(SUMMARY), *CLI_FIT, "--generations", "3", "--predictive", "0",
+                                     "--out", str(tmp_path / "whole")])
+    assert whole.exit_code == 0, whole.output
+    a, b = (json.loads((p / "fit.json").read_text()) for p in (out, tmp_path / "whole"))
+    assert a["generations"] == b["generations"] and a["posterior"] == b["posterior"]
+
+
+@pytest.mark.slow  # whole processes
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc to find the worker processes")
+def test_a_killed_fit_worker_is_one_line_and_the_rerun_goes_on(tmp_path):
+    from tests.test_sweep import _children
+
+    out = tmp_path / "fit"
+    args = [sys.executable, "-m", "bark_cli", "fit", str(SUMMARY), *[a for a in CLI_FIT if a != "--quiet"],
+            "--generations", "3", "--predictive", "0", "--workers", "2", "--out", str(out)]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        line = proc.stderr.readline()  # a generation is in fit.db, and the workers are running the next
+        assert line.startswith("bark: generation 0:"), line + proc.communicate()[1]
+        workers = [k for k in _children(proc.pid) if "python" in Path(f"/proc/{k}/cmdline").read_bytes().decode(errors="replace")]
+        os.kill(workers[-1], signal.SIGKILL)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    if proc.returncode == 0:
+        pytest.skip("the fit ended before its worker was killed")
+    assert proc.returncode == 1 and "fit worker died" in err and err.count("\n") == 1, err
+    r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *CLI_FIT, "--generations", "3", "--predictive", "0", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    assert [g["t"] for g in json.loads((out / "fit.json").read_text())["generations"]] == [0, 1, 2]
