@@ -12,7 +12,8 @@ DAYS_PER_TIME_UNIT = 88.5
 METRES_PER_LENGTH_UNIT = 0.3
 DAYS_PER_YEAR = 365.25
 
-__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "COLUMN_UNITS", "headed", "years", "metres", "unwrap"]
+__all__ = ["DAYS_PER_TIME_UNIT", "METRES_PER_LENGTH_UNIT", "COLUMN_UNITS", "headed", "data_frame", "years", "metres",
+           "unwrap"]
 
 COLUMN_UNITS = {"t": "tu", "radius": "lu", "z": "lu", "lambda1": "lu2", "lambda2": "lu2", "tension": "fu",
                 "dissipation": "fu_lu_per_tu"}
@@ -27,6 +28,22 @@ def headed(columns, units: dict[str, str] = COLUMN_UNITS) -> list[str]:
     """A table's header: each column's short name with its unit (:data:`COLUMN_UNITS`) appended,
     ``t`` → ``t_tu``; a column with no unit as it is."""
     return [f"{c}_{units[c]}" if c in units else c for c in columns]
+
+
+def data_frame(rows, columns, header=None):
+    """``pandas.DataFrame(rows, columns=columns)`` headed ``header`` (default: ``columns``), or one
+    line saying pandas is needed (it is not a dependency of bark).  ``rows`` are dicts, or a dict of
+    equal-length columns."""
+    from bark.errors import BarkError
+
+    try:
+        import pandas
+    except ImportError:
+        raise BarkError("pandas is needed for a DataFrame (pip install pandas); the rows are there without it") from None
+    frame = pandas.DataFrame(rows, columns=columns)
+    if header is not None:
+        frame.columns = list(header)
+    return frame
 
 
 def years(t):

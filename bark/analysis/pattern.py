@@ -318,6 +318,8 @@ class PatchTable:
     def to_pandas(self):
         """The table as a ``pandas.DataFrame``, a row per patch, patches.csv's columns (:attr:`header`;
         pandas is not a dependency of bark: install it to use this)."""
+        from bark.units import data_frame
+
         return data_frame(self.rows(), self.columns, self.header)
 
     def rows(self) -> list[dict]:
@@ -377,19 +379,6 @@ def patch_header(columns: list[str]) -> list[str]:
     """A patch table's header for its ``columns``: their units on the trunk (centroid ``theta_deg,
     z``: ``z_lu``, ``lambda1_lu2``); a pattern in a plane is in the input's own units, unnamed."""
     return headed(columns) if "theta_deg" in columns else columns
-
-
-def data_frame(rows, columns, header=None):
-    """``pandas.DataFrame(rows, columns=columns)`` headed ``header`` (default: ``columns``), or one
-    line saying pandas is needed.  ``rows`` are dicts, or a dict of equal-length columns."""
-    try:
-        import pandas
-    except ImportError:
-        raise BarkError("pandas is needed for a DataFrame (pip install pandas); the rows are there without it") from None
-    frame = pandas.DataFrame(rows, columns=columns)
-    if header is not None:
-        frame.columns = list(header)
-    return frame
 
 
 @attrs.frozen(eq=False, repr=False)

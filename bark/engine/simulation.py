@@ -93,11 +93,9 @@ class BreakLog:
         """The log as a ``pandas.DataFrame``, a row per break, breaks.csv's columns: those of
         :meth:`arrays` with their units (``t_tu``, ``tension_fu``: ``bark.units.headed``; pandas is not
         a dependency of bark: install it to use this)."""
-        try:
-            import pandas
-        except ImportError:
-            raise BarkError("pandas is needed for a DataFrame (pip install pandas); arrays() gives the columns") from None
-        return pandas.DataFrame(dict(zip(headed(self.COLUMNS), self.arrays().values())))
+        from bark.units import data_frame
+
+        return data_frame(self.arrays(), list(self.COLUMNS), headed(self.COLUMNS))
 
     @classmethod
     def of_arrays(cls, arrays: dict[str, np.ndarray]) -> "BreakLog":

@@ -72,7 +72,7 @@ class StatisticsSeries(Recorder):
     def to_pandas(self):
         """The series as a ``pandas.DataFrame``, a row a sample, statistics.csv's columns (``t_tu``,
         ``radius_lu``, ...: ``bark.units.headed``)."""
-        from bark.analysis.pattern import data_frame
+        from bark.units import data_frame
 
         return data_frame(self.rows, SERIES_COLUMNS, headed(SERIES_COLUMNS))
 
