@@ -374,7 +374,7 @@ def scenes(scenes, repeats):
 @bench.command("fit")
 @click.option("--scene", "scene_name", default="reticulate", show_default=True,
               help="Scene of every run (a shipped scene's name or a TOML file); the observed pattern is one of its runs.")
-@click.option("--population", type=click.IntRange(2, 10_000), default=50, show_default=True,
+@click.option("--population", type=click.IntRange(2, 10_000), default=30, show_default=True,
               help="The fit's population: it runs a calibration and one generation, all drawn from the prior.")
 @click.option("--workers", type=click.IntRange(1, 256), default=2, show_default=True,
               help="The fit's workers, and the plain processes run at a time.")
@@ -383,8 +383,8 @@ def scenes(scenes, repeats):
 def fit_speed(scene_name, population, workers, repeats):
     """Runs per minute of a fit against plain `bark simulate` processes: a whole `bark fit` process
     (its start-up, its warm workers, runs that write nothing but their statistics), then as many
-    `bark simulate` processes of settings drawn from the same prior, --workers at a time, each
-    writing what the scene asks for."""
+    `bark simulate` processes of settings drawn from the same prior, each writing what the scene
+    asks for: one at a time (a shell loop) and --workers at a time (xargs -P)."""
     import json
     import subprocess
     import sys
@@ -394,43 +394,56 @@ def fit_speed(scene_name, population, workers, repeats):
     from rich.console import Console
     from rich.table import Table
 
+    from bark.engine.scene import Scene, read_toml
     from bark.studies.fit import Prior
 
+    Scene.from_dict(read_toml(scene_name))  # a scene that is not one: one line, before any work
     priors = (Prior("growth.G", 0.005, 0.016), Prior("mechanics.f_max", 0.002, 0.01))  # bark fit's default priors
     bark = [sys.executable, "-m", "bark_cli"]
-    fit_rate, plain_rate = [], []
+
+    def command(*args: str) -> None:
+        done = subprocess.run([*bark, *args], capture_output=True, text=True)
+        if done.returncode != 0:
+            raise click.ClickException(f"bark {args[0]}: {(done.stderr.strip().splitlines() or ['failed'])[-1]}")
+    lanes = sorted({1, workers})
+    rates: dict = {"fit": [], **{lanes_: [] for lanes_ in lanes}}
+
+    def plain(todo: list, at_a_time: int, folder: Path) -> float:
+        t0 = time.perf_counter()
+        running: list = []
+        for k, settings in enumerate(todo):
+            while len(running) >= at_a_time:
+                running.pop(0).wait()
+            running.append(subprocess.Popen([*bark, "simulate", "--scene", scene_name, *settings, "--out",
+                                             str(folder / str(k)), "--quiet"], stdout=subprocess.DEVNULL,
+                                            stderr=subprocess.DEVNULL))
+        for p in running:
+            p.wait()
+        return 60.0 * len(todo) / (time.perf_counter() - t0)
+
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        subprocess.run([*bark, "simulate", "--scene", scene_name, "--seed", "999", "--out", str(tmp / "observed"), "--quiet"],
-                       check=True, capture_output=True)
-        for r in range(repeats):  # interleaved, so that a change in the machine's load falls on both alike
+        command("simulate", "--scene", scene_name, "--seed", "999", "--out", str(tmp / "observed"), "--quiet")
+        runs = 0
+        for r in range(repeats):  # interleaved, so that a change in the machine's load falls on all alike
             out = tmp / f"fit-{r}"
             t0 = time.perf_counter()
-            subprocess.run([*bark, "fit", str(tmp / "observed"), "--scene", scene_name, "--population", str(population),
-                            "--generations", "1", "--predictive", "0", "--seed", str(r), "--workers", str(workers),
-                            "--out", str(out), "--quiet"], check=True, capture_output=True)
+            command("fit", str(tmp / "observed"), "--scene", scene_name, "--population", str(population), "--generations",
+                    "1", "--predictive", "0", "--seed", str(r), "--workers", str(workers), "--out", str(out), "--quiet")
             wall = time.perf_counter() - t0
-            report = json.loads((out / "fit.json").read_text())
-            runs = population + report["runs"]  # the calibration sample, then the generation
-            fit_rate.append(60.0 * runs / wall)
+            runs = population + json.loads((out / "fit.json").read_text())["runs"]  # the calibration, then the generation
+            rates["fit"].append(60.0 * runs / wall)
             rng = np.random.default_rng(r)
             todo = [[f"--set=growth.G={rng.uniform(priors[0].low, priors[0].high):.6g}",
                      f"--set=mechanics.f_max={rng.uniform(priors[1].low, priors[1].high):.6g}", f"--seed={k}"]
                     for k in range(runs)]
-            t0 = time.perf_counter()
-            running: list = []
-            for k, settings in enumerate(todo):
-                while len(running) >= workers:
-                    running.pop(0).wait()
-                running.append(subprocess.Popen([*bark, "simulate", "--scene", scene_name, *settings,
-                                                 "--out", str(tmp / f"plain-{r}" / str(k)), "--quiet"],
-                                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            for p in running:
-                p.wait()
-            plain_rate.append(60.0 * runs / (time.perf_counter() - t0))
-    f, p = float(np.median(fit_rate)), float(np.median(plain_rate))
-    table = Table("", "runs per minute (median)", "vs plain processes",
-                  title=f"bark bench fit: {scene_name}, {workers} at a time, {repeats} measurement{'s' if repeats > 1 else ''}")
-    table.add_row("plain `bark simulate` processes", f"{p:.0f}", "1")
-    table.add_row("`bark fit` (whole process)", f"{f:.0f}", f"{f / p:.2f}")
+            for at_a_time in lanes:
+                rates[at_a_time].append(plain(todo, at_a_time, tmp / f"plain-{r}-{at_a_time}"))
+    fit = float(np.median(rates["fit"]))
+    table = Table("", "runs per minute (median)", "fit vs this",
+                  title=f"bark bench fit: {scene_name}, {runs} runs, {repeats} measurement{'s' if repeats > 1 else ''}")
+    for at_a_time in lanes:
+        p = float(np.median(rates[at_a_time]))
+        table.add_row(f"plain `bark simulate` processes, {at_a_time} at a time", f"{p:.0f}", f"{fit / p:.2f}")
+    table.add_row(f"`bark fit`, {workers} worker{'s' if workers > 1 else ''} (whole process)", f"{fit:.0f}", "1")
     Console(width=120).print(table)

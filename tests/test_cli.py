@@ -283,6 +283,21 @@ def test_bench_scenes_times_the_command_as_bark_runs_it(tmp_path):
         assert len(figures) == 4 and all(v > 0 for v in figures), row
 
 
+@pytest.mark.slow  # whole processes: a fit and the plain runs beside it
+def test_bench_fit_measures_a_fit_against_plain_processes(tmp_path):
+    pytest.importorskip("pyabc")
+    scene = tmp_path / "tiny.toml"
+    scene.write_text((REPO_ROOT / "bark" / "scenes" / "reticulate.toml").read_text().replace("n_bases = 3000", "n_bases = 400")
+                     .replace("until_patches = 115", "until_patches = 10"))
+    result = CliRunner().invoke(cli, ["bench", "fit", "--scene", str(scene), "--population", "3", "--workers", "2"])
+    assert result.exit_code == 0, result.output
+    rows = [line for line in result.output.splitlines() if "at a time" in line or "whole process" in line]
+    assert len(rows) == 3  # one at a time, two at a time, the fit
+    for row in rows:
+        rate, ratio = (float(v) for v in re.findall(r"│ +([0-9.]+) +(?=│)", row))
+        assert rate > 0 and ratio > 0, row
+
+
 @pytest.mark.slow  # a whole process
 def test_a_run_whose_stderr_is_a_file_logs_its_progress_there_in_plain_lines(tmp_path):
     """stderr not a terminal (a batch job, nohup): a line at the start, then every --progress-every

@@ -25,6 +25,9 @@ from conftest import assert_clean_outcome
     (["bench", "accuracy", "--out", "/proc/nope"], "--out"),
     (["bench", "scenes", "nosuch.toml"], "nosuch.toml"),
     (["bench", "scenes", "bark/scenes/vertical.toml", "--repeats", "0"], "--repeats"),
+    (["bench", "fit", "--scene", "nosuch.toml"], "nosuch.toml"),
+    (["bench", "fit", "--population", "1"], "--population"),
+    (["bench", "fit", "--workers", "0"], "--workers"),
     (["plan", "nosuch.toml"], "nosuch.toml"),
 ])
 def test_bench_and_plan_refuse_bad_arguments_before_any_work(args, named, monkeypatch):
