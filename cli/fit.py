@@ -94,13 +94,14 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
     killed or stopped, the same command goes on from the last one."""
     from bark.engine.scene import merge, read_toml
     from bark.io.folder import held_folder
-    from bark.studies.fit import Fit, Observed, Prior
+    from bark.studies.fit import Fit, Observed, Prior, needs_pyabc
     from bark_cli.main import _parse_set
     from bark_cli.options import NAMER, Provenance
     from bark_cli.sweep import _dask_client, parse_ranges
 
     prov = Provenance(aliases={(None, "out"): "--out", (None, "workers"): "--workers", (None, "seed"): "--seed"})
     NAMER.set(prov.name)
+    needs_pyabc()
     if dask_address is not None and workers is not None:
         raise BarkError("--workers and --dask: local processes or a Dask cluster, not both")
     ranges = parse_ranges(priors, "--prior") if priors else {"growth.G": (0.005, 0.016, False),
@@ -272,7 +273,7 @@ def plot_corner(result, marks: dict, path) -> None:
     fit = result.fit
     x, w = result.posterior()
     d = len(fit.keys)
-    fig = new_figure(figsize=(3.2 * d + 0.8, 3.2 * d + 0.4), dpi=130)
+    fig = new_figure(figsize=(3.2 * d + 0.8, 3.2 * d + 0.4), dpi=130, layout="constrained")
     axes = fig.subplots(d, d, squeeze=False)
     colours = ["#CC3311", "#0077BB", "#009988", "#EE7733", "#33BBEE", "#EE3377", "#BBBBBB"]
     for i, pi in enumerate(fit.priors):
@@ -298,8 +299,8 @@ def plot_corner(result, marks: dict, path) -> None:
                 if len(x) > d + 1:
                     _contours(ax, x[:, [j, i]], w, (pj, pi))
                 for k, (label, p) in enumerate(marks.items()):
-                    ax.plot(p[pj.key], p[pi.key], marker="*", ms=13, color=colours[k % len(colours)], mec="white", mew=0.8,
-                            ls="none", label=label)
+                    ax.plot(p[pj.key], p[pi.key], marker="*", ms=max(6, 16 - 3 * k), color=colours[k % len(colours)],
+                            mec="white", mew=0.8, ls="none", label=label)  # each smaller: marks on one point all show
                 _prior_axis(ax, "y", pi)
             _prior_axis(ax, "x", pj)
             ax.tick_params(axis="x", labelrotation=30)
@@ -363,7 +364,7 @@ def plot_predictive(fit, runs: list[dict], path) -> None:
     names = fit.compared
     cols = min(4, len(names))
     rows = -(-len(names) // cols)
-    fig = new_figure(figsize=(3.0 * cols + 0.6, 2.8 * rows + 0.4), dpi=130)
+    fig = new_figure(figsize=(3.0 * cols + 0.6, 2.8 * rows + 0.4), dpi=130, layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False)
     for ax in axes.flat[len(names):]:
         ax.set_visible(False)

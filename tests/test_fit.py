@@ -229,6 +229,13 @@ def test_bad_input_to_bark_fit_is_one_line_and_writes_nothing(tmp_path, args, me
     assert r.exit_code == 2 and message in r.stderr, r.stderr
 
 
+def test_without_pyabc_bark_fit_says_how_to_install_it(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyabc", None)  # as if it were not installed
+    r = CliRunner().invoke(cli, ["fit", str(SUMMARY), "--out", str(tmp_path / "fit")])
+    assert_clean_outcome(r, tmp_path / "fit")
+    assert r.exit_code == 2 and "pip install 'bark-grasstree[fit]'" in r.stderr, r.stderr
+
+
 @pytest.mark.parametrize("observed", ["missing.csv", "folder-without-a-run", "odd name ünï.toml"])
 def test_an_observed_pattern_that_is_not_one_is_one_line(tmp_path, observed):
     (tmp_path / "folder-without-a-run").mkdir()

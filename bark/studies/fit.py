@@ -49,7 +49,8 @@ import numpy as np
 from bark.errors import BarkError
 from bark.studies.pool import DaskPool, LocalPool, WorkerDied
 
-__all__ = ["STATISTICS", "Prior", "Observed", "Fit", "FitResult", "Generation", "run_fit", "load_fit", "simulate_statistics"]
+__all__ = ["STATISTICS", "Prior", "Observed", "Fit", "FitResult", "Generation", "run_fit", "load_fit", "simulate_statistics",
+           "predictive", "needs_pyabc"]
 
 STATISTICS = {
     "orientation": "the patches' mean orientation (axial mean, degrees from horizontal; compared as the cosine and "
@@ -95,8 +96,7 @@ class Prior:
 
     def rv(self):
         """The prior as pyabc's random variable (scipy.stats ``uniform`` or ``loguniform``)."""
-        import pyabc
-
+        pyabc = needs_pyabc()
         return pyabc.RV("loguniform", self.low, self.high) if self.log else pyabc.RV("uniform", self.low, self.high - self.low)
 
     def as_dict(self) -> dict:
@@ -109,6 +109,15 @@ class Prior:
         if self.log:
             return (np.log(v) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
         return (v - self.low) / (self.high - self.low)
+
+
+def needs_pyabc():
+    """pyabc, or one line saying how to install it (``bark fit`` needs it; bark does not otherwise)."""
+    try:
+        import pyabc
+    except ImportError:
+        raise BarkError("bark fit needs pyabc: pip install 'bark-grasstree[fit]' (or pip install pyabc)") from None
+    return pyabc
 
 
 def _finite(value) -> float | None:
@@ -320,9 +329,7 @@ def _evaluate(blob: bytes, digest: str, seed: int, t: int, ids: list[int]) -> li
 @functools.cache
 def _sampler_class():
     """The sampler (a subclass of pyabc's ``Sampler``, made when pyabc is first needed)."""
-    from pyabc.sampler import Sampler
-
-    class SeededSampler(Sampler):
+    class SeededSampler(needs_pyabc().sampler.Sampler):
         """Runs of a generation numbered k = 0, 1, ..., each seeded by ``(seed, t, k)``, handed to
         ``pool`` in batches; the generation is the first ``n`` accepted runs in the order of k, with
         every run before the n-th accepted one (those rejected too: the distance's scales use them)."""
@@ -455,7 +462,7 @@ def _url(database: Path) -> str:
 
 
 def _history(database: Path):
-    import pyabc
+    pyabc = needs_pyabc()
 
     return pyabc.History(_url(database), _id=1, create=False)
 
@@ -498,6 +505,8 @@ def _generations(database: Path) -> list[Generation]:
         return []
     try:
         history = _history(database)
+    except BarkError:
+        raise
     except Exception:  # noqa: BLE001 — pyabc has no run there yet
         return []
     if history.n_populations == 0:
@@ -513,7 +522,7 @@ def _generations(database: Path) -> list[Generation]:
     return out
 
 
-def _quiet_pyabc() -> None:
+def _quietneeds_pyabc() -> None:
     """pyabc's log lines (one per generation and more) are bark's to say, in its own words."""
     import logging
 
@@ -530,7 +539,7 @@ five median absolute deviations, so that such a run is far, not undefined."""
 @functools.cache
 def _distance_class():
     """The distance (pyabc's adaptive L1 distance, a statistic a run lacks counted as :data:`MISSING`)."""
-    import pyabc
+    pyabc = needs_pyabc()
 
     class Distance(pyabc.AdaptivePNormDistance):
         def __call__(self, x, x_0, t=None, par=None) -> float:
@@ -544,9 +553,9 @@ def _distance_class():
 
 
 def _abcsmc(fit: Fit, sampler):
-    import pyabc
+    pyabc = needs_pyabc()
 
-    _quiet_pyabc()
+    _quietneeds_pyabc()
     prior = pyabc.Distribution({p.key: p.rv() for p in fit.priors})
     distance = _distance_class()(p=1, scale_function=pyabc.distance.mad, max_scale_weight_ratio=1e3)
     return pyabc.ABCSMC(fit.model(), prior, distance, population_size=fit.population, sampler=sampler,
