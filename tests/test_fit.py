@@ -20,7 +20,7 @@ from bark.errors import BarkError
 from bark.studies import fit as F
 from bark.studies.fit import Fit, Observed, Prior, compared, load_fit, run_fit, weighted_quantiles
 from bark_cli.main import cli
-from tests.conftest import assert_clean_outcome
+from conftest import assert_clean_outcome
 
 pytest.importorskip("pyabc")
 
@@ -276,7 +276,7 @@ def test_a_fit_stopped_by_a_signal_goes_on_from_its_last_generation(tmp_path):
 @pytest.mark.slow  # whole processes
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs /proc to find the worker processes")
 def test_a_killed_fit_worker_is_one_line_and_the_rerun_goes_on(tmp_path):
-    from tests.test_sweep import _children
+    from test_sweep import _children
 
     out = tmp_path / "fit"
     args = [sys.executable, "-m", "bark_cli", "fit", str(SUMMARY), *[a for a in CLI_FIT if a != "--quiet"],
