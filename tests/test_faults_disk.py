@@ -289,6 +289,7 @@ def test_a_full_disk_costs_only_the_files_it_refuses(small_disk):
     _no_temporaries(out)
 
 
+@pytest.mark.slow  # a run, stopped and resumed: seconds: the quick subset (-m "not slow") leaves it out
 def test_a_resume_onto_a_size_limit_leaves_no_output_of_the_earlier_state(tmp_path):
     """Stopped at t = 3 of 6, then resumed under ``ulimit -f``: the outputs refused are gone (not
     the stopped state's left beside the end's), the last checkpoint is kept, and a resume with room

@@ -200,6 +200,7 @@ def test_a_strategy_named_on_the_command_line_keeps_its_set_values(tmp_path, arg
     assert json.loads((out / "summary.json").read_text())["settings"][section][key] == value
 
 
+@pytest.mark.slow  # a run to its patch count: seconds: the quick subset (-m "not slow") leaves it out
 def test_no_time_bound_is_said(tmp_path):
     out = tmp_path / "out"
     with signal_after(LIMIT_S):

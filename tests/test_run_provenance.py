@@ -62,6 +62,7 @@ def test_a_run_records_its_version_commit_command_and_start_and_a_resume_adds_it
     assert [s["command"] for s in _summary(out)["provenance"]["sessions"]] == [command, f"bark simulate --resume {out} --quiet"]
 
 
+@pytest.mark.slow  # two whole runs: seconds: the quick subset (-m "not slow") leaves it out
 def test_scene_toml_reruns_the_run_to_the_same_bits(tmp_path):
     """scene.toml beside summary.json holds every setting resolved: `--scene out/scene.toml` runs the
     same run again, to the bit."""

@@ -64,6 +64,7 @@ def test_the_small_variant_is_the_same_tree_cut_down():
     assert small["growth"]["base"] == big["growth"]["base"]
 
 
+@pytest.mark.slow  # a small whole tree: seconds: the quick subset (-m "not slow") leaves it out
 def test_the_small_whole_tree_runs_through_the_command_line(tmp_path):
     out = tmp_path / "out"
     result = CliRunner().invoke(cli, ["simulate", "--scene", str(SCENES / "whole-tree-small.toml"), "--quiet",
@@ -104,6 +105,7 @@ def test_the_window_of_the_statistics_is_a_scene_setting(tmp_path):
     assert summary["windows"]["window"] == 1.0 and summary["windows"]["window_m"] == pytest.approx(0.3)
 
 
+@pytest.mark.slow  # a small whole tree run twice over: ten seconds: the quick subset (-m "not slow") leaves it out
 def test_the_small_whole_tree_interrupted_and_resumed_ends_bit_for_bit(tmp_path):
     scene = Scene.from_toml(SCENES / "whole-tree-small.toml")
     whole, part = tmp_path / "whole", tmp_path / "part"
