@@ -90,6 +90,27 @@ def test_the_observed_pattern_brings_the_statistics_it_has(tmp_path):
     assert {"orientation", "sd", "anisotropy", "size_mean", "nematic_order"} <= set(run.available())
 
 
+def test_a_photographs_csv_brings_its_pattern_and_patch_sizes_not_a_network(tmp_path):
+    """A photograph (leaf-base centres and patches, no springs): orientation, SD, anisotropy and
+    patch sizes to fit on; none of the crack network's statistics."""
+    from bark.engine.scene import Scene
+    from bark.units import unwrap
+
+    scene = merge(read_toml("reticulate"), {**TINY, "run": {**TINY["run"], "seed": 2}})
+    sc = Scene.from_dict(scene)
+    sim = sc.simulation()
+    sim.run(sc.stop())
+    uv, labels = unwrap(sim.state.x, sim.radius), sim.patch_labels()
+    lines = ["# digitised from a made-up photograph", "x,y,patch", *(f"{float(u)!r},{float(v)!r},{int(k)}" for (u, v), k in zip(uv, labels))]
+    (tmp_path / "photo.csv").write_text("\n".join(lines) + "\n")
+    photo = Observed.read(tmp_path / "photo.csv")
+    assert photo.available() == ("orientation", "sd", "anisotropy", "size_mean")
+    run = F.simulate_statistics(scene, ("sd", "size_mean"))
+    assert photo.values["size_mean"] == pytest.approx(run["size_mean"])
+    with pytest.raises(BarkError, match="has no n_bar"):
+        _fit(observed=photo, statistics=("orientation", "n_bar"))
+
+
 def test_a_run_of_the_fit_measures_what_the_run_folder_says(tmp_path):
     """The statistics a fit's run measures in memory are those ``bark simulate`` writes for the same scene."""
     scene = merge(read_toml("reticulate"), {**TINY, "run": {**TINY["run"], "seed": 5}})
