@@ -522,7 +522,7 @@ def _generations(database: Path) -> list[Generation]:
     return out
 
 
-def _quietneeds_pyabc() -> None:
+def _quiet_pyabc() -> None:
     """pyabc's log lines (one per generation and more) are bark's to say, in its own words."""
     import logging
 
@@ -555,7 +555,7 @@ def _distance_class():
 def _abcsmc(fit: Fit, sampler):
     pyabc = needs_pyabc()
 
-    _quietneeds_pyabc()
+    _quiet_pyabc()
     prior = pyabc.Distribution({p.key: p.rv() for p in fit.priors})
     distance = _distance_class()(p=1, scale_function=pyabc.distance.mad, max_scale_weight_ratio=1e3)
     return pyabc.ABCSMC(fit.model(), prior, distance, population_size=fit.population, sampler=sampler,
