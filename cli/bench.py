@@ -395,10 +395,9 @@ def fit_speed(scene_name, population, workers, repeats):
     from rich.table import Table
 
     from bark.engine.scene import Scene, read_toml
-    from bark.studies.fit import Prior
+    from bark.studies.fit import DEFAULT_PRIORS as priors  # the settings bark fit draws when told none
 
     Scene.from_dict(read_toml(scene_name))  # a scene that is not one: one line, before any work
-    priors = (Prior("growth.G", 0.005, 0.016), Prior("mechanics.f_max", 0.002, 0.01))  # bark fit's default priors
     bark = [sys.executable, "-m", "bark_cli"]
 
     def command(*args: str) -> None:

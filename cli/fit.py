@@ -94,7 +94,7 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
     killed or stopped, the same command goes on from the last one."""
     from bark.engine.scene import merge, read_toml
     from bark.io.folder import held_folder
-    from bark.studies.fit import Fit, Observed, Prior, needs_pyabc
+    from bark.studies.fit import DEFAULT_PRIORS, Fit, Observed, Prior, needs_pyabc
     from bark_cli.main import _parse_set
     from bark_cli.options import NAMER, Provenance
     from bark_cli.sweep import _dask_client, parse_ranges
@@ -104,8 +104,7 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
     needs_pyabc()
     if dask_address is not None and workers is not None:
         raise BarkError("--workers and --dask: local processes or a Dask cluster, not both")
-    ranges = parse_ranges(priors, "--prior") if priors else {"growth.G": (0.005, 0.016, False),
-                                                             "mechanics.f_max": (0.002, 0.01, False)}
+    ranges = parse_ranges(priors, "--prior") if priors else {p.key: (p.low, p.high, p.log) for p in DEFAULT_PRIORS}
     set_layer, prov.set_items = _parse_set(sets)
     base = prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {}
     base = merge(base, prov.add("--set", set_layer))
@@ -126,8 +125,8 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
 class _Progress:
     """A line per generation on stderr; within one, a rich bar where stderr is a terminal."""
 
-    def __init__(self, quiet: bool, population: int) -> None:
-        self.quiet, self.population = quiet, population
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
         self.t0 = time.perf_counter()
         self.bar = self.task = None
         self.live = not quiet and sys.stderr.isatty()
@@ -169,17 +168,17 @@ def _clock(seconds: float) -> str:
 
 
 def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, marks: dict, pictures) -> None:
-    from bark.studies.fit import run_fit
+    from bark.studies.fit import predictive, run_fit
     from bark.studies.pool import WorkerDied
     from bark_cli.main import Signals
 
-    progress = _Progress(quiet, plan.population)
+    progress = _Progress(quiet)
     database = folder / "fit.db"
     with Signals() as signals:  # SIGTERM and SIGHUP stop a fit as Ctrl-C does: the finished generations stay
         try:
             result = run_fit(plan, database, workers=workers, client=client, progress=progress.runs,
                              generation_done=progress.generation)
-            runs = _predictive(result, n_predictive, workers, client)
+            runs = predictive(result, n_predictive, workers=workers, client=client) if n_predictive else []
         except WorkerDied as err:
             progress.close()
             click.echo(f"bark: {err}", err=True)
@@ -198,12 +197,6 @@ def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, mar
             if client is not None:
                 client.close()
     _finish(result, folder, runs, marks, quiet, pictures)
-
-
-def _predictive(result, n: int, workers: int, client) -> list[dict]:
-    from bark.studies.fit import predictive
-
-    return predictive(result, n, workers=workers, client=client) if n else []
 
 
 def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures) -> None:
@@ -272,6 +265,7 @@ def plot_corner(result, marks: dict, path) -> None:
 
     fit = result.fit
     x, w = result.posterior()
+    intervals = {key: e["ci90"] for key, e in result.estimates().items()}
     d = len(fit.keys)
     fig = new_figure(figsize=(3.2 * d + 0.8, 3.2 * d + 0.4), dpi=130, layout="constrained")
     axes = fig.subplots(d, d, squeeze=False)
@@ -289,7 +283,7 @@ def plot_corner(result, marks: dict, path) -> None:
                     grid = np.geomspace(pi.low, pi.high, 200) if pi.log else np.linspace(pi.low, pi.high, 200)
                     density = gaussian_kde(pi.scaled(x[:, i]), weights=w)(pi.scaled(grid))
                     ax.plot(grid, density / len(heights), color="#222222", lw=1.2)  # weight per bin of 1/24 of the range
-                lo, hi = result.estimates()[pi.key]["ci90"]
+                lo, hi = intervals[pi.key]
                 ax.axvspan(lo, hi, color="#4477AA", alpha=0.12, lw=0)
                 ax.set_yticks([])
                 for k, (label, p) in enumerate(marks.items()):

@@ -49,8 +49,8 @@ import numpy as np
 from bark.errors import BarkError
 from bark.studies.pool import DaskPool, LocalPool, WorkerDied
 
-__all__ = ["STATISTICS", "Prior", "Observed", "Fit", "FitResult", "Generation", "run_fit", "load_fit", "simulate_statistics",
-           "predictive", "needs_pyabc"]
+__all__ = ["STATISTICS", "DEFAULT_PRIORS", "Prior", "Observed", "Fit", "FitResult", "Generation", "run_fit", "load_fit",
+           "simulate_statistics", "predictive", "needs_pyabc"]
 
 STATISTICS = {
     "orientation": "the patches' mean orientation (axial mean, degrees from horizontal; compared as the cosine and "
@@ -109,6 +109,11 @@ class Prior:
         if self.log:
             return (np.log(v) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
         return (v - self.low) / (self.high - self.low)
+
+
+DEFAULT_PRIORS = (Prior("growth.G", 0.005, 0.016), Prior("mechanics.f_max", 0.002, 0.01))
+"""The priors of a fit that names none: the growth rate and the breaking force, each uniform over a
+range that holds Table 2's three regimes with a margin."""
 
 
 def needs_pyabc():
@@ -414,13 +419,17 @@ class FitResult:
     ran: int = 0
     """Generations run by this call (the others were in the database)."""
     stop_reason: str = ""
+    _read: dict = attrs.field(factory=dict, init=False, repr=False, eq=False)
+    """Populations read from the database, by generation (the last generation: by its count)."""
 
     def posterior(self, t: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The population of generation ``t`` (default: the last): settings (one column per prior,
-        in the priors' order) and normalised weights."""
-        history = _history(self.database)
-        frame, w = history.get_distribution(m=0, t=t)
-        return frame[list(self.fit.keys)].to_numpy(dtype=float), np.asarray(w, dtype=float) / np.sum(w)
+        in the priors' order) and normalised weights; read from the database once."""
+        at = len(self.generations) - 1 if t is None else t
+        if at not in self._read:
+            frame, w = _history(self.database).get_distribution(m=0, t=at)
+            self._read[at] = (frame[list(self.fit.keys)].to_numpy(dtype=float), np.asarray(w, dtype=float) / np.sum(w))
+        return self._read[at]
 
     def estimates(self) -> dict[str, dict]:
         """Per fitted setting: the posterior mean, SD, median and the central 90 % credible interval."""
@@ -462,9 +471,7 @@ def _url(database: Path) -> str:
 
 
 def _history(database: Path):
-    pyabc = needs_pyabc()
-
-    return pyabc.History(_url(database), _id=1, create=False)
+    return needs_pyabc().History(_url(database), _id=1, create=False)
 
 
 SETTINGS_TABLE = "bark_fit"
@@ -554,7 +561,6 @@ def _distance_class():
 
 def _abcsmc(fit: Fit, sampler):
     pyabc = needs_pyabc()
-
     _quiet_pyabc()
     prior = pyabc.Distribution({p.key: p.rv() for p in fit.priors})
     distance = _distance_class()(p=1, scale_function=pyabc.distance.mad, max_scale_weight_ratio=1e3)
@@ -571,14 +577,14 @@ def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None,
     run on; else ``workers`` local processes.  ``progress(t, accepted, population, runs)`` after
     each batch of runs, ``generation_done(generation)`` after each generation stored."""
     database = Path(database)
+    if workers < 1:
+        raise BarkError(f"fit: workers must be at least 1, given {workers}")
     fit.check(None if client is not None else workers)
     stored = _stored_settings(database)
     settings = fit.settings()
     if stored and stored != json.loads(_canonical(settings)):
         raise BarkError(f"{database}: holds a fit of other settings (its observed pattern, scene, priors, statistics, "
                         "population or seed differ); give the fit a folder of its own")
-    if workers < 1:
-        raise BarkError(f"fit: workers must be at least 1, given {workers}")
     done = _generations(database)
     if not done and stored is not None:  # stopped in its first generation: nothing of it was kept
         for part in ("", "-wal", "-shm", "-journal"):

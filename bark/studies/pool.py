@@ -32,16 +32,20 @@ class LocalPool:
         try:
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                             initializer=worker_start, initargs=(max(1, cores() // workers),))
-        except OSError as err:  # the process limit (ulimit -u), or memory for another process
-            raise OSError(err.errno, f"cannot start the {what}'s worker processes ({err.strerror or err}): the "
-                          "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
+        except OSError as err:
+            raise self._cannot_start(err) from None
+
+    def _cannot_start(self, err: OSError) -> OSError:
+        """What an ``OSError`` starting a worker means: the process limit (ulimit -u), or memory for
+        another process (the pool starts its processes as work is submitted, too)."""
+        return OSError(err.errno, f"cannot start the {self.what}'s worker processes ({err.strerror or err}): the "
+                       "process limit (ulimit -u) or memory is reached; try fewer --workers")
 
     def submit(self, fn, *args):
         try:
             return self.pool.submit(fn, *args)
         except OSError as err:
-            raise OSError(err.errno, f"cannot start the {self.what}'s worker processes ({err.strerror or err}): the "
-                          "process limit (ulimit -u) or memory is reached; try fewer --workers") from None
+            raise self._cannot_start(err) from None
 
     def wait_any(self, futures) -> set:
         from concurrent.futures import FIRST_COMPLETED, wait
@@ -70,8 +74,8 @@ class DaskPool:
         self.client = client
         self.slots = max(1, sum(client.nthreads().values()))
 
-    def submit(self, fn, *args, key: str | None = None):
-        return self.client.submit(fn, *args, pure=False, **({"key": key} if key else {}))
+    def submit(self, fn, *args):
+        return self.client.submit(fn, *args, pure=False)
 
     def wait_any(self, futures) -> set:
         from distributed import wait
