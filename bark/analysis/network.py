@@ -246,18 +246,15 @@ def of_pattern(path, patch_sizes, min_size: int | None) -> dict:
     """The statistics beyond the paper's of the pattern at ``path`` (as ``bark.analysis.pattern.read``
     takes it) whose patches have ``patch_sizes`` bases: the sizes' statistics always, and the crack
     network's where the pattern has springs (a run's folder or state file).  ``min_size`` ``None``:
-    the run's own (its summary.json), else 7."""
-    import json
+    the run's own (the summary.json beside it), else the default."""
     from pathlib import Path
+
+    from bark.analysis.pattern import run_min_size
 
     path = Path(path)
     state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
     if min_size is None:  # the run's own, as the statistics took it
-        summary = path / "summary.json" if path.is_dir() else path.parent / "summary.json"
-        try:
-            min_size = int(json.loads(summary.read_text())["stop"]["min_patch_size"])
-        except (OSError, ValueError, KeyError, TypeError):
-            min_size = 7
+        min_size = run_min_size(path if path.is_dir() else path.parent)
     out = size_distribution(patch_sizes, min_size)
     if state is not None:
         with np.load(state, allow_pickle=False) as d:

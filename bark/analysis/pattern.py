@@ -41,7 +41,7 @@ from bark.errors import BarkError
 from bark.paths import is_zip, open_regular
 from bark.units import headed
 
-__all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "MIN_PATCH_SIZE", "patch_colours",
+__all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "run_min_size", "MIN_PATCH_SIZE", "patch_colours",
            "PALETTE", "FRAGMENT_GREY", "simulation_colours", "lineage_colours", "spiral_handedness"]
 
 MIN_PATCH_SIZE = 7
@@ -548,7 +548,7 @@ def read(path: str | Path, min_size: int | None = None) -> PatternStatistics:
     if path.is_dir():
         pattern = _run_folder(path)
         if min_size is None:
-            min_size = _run_min_size(path)
+            min_size = run_min_size(path)
     elif suffix == ".npz":
         pattern = Pattern.from_state(path)
     elif suffix == ".csv":
@@ -559,7 +559,7 @@ def read(path: str | Path, min_size: int | None = None) -> PatternStatistics:
     return attrs.evolve(stats, source=str(path))
 
 
-def _run_min_size(folder: Path) -> int:
+def run_min_size(folder: Path) -> int:
     """The minimum patch size the run in ``folder`` used (its summary.json), else the default."""
     import json
 
