@@ -16,7 +16,8 @@ from typing import Any, Callable
 
 import attrs
 
-__all__ = ["Ref", "BarkError", "BarkWarning", "NonFiniteStateError", "StepFailedError", "show", "one_line"]
+__all__ = ["Ref", "BarkError", "BarkWarning", "StateWriteError", "NonFiniteStateError", "StepFailedError", "show",
+           "one_line"]
 
 
 def show(value: Any) -> str:
@@ -94,6 +95,13 @@ class BarkError(ValueError):
             return self
         refs = tuple(attrs.evolve(r, section=r.section or section, key=prefix + r.key) for r in self.refs)
         return type(self)(self.template, *refs)
+
+
+class StateWriteError(BarkError, AttributeError):
+    """A write to a field of the state that the writer has not declared (``state.rest[0] = 1.0`` in a
+    strategy's Python or a script): the state's fields are read-only outside the engine and outside
+    the writes declared to it, so that no backend's copy of a field can silently go stale.  A
+    ``ValueError`` (as numpy's read-only error) and an ``AttributeError`` (as a read-only property's)."""
 
 
 class NonFiniteStateError(FloatingPointError):

@@ -29,6 +29,7 @@ Needs hypothesis (``pip install bark[test]``).
 
 from __future__ import annotations
 
+import json
 import math
 import pickle
 from typing import Any
@@ -38,7 +39,7 @@ import numpy as np
 
 from bark.errors import BarkError
 from bark.contract.parts import spring_inputs
-from bark.contract.strategies import KINDS, Breaker, Growth, Integrator, Strategy
+from bark.contract.strategies import KINDS, Breaker, Growth, Integrator, Made, Strategy, check_recordable
 from bark.validators import construct
 
 __all__ = ["check_strategy"]
@@ -59,7 +60,7 @@ def check_strategy(cls: type, params: dict[str, Any] | None = None, *, examples:
     strategy = construct(cls, params, f"{cls.kind} {cls.__name__}")
     profile = settings(max_examples=examples, deadline=None, database=None, derandomize=True, report_multiple_bugs=False,
                        suppress_health_check=list(HealthCheck))
-    ran = [_construction(strategy), _validation(cls, params, profile)]
+    ran = [_construction(strategy), _recording(strategy), _validation(cls, params, profile)]
     if isinstance(strategy, Breaker):
         ran += _breaker(strategy, profile)
     elif isinstance(strategy, Growth):
@@ -68,6 +69,7 @@ def check_strategy(cls: type, params: dict[str, Any] | None = None, *, examples:
         ran += _integrator(strategy, profile)
     if not isinstance(strategy, (Breaker, Growth, Integrator)):
         return ran
+    ran.append(_life_cycle(strategy))
     ran.append(_backends(strategy) if _have_numba() else "numpy = numba: skipped (numba is not installed)")
     return ran
 
@@ -89,6 +91,22 @@ def _construction(strategy) -> str:
                              "need it; define the class at a module's top level") from err
     assert copy == strategy, f"{name} does not survive pickling: {copy!r} != {strategy!r}"
     return "construction and pickling"
+
+
+def _recording(strategy) -> str:
+    """What a scene file, summary.json and a checkpoint record of the strategy gives it back: its
+    parameters are plain data (``check_recordable``), and through JSON they make an equal strategy."""
+    from bark.engine.scene import plain
+
+    name = type(strategy).__name__
+    try:
+        check_recordable(strategy)
+    except BarkError as err:
+        raise AssertionError(str(err)) from None
+    recorded = json.loads(json.dumps(plain(strategy.params())))
+    again = construct(type(strategy), recorded, f"{strategy.kind} {name}")
+    assert again == strategy, f"{name}'s parameters through JSON give {again!r}, not {strategy!r}"
+    return "parameters recorded (JSON round trip)"
 
 
 def _validation(cls, params, profile) -> str:
@@ -135,9 +153,11 @@ def _use(strategy) -> None:
 
 # -- breakers --------------------------------------------------------------------------------------
 
-def _spring_data():
+def _spring_data(breaker):
     """Random springs as a :class:`~bark.model.state.State` (each on a pair of bases of its own, along x,
-    so that its measured length is the drawn one exactly), with their tensions and lengths."""
+    so that its measured length is the drawn one exactly), with their tensions and lengths; the
+    breaker's declared per-spring fields made by its own ``initial`` (at a drawn time, height and
+    lattice offset)."""
     from hypothesis import strategies as st
     from hypothesis.extra import numpy as hnp
 
@@ -152,11 +172,19 @@ def _spring_data():
         k = draw(st.floats(1e-3, 100.0))
         x = np.zeros((2 * m, 3))
         x[1::2, 0] = length
-        state = State.empty(2 * m, m)
+        declared = [d for d in breaker.declares if d.per == "spring"]
+        state = State.empty(2 * m, m, declared)
         state.add_bases(x=x, v=np.zeros_like(x), anchor=x, anchor_dir=np.tile([1.0, 0.0], (2 * m, 1)),
                         born=np.zeros(2 * m))
+        own = {}
+        if declared:
+            made = Made(per="spring", t=draw(st.floats(0.0, 1e3)), ids=np.arange(m),
+                        z=draw(hnp.arrays(float, m, elements=st.floats(0.0, 10.0))),
+                        offset=draw(hnp.arrays(np.int64, m, elements=st.sampled_from([1, 2, 3, 5, 8, 13, 21, 34, 55]))),
+                        rest=rest)
+            own = breaker.initial(made, np.random.default_rng(draw(st.integers(0, 2**32))))
         state.add_springs(pairs=np.arange(2 * m).reshape(m, 2), rest=rest, fmax=fmax,
-                          intact=draw(hnp.arrays(bool, m)))
+                          intact=draw(hnp.arrays(bool, m)), **own)
         state.h = draw(st.floats(1e-4, 1.0))
         return state, k * (length - rest), length
 
@@ -170,10 +198,11 @@ def _breaker(breaker, profile) -> list[str]:
     name = type(breaker).__name__
     if part is None:
         return ["part: none (select runs in Python after every step)"]
-    evaluate = _compiled(part, "part_on_springs")
+    columns = tuple(d.name for d in breaker.declares if d.per == "spring")
+    evaluate = _compiled(part, "part_on_springs", columns)
 
     @profile
-    @given(_spring_data())
+    @given(_spring_data(breaker))
     def part_is_elementwise_and_select_follows(data):
         state, tension, length = data
         rule_in = spring_inputs(state, tension, part.reads, length)
@@ -190,7 +219,8 @@ def _breaker(breaker, profile) -> list[str]:
             assert chosen.tolist() == np.flatnonzero(state.intact & picked).tolist(), \
                 f"{name}.select does not pick what its part's rule picks"
         if evaluate is not None:
-            got_picked, got_loads = evaluate(tension, length, state.rest, state.fmax, 1.0 / state.fmax)
+            own = np.column_stack([state[c] for c in columns]) if columns else None
+            got_picked, got_loads = evaluate(tension, length, state.rest, state.fmax, 1.0 / state.fmax, own)
             assert got_picked.tolist() == picked.tolist(), f"{name}'s rule compiled (numba) differs from numpy"
             if part.load is not None:
                 assert np.array_equal(got_loads, loads, equal_nan=True), \
@@ -200,14 +230,14 @@ def _breaker(breaker, profile) -> list[str]:
     return ["breaker part: elementwise, select follows" + (", compiled = numpy" if evaluate else "")]
 
 
-def _compiled(part, how: str):
+def _compiled(part, how: str, *args):
     """The part compiled as the stepping kernel compiles it, by ``bark.engine.kernels.numba_backend``'s
     function ``how`` (``None`` where numba is not installed)."""
     if not _have_numba():
         return None
     from bark.engine.kernels import numba_backend
 
-    return getattr(numba_backend, how)(part)
+    return getattr(numba_backend, how)(part, *args)
 
 
 # -- growth laws and integrators -------------------------------------------------------------------
@@ -268,11 +298,16 @@ def _integrator(integrator, profile) -> list[str]:
     return ["integrator: update elementwise" + (", compiled = numpy" if evaluate else " (compiled check skipped: numba is not installed)")]
 
 
-# -- a short run on both backends ------------------------------------------------------------------
+# -- short runs: the life cycle, and both backends ----------------------------------------------------
 
-def _backends(strategy) -> str:
-    """A short growing, cracking run with ``strategy`` in place of the default of its kind, on the
-    numpy and the numba backend: the same state, steps and break log, to the bit."""
+RUN_UNTIL = 25.0
+"""A short run's end: past the first breaks of Table 2's vertical regime on the kit's small, growing
+segment."""
+
+
+def _short_run(strategy, backend: str, seed: int = 1):
+    """A simulation of a small segment that grows (bases join during the run) and cracks, with
+    ``strategy`` in place of the default of its kind, and its stop."""
     from bark.contract import registry
     from bark.model.forces import Mechanics
     from bark.model.lattice import Lattice
@@ -283,18 +318,51 @@ def _backends(strategy) -> str:
     parts = {kind: registry.create(kind, DEFAULT_STRATEGIES[kind]) for kind in ("growth", "integrator", "breaker")}
     parts[strategy.kind] = strategy
     parts["breakers"] = [parts.pop("breaker")]
+    lattice = Lattice(n_bases=300, n_start=240, join_rate=3.0, join_every=1.0, jitter=0.05)  # joins to t = 20
+    sim = Simulation(lattice=lattice, mechanics=Mechanics(fmax_spread=0.05), numerics=Numerics(dt=0.05, backend=backend),
+                     seed=seed, **parts)  # Table 2's k, c, b, m
+    return sim, Stop(until_time=RUN_UNTIL)
+
+
+def _same_run(a, b, what: str) -> None:
+    """Two simulations that must have run alike: the same steps, every field of the state and the
+    break log, to the bit."""
+    assert a.step_count == b.step_count, f"{what}: {a.step_count} steps against {b.step_count}"
+    for field, value in a.state.arrays().items():
+        assert np.array_equal(value, b.state.arrays()[field]), f"{what}: state.{field} differs"
+    la, lb = a.breaks.arrays(), b.breaks.arrays()
+    assert all(np.array_equal(la[k], lb[k]) for k in la), f"{what}: the break logs differ"
+
+
+def _life_cycle(strategy) -> str:
+    """Run, stop halfway, snapshot, restore into a fresh simulation made from the strategy's recorded
+    parameters (what a resumed run has: ``type(s)(**params())``, nothing the strategy kept), go on
+    under the same stop: the bits of the uninterrupted run.  The run itself holds the strategy to the
+    fields it declares (any other write fails at once)."""
+    name = type(strategy).__name__
+    whole, stop = _short_run(strategy, "numpy")
+    whole.run(stop)
+    again = type(strategy)(**strategy.params())
+    first, _ = _short_run(again, "numpy")
+    for sim in first.irun(stop):
+        if sim.state.t >= 0.5 * RUN_UNTIL:
+            break
+    assert first.step_count < whole.step_count, f"{name}: the run ended before its half"
+    snap = pickle.loads(pickle.dumps(first.snapshot()))
+    fresh, _ = _short_run(type(strategy)(**strategy.params()), "numpy")
+    fresh.restore(snap).run(stop)
+    _same_run(whole, fresh, f"a run with {name} stopped at t = {first.state.t:.6g}, restored and gone on")
+    return f"snapshot, restore, go on = uninterrupted, to the bit (stopped at step {first.step_count} of {whole.step_count})"
+
+
+def _backends(strategy) -> str:
+    """A short growing, cracking run with ``strategy`` in place of the default of its kind, on the
+    numpy and the numba backend: the same state, steps and break log, to the bit."""
     runs = []
     for backend in ("numpy", "numba"):
-        sim = Simulation(lattice=Lattice(n_bases=300, jitter=0.05), mechanics=Mechanics(fmax_spread=0.05),
-                         numerics=Numerics(dt=0.05, backend=backend), seed=1, **parts)  # Table 2's k, c, b, m
-        sim.run(Stop(until_time=25.0))  # past the first breaks of Table 2's vertical regime
+        sim, stop = _short_run(strategy, backend)
+        sim.run(stop)
         runs.append(sim)
     a, b = runs
-    name = type(strategy).__name__
-    for field in ("x", "v", "anchor", "intact"):
-        assert np.array_equal(getattr(a.state, field), getattr(b.state, field)), \
-            f"a run with {name}: state.{field} differs between the numpy and numba backends"
-    la, lb = a.breaks.arrays(), b.breaks.arrays()
-    assert a.step_count == b.step_count and all(np.array_equal(la[k], lb[k]) for k in la), \
-        f"a run with {name}: steps or break logs differ between the numpy and numba backends"
-    return f"numpy = numba to the bit (a run of {a.step_count} steps, {len(la['spring'])} breaks)"
+    _same_run(a, b, f"a run with {type(strategy).__name__} on the numpy and numba backends")
+    return f"numpy = numba to the bit (a run of {a.step_count} steps, {len(a.breaks)} breaks)"

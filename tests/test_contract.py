@@ -24,6 +24,7 @@ from conftest import REPO_ROOT, build_sim
 sys.path.insert(0, str(REPO_ROOT / "examples" / "plugin"))  # the example plugin, as its author tests it
 
 from bark_example_plugin import MostOverloadedBreaker, PowerLawGrowth, StrainBreaker  # noqa: E402
+from bark_example_plugin.disorder import ParastichyWeibull  # noqa: E402
 
 BUILT_IN = [(kind, name) for kind in ("growth", "integrator", "breaker", "analyzer") for name in registry.available(kind)
             if registry.available(kind)[name].value.startswith("bark_plugins.")]
@@ -37,7 +38,8 @@ def test_every_built_in_keeps_the_contract(kind, name):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("cls, params", [(StrainBreaker, {"eps": 0.3}), (PowerLawGrowth, {"a": 0.6}),
-                                         (MostOverloadedBreaker, {"max_per_step": 2})])
+                                         (MostOverloadedBreaker, {"max_per_step": 2}),
+                                         (ParastichyWeibull, {"m": 4.0, "scale_steep": 0.002})])
 def test_the_example_plugin_keeps_the_contract(cls, params):
     ran = check_strategy(cls, params)
     assert any(r.startswith("numpy = numba to the bit") for r in ran), ran
@@ -148,8 +150,11 @@ def test_a_part_is_one_value_compared_by_its_work():
     a = BreakerPart(rule=np.greater, reads=("tension", "fmax"), params=[1.0])
     assert a == BreakerPart(rule=np.greater, reads=["tension", "fmax"], params=np.array([1.0]))
     assert a != attrs.evolve(a, params=[2.0]) and len({a, attrs.evolve(a)}) == 1
-    with pytest.raises(ValueError, match="each field once"):
-        BreakerPart(rule=np.greater, reads=("tension", "stress"))
+    for reads in (("tension", "tension"), ("tension", "two words"), ("tension", "_private"), ("tension", 3)):
+        with pytest.raises(ValueError, match="each field once"):
+            BreakerPart(rule=np.greater, reads=reads)
+    assert BreakerPart(rule=np.greater, reads=("tension", "stress")).reads == ("tension", "stress")  # a declared
+    # field's name: a simulation whose strategies declare no 'stress' refuses it (tests/test_declared_fields.py)
     assert not a.params.flags.writeable
 
 

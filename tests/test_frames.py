@@ -82,7 +82,8 @@ def test_positions_changed_between_calls_are_seen():
     for backend in ("numba", "numpy"):
         sim = build_sim(n_bases=300, G=0.05, dt=0.05, seed=2, backend=backend)
         sim.run(Stop(until_time=1.0))
-        sim.state.x[17, 2] += 1e-9
+        with sim.state.writing("x"):
+            sim.state.x[17, 2] += 1e-9
         sim.run(Stop(until_time=1.5))
         runs.append(sim)
     assert np.array_equal(runs[0].state.x, runs[1].state.x)

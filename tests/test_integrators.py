@@ -59,7 +59,8 @@ def _displace(sim: Simulation, amplitude: float, seed: int = 0) -> None:
     r = np.hypot(s.x[:, 0], s.x[:, 1])
     theta = np.arctan2(s.x[:, 1], s.x[:, 0]) + rng.normal(scale=amplitude * SPACING / r)
     z = s.x[:, 2] + rng.normal(scale=amplitude * SPACING, size=s.n_bases)
-    s.x[:] = np.column_stack([r * np.cos(theta), r * np.sin(theta), z])
+    with s.writing("x"):
+        s.x[:] = np.column_stack([r * np.cos(theta), r * np.sin(theta), z])
 
 
 def _dense(matvec, size: int) -> np.ndarray:
@@ -87,7 +88,8 @@ def _convergence_sim(integrator, dt, backend="numpy") -> Simulation:
     rng = np.random.default_rng(0)
     theta = np.arctan2(s.x[:, 1], s.x[:, 0]) + rng.normal(scale=0.02, size=s.n_bases)
     z = s.x[:, 2] + rng.normal(scale=0.003, size=s.n_bases)
-    s.x[:] = np.column_stack([R0 * np.cos(theta), R0 * np.sin(theta), z])
+    with s.writing("x"):
+        s.x[:] = np.column_stack([R0 * np.cos(theta), R0 * np.sin(theta), z])
     return sim
 
 
@@ -331,8 +333,9 @@ def test_gershgorin_bounds_lanczos_on_stretched_states(scale, jitter, k, c, brok
     sim = _sim(EulerCromer(), 1e-3, n_bases=150, mechanics=Mechanics(k=k, c=c), seed=seed % 1000)
     s = sim.state
     rng = np.random.default_rng(seed)
-    s.x[:, :2] *= scale
-    s.x += rng.normal(scale=jitter * SPACING, size=s.x.shape)
+    with s.writing("x"):
+        s.x[:, :2] *= scale
+        s.x += rng.normal(scale=jitter * SPACING, size=s.x.shape)
     sim.break_springs(np.flatnonzero(rng.random(s.n_springs) < broken))  # graph and arrays together
     forces = sim.forces
     gershgorin = lambda_max(s, forces, "gershgorin")
@@ -361,7 +364,8 @@ def test_h_max_is_where_euler_cromer_really_becomes_unstable(k, m):
     peaks = {}
     for factor in (0.97, 1.1):
         sim = _sim(_Unguarded(), factor * h_max, n_bases=150, mechanics=mechanics)
-        sim.state.v[:] = np.random.default_rng(0).normal(scale=1e-4, size=sim.state.v.shape)
+        with sim.state.writing("v"):
+            sim.state.v[:] = np.random.default_rng(0).normal(scale=1e-4, size=sim.state.v.shape)
         sim.step()  # the kick's first effect, the yardstick (later amplitudes are seen after each call)
         amplitude = [float(np.abs(sim.state.x - sim.state.anchor).max())]
         try:
@@ -391,7 +395,8 @@ def test_stiffness_matvec_is_the_force_jacobian_when_nothing_is_compressed(scale
     rng = np.random.default_rng(seed)
     sim.break_springs(np.flatnonzero(rng.random(s.n_springs) < broken))  # graph and arrays together
     x = s.x * scale  # every spring stretched by `scale`: no transverse clamping
-    s.anchor[:] += rng.normal(scale=SPACING, size=s.anchor.shape)  # anchors off the bases
+    with s.writing("anchor"):
+        s.anchor[:] += rng.normal(scale=SPACING, size=s.anchor.shape)  # anchors off the bases
     matvec, diag = stiffness_matvec(x, s.pairs, s.rest, k, s.intact, c)
     size = x.size
     K = _dense(matvec, size)

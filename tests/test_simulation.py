@@ -224,7 +224,8 @@ def test_per_spring_thresholds_stay_per_spring(make_sim):
     sim = make_sim(n_bases=400, jitter=0.0, G=0.05)
     s = sim.state
     target = int(np.flatnonzero((s.pairs[:, 0] == 180) & (s.pairs[:, 1] == 201))[0])
-    s.fmax[target] = 0.5 * sim.mechanics.f_max
+    with s.writing("fmax"):
+        s.fmax[target] = 0.5 * sim.mechanics.f_max
     while sim.n_broken == 0:
         sim.step()
         assert sim.state.t < 5.0
@@ -367,7 +368,8 @@ def test_dt_above_stability_limit_never_runs_silently():
         sim = build_sim(n_bases=200, dt=0.9, G=0.0, f_max=10.0).build()
     except ValueError:  # BarkError: refused before running
         return
-    sim.state.v[:, 2] = 1e-3  # a kick, so that something can grow
+    with sim.state.writing("v"):
+        sim.state.v[:, 2] = 1e-3  # a kick, so that something can grow
     with pytest.raises(NonFiniteStateError):
         sim.run(Stop(until_time=5000.0))
 
@@ -375,6 +377,7 @@ def test_dt_above_stability_limit_never_runs_silently():
 def test_non_finite_state_raises(make_sim):
     sim = make_sim()
     sim.run(Stop(until_time=0.5))
-    sim.state.x[3, 0] = np.nan
+    with sim.state.writing("x"):
+        sim.state.x[3, 0] = np.nan
     with pytest.raises(NonFiniteStateError):
         sim.run(Stop(until_time=1.0))

@@ -18,9 +18,10 @@ A breaker's part (:class:`BreakerPart`)
     ``None``: the breaker does not steer the step (a hazard-rate breaker, whose breaking does not
     depend on landing a step on a threshold).
 ``reads``, ``load_reads``
-    the per-spring fields the rule and the load take, in order, from :data:`SPRING_INPUTS` (the
-    load's the rule's unless given); ``params`` (the breaker's numbers, a float array) always comes
-    last.
+    the per-spring fields the rule and the load take, in order, from :data:`SPRING_INPUTS` and the
+    per-spring fields the simulation's strategies declare (``Strategy.declares``: a breaker's own
+    quenched thresholds, say) (the load's the rule's unless given); ``params`` (the breaker's numbers,
+    a float array) always comes last.
 
 An integrator's part (:class:`IntegratorPart`)
 ----------------------------------------------
@@ -68,18 +69,19 @@ from bark.errors import BarkError
 __all__ = ["BreakerPart", "GrowthPart", "IntegratorPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
 
 SPRING_INPUTS: tuple[str, ...] = ("tension", "length", "rest", "fmax", "inv_fmax")
-"""What a breaker's part may read of each spring: its tension ``k(|d| − l)`` (force units), its
-length ``|d|`` and rest length ``l`` (length units; 1 = 0.3 m), its breaking threshold ``f_max``
-(force units) and ``1 / f_max`` (kept per spring: a product is cheaper than a division in the hot
-loop)."""
+"""What a breaker's part may read of each spring besides the per-spring fields declared by the
+simulation's strategies (``Strategy.declares``, read by name): its tension ``k(|d| − l)`` (force
+units), its length ``|d|`` and rest length ``l`` (length units; 1 = 0.3 m), its breaking threshold
+``f_max`` (force units) and ``1 / f_max`` (kept per spring: a product is cheaper than a division in
+the hot loop)."""
 
 
 def _reads(value) -> tuple[str, ...]:
     reads = tuple(value)
-    unknown = [r for r in reads if r not in SPRING_INPUTS]
+    unknown = [r for r in reads if not isinstance(r, str) or not r.isidentifier() or r.startswith("_")]
     if unknown or len(set(reads)) != len(reads):
         raise BarkError(f"a breaker part reads {', '.join(map(repr, reads))}: each field once, from "
-                        + ", ".join(SPRING_INPUTS))
+                        + ", ".join(SPRING_INPUTS) + " or a per-spring field its breaker declares")
     return reads
 
 
@@ -206,7 +208,8 @@ def spring_inputs(state, tension: np.ndarray, reads: tuple[str, ...], length: np
 
         _, length = spring_geometry(state.x, state.pairs)
     fields = {"tension": tension, "length": length, "rest": state.rest, "fmax": state.fmax}
-    return [1.0 / state.fmax if name == "inv_fmax" else fields[name] for name in reads]
+    return [1.0 / state.fmax if name == "inv_fmax" else fields[name] if name in fields else state[name]
+            for name in reads]
 
 
 def picks(part: BreakerPart, state, tension: np.ndarray, live: np.ndarray, length: np.ndarray | None = None) -> np.ndarray:

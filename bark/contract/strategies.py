@@ -56,9 +56,12 @@ import attrs
 import numpy as np
 
 from bark.contract.parts import BreakerPart, GrowthPart, IntegratorPart, picks
+from bark.errors import BarkError
 from bark.model.effects import Effect
+from bark.model.state import Declared
 
-__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "pattern_of"]
+__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "pattern_of",
+           "check_recordable", "Declared", "Made"]
 
 
 @attrs.frozen(kw_only=True)
@@ -79,6 +82,29 @@ class Strategy(abc.ABC):
     """The verb a part defines (``radius``, ``step``, ``select``): a class that writes it again and
     not ``part`` has no part."""
 
+    writes: ClassVar[tuple[str, ...]] = ()
+    """The state's fields its Python verb may write (``bark.model.state.State``), besides the fields
+    it declares (``declares``): the engine opens exactly these around the call, and any other write
+    fails at once (:class:`~bark.errors.StateWriteError`).  An integrator writes ``x`` and ``v``;
+    the other kinds nothing of the state's own."""
+
+    declares: ClassVar[tuple[Declared, ...]] = ()
+    """Per-spring and per-base fields this strategy owns (``bark.model.state.Declared``: name, per
+    spring or base, unit): the state carries them beside its own — grown, snapshot, checkpointed,
+    restored, on both backends —, :meth:`initial` makes each new spring's or base's value, a part
+    reads them by name (a breaker's ``reads``), and its Python verb may write them."""
+
+    def initial(self, made: "Made", rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """The first values of the fields this strategy declares for ``made.per`` (``spring`` or
+        ``base``), one per spring or base being made (:class:`Made`: when, where, which lattice
+        offset), drawn from ``rng`` (the simulation's one generator: the same seed gives the same
+        values, and a resumed run goes on with the generator where it was)."""
+        raise NotImplementedError(f"{type(self).__name__} declares fields and must give their first values (initial)")
+
+    def writable(self) -> tuple[str, ...]:
+        """What its Python verb may write: ``writes`` and the fields it declares."""
+        return (*self.writes, *(d.name for d in self.declares))
+
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
         if cls.verb and cls.verb in vars(cls) and "part" not in vars(cls):
@@ -96,12 +122,80 @@ class Strategy(abc.ABC):
         return self.part()
 
     def params(self) -> dict[str, Any]:
-        """Constructor keywords of this strategy, as given (for summaries and sweeps)."""
-        return attrs.asdict(self, recurse=False)
+        """Constructor keywords of this strategy, as given: ``type(s)(**s.params())`` is ``s`` (for
+        scene files, summaries, checkpoints and sweeps).  Only the constructor's fields: what a
+        strategy computes is not a parameter (and is refused: :func:`check_recordable`)."""
+        return {a.alias: getattr(self, a.name) for a in attrs.fields(type(self)) if a.init}
 
     def without(self, effect: str) -> "Strategy":
         """The strategy that does this one's work less its effect ``effect`` (one of ``provides``)."""
         raise NotImplementedError(f"{type(self).__name__} provides {effect!r} and must say what runs without it")
+
+
+@attrs.frozen(kw_only=True)
+class Made:
+    """Springs or bases being made now (a simulation's lattice laid out, bases joining at the top):
+    what the first value of a declared field may depend on (``Strategy.initial``)."""
+
+    per: str
+    """``spring`` or ``base``."""
+    t: float
+    """The time they are made (time units)."""
+    ids: np.ndarray
+    """Their ids (rows of the state)."""
+    z: np.ndarray
+    """Their heights: a base's site, a spring's midpoint (length units)."""
+    offset: np.ndarray | None = None
+    """Springs: each one's lattice index offset ``j − i`` (its parastichy); ``None`` for bases."""
+    rest: np.ndarray | None = None
+    """Springs: each one's rest length."""
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+_PLAIN = (bool, int, float, str, type(None))
+
+
+def _unrecordable(value, path: str) -> tuple[str, Any] | None:
+    """``(where, value)`` of the first part of ``value`` a scene file and a checkpoint cannot record
+    (plain numbers, strings, booleans, None, lists and tables of them, attrs values of such fields),
+    or ``None``."""
+    if isinstance(value, _PLAIN):
+        return None
+    if isinstance(value, (list, tuple)):
+        return next((bad for i, v in enumerate(value) if (bad := _unrecordable(v, f"{path}[{i}]"))), None)
+    if isinstance(value, dict):
+        if not all(isinstance(k, str) for k in value):
+            return path, value
+        return next((bad for k, v in value.items() if (bad := _unrecordable(v, f"{path}.{k}"))), None)
+    if attrs.has(type(value)):
+        hidden = [a.name for a in attrs.fields(type(value)) if not a.init]
+        if hidden:
+            return f"{path}.{hidden[0]}", getattr(value, hidden[0], None)
+        return next((bad for a in attrs.fields(type(value))
+                     if (bad := _unrecordable(getattr(value, a.name), f"{path}.{a.alias}"))), None)
+    return path, value
+
+
+def check_recordable(strategy: "Strategy", what: str | None = None) -> None:
+    """Refuse, in one line, a strategy that a scene file and a checkpoint cannot record exactly: a
+    field that is not a constructor keyword (``init=False``: what a strategy computes or draws is
+    state, which it declares to the simulation, or a resumed run would not have it), or a parameter
+    that is not plain data (numbers, strings, booleans, lists, tables).  Asked before a run starts,
+    so that nothing is computed or written that could not be recorded."""
+    what = what or f"{strategy.kind} {type(strategy).__name__}"
+    hidden = [a.name for a in attrs.fields(type(strategy)) if not a.init]
+    if hidden:
+        raise BarkError(f"{what}: its field {hidden[0]!r} is not a constructor keyword (init=False), so no scene "
+                        "file or checkpoint records it: keep only parameters on a strategy, and its state in the "
+                        "simulation's state")
+    for name, value in strategy.params().items():
+        bad = _unrecordable(value, name)
+        if bad is not None:
+            where, found = bad
+            raise BarkError(f"{what}: its parameter {where} holds a {type(found).__name__}, which no scene file or "
+                            "checkpoint can record: give numbers, strings, booleans, lists or tables")
 
 
 @attrs.frozen(kw_only=True)
@@ -160,6 +254,7 @@ class Integrator(Strategy):
 
     kind: ClassVar[str] = "integrator"
     verb: ClassVar[str] = "step"
+    writes: ClassVar[tuple[str, ...]] = ("x", "v")
     overdamped: ClassVar[bool] = False
     """Whether it integrates the massless limit ``b·dx/dt = F(x)`` rather than eq. 3 (masses, inertia):
     no stability limit from the masses; a work-precision study measures it against that model."""

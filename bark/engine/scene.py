@@ -427,7 +427,7 @@ class Scene:
         for section in PARAM_SECTIONS:
             out[section] = {k: v for k, v in attrs.asdict(getattr(self, section)).items()}
         for section, strategy in self.strategies.items():
-            out[section] = {"name": self.names[section], **_plain(strategy.params())}
+            out[section] = {"name": self.names[section], **plain(strategy.params())}
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
                           "history_every": self.history_every, "window": self.window, "tree_every": self.tree_every,
                           "picture_format": self.picture_format, "picture_dpi": self.picture_dpi}
@@ -478,19 +478,19 @@ def _without(strategy, has: dict[str, str]):
     return strategy
 
 
-def _plain(value):
+def plain(value):
     """Strategy parameters as TOML/JSON-shaped data (nested attrs objects become tables)."""
     if attrs.has(type(value)):
-        params = {a.name: _plain(getattr(value, a.name)) for a in attrs.fields(type(value)) if a.init}
+        params = {a.name: plain(getattr(value, a.name)) for a in attrs.fields(type(value)) if a.init}
         from bark.contract.strategies import Strategy
 
         if isinstance(value, Strategy):  # a nested strategy (a bulge law's base) is named as in a scene
             params = {"name": registry.name_of(value), **params}
         return params
     if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
+        return {k: plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     return value
 
 

@@ -25,7 +25,8 @@ from bark.model.state import State, cylinder_points, grown
 from bark.model.tree import Packing
 from bark.units import headed
 from bark.engine.stepping import Clock, Numerics
-from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator
+from bark.contract.parts import SPRING_INPUTS
+from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator, Made, check_recordable
 
 if TYPE_CHECKING:
     from bark.model.graph import LeafBaseGraph
@@ -189,6 +190,9 @@ class Simulation:
         of it, set the clock below the integrator's stability limit.  Does nothing once built."""
         if self._built:
             return self
+        for strategy in self.strategies():
+            check_recordable(strategy)  # what could not be recorded is refused before anything runs
+        declared = self.declared()
         if self.rng is None:
             self.rng = np.random.default_rng(self.seed)
         self.growth = self.growth.on(self.lattice)  # features placed relative to the growing top
@@ -199,9 +203,14 @@ class Simulation:
 
         self.graph = LeafBaseGraph(lambda: self.state)
         if state is None:
-            self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases)
+            self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases,
+                                     declared)
             self._built = True
-            self.join(*self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng))
+            try:
+                self.join(*self.lattice.sites(float(np.mean(np.broadcast_to(self.growth.radius(0.0, 0.0), 1))), self.rng))
+            except BaseException:  # a strategy's first values refused: not built, nothing half made
+                self._built, self.rng = False, None
+                raise
         else:
             self.state, self._built = state, True
             self._tension = np.zeros(state.n_springs)
@@ -209,12 +218,38 @@ class Simulation:
         self.clock = clock or Clock(h=h, levels=self.numerics.max_halvings if self.numerics.stepping == "adaptive" else 0)
         return self
 
+    def strategies(self) -> tuple:
+        """Every strategy of the simulation: growth law, integrator, breakers, analyzers."""
+        return (self.growth, self.integrator, *self.breakers, *self.analyzers)
+
+    def declared(self) -> tuple:
+        """The fields the strategies declare (``Strategy.declares``), which the state carries beside its
+        own; one owner each, and a part reads only the fields the state has."""
+        owners: dict[str, Any] = {}
+        for strategy in self.strategies():
+            for spec in type(strategy).declares:
+                if spec.name in owners:
+                    raise BarkError(f"{type(owners[spec.name]).__name__} and {type(strategy).__name__} both declare the "
+                                    f"field {spec.name!r}: a field has one owner")
+                owners[spec.name] = strategy
+        springs = {n for n, st in owners.items() if any(d.name == n and d.per == "spring" for d in type(st).declares)}
+        for b in self.breakers:
+            part = b.part_
+            for name in () if part is None else (*part.reads, *part.load_reads):
+                if name not in SPRING_INPUTS and name not in springs:
+                    raise BarkError(f"{type(b).__name__}'s part reads {name!r}, which is neither one of "
+                                    f"{', '.join(SPRING_INPUTS)} nor a per-spring field a strategy declares")
+        return tuple(spec for st in owners.values() for spec in type(st).declares if owners[spec.name] is st)
+
     def snapshot(self) -> Snapshot:
-        """The run where it stands (:class:`Snapshot`): a value, which the run going on leaves as it is."""
-        arrays = {**{k: v.copy() for k, v in self.state.arrays().items()},
+        """The run where it stands (:class:`Snapshot`): a value, which the run going on leaves as it is.
+        The declared fields are ``field_<name>`` among its arrays."""
+        own = {d.name for d in self.state.declared}
+        arrays = {**{(f"field_{k}" if k in own else k): np.array(v) for k, v in self.state.arrays().items()},
                   **{f"breaks_{k}": v for k, v in self.breaks.arrays().items()}}  # the log's arrays are made afresh
         meta = {"t": self.state.t, "h_last": self.state.h, "clock": attrs.asdict(self.clock), "step_count": self.step_count,
-                "events": [dict(e) for e in self.events], "rng": self.rng.bit_generator.state, "backend": self.backend.name}
+                "events": [dict(e) for e in self.events], "rng": self.rng.bit_generator.state, "backend": self.backend.name,
+                "declared": {d.name: d.per for d in self.state.declared}}
         return Snapshot(arrays, meta)
 
     def restore(self, snapshot: Snapshot) -> "Simulation":
@@ -229,7 +264,13 @@ class Simulation:
         self.rng.bit_generator.state = meta["rng"]
         if self.numerics.backend == "auto" and meta.get("backend") in ("numpy", "numba") and kernels.available(meta["backend"]):
             self.numerics = attrs.evolve(self.numerics, backend=meta["backend"])
-        self.build(State.from_arrays(arrays, meta["t"], meta["h_last"]), Clock(**meta["clock"]))
+        declared = self.declared()
+        held = meta.get("declared", {})
+        if held != {d.name: d.per for d in declared}:
+            raise BarkError(f"the snapshot holds the declared fields {sorted(held) or 'none'}, and this simulation's "
+                            f"strategies declare {sorted(d.name for d in declared) or 'none'}: it is of another model")
+        fields = {**arrays, **{d.name: arrays[f"field_{d.name}"] for d in declared}}
+        self.build(State.from_arrays(fields, meta["t"], meta["h_last"], declared), Clock(**meta["clock"]))
         self.breaks = BreakLog.of_arrays({k: arrays[f"breaks_{k}"] for k in BreakLog.COLUMNS})
         self.step_count = int(meta["step_count"])
         self.events = list(meta["events"])
@@ -336,7 +377,10 @@ class Simulation:
             pass
 
     def _break_selected(self) -> None:
-        picks = [np.asarray(b.select(self.state, self._tension, self.rng), dtype=np.int64) for b in self.breakers]
+        picks = []
+        for b in self.breakers:
+            with self.state.only(b.writable()):  # of the state, a breaker's select changes only its own fields
+                picks.append(np.asarray(b.select(self.state, self._tension, self.rng), dtype=np.int64))
         if picks:
             ids = np.unique(np.concatenate(picks))
             ids = self.break_springs(ids[self.state.intact[ids]], self._tension)
@@ -360,16 +404,44 @@ class Simulation:
         rest lengths are the distances now (a new spring is at rest) and whose thresholds come from the
         material and the growth law's regions.  Returns the ids."""
         s, t = self.state, self.state.t
-        ids = s.add_bases(**self._new_bases(theta, z, t))
+        bases = self._new_bases(theta, z, t)
+        made = Made(per="base", t=t, ids=np.arange(s.n_bases, s.n_bases + len(bases["born"])), z=bases["x"][:, 2])
+        ids = s.add_bases(**bases, **self._initial(made))
         pairs = self.lattice.new_pairs(ids, self.graph)
         if len(pairs):  # their ends' positions gathered first (np.take of a few rows copies all of x)
             ends = s.x[pairs.ravel()]
             _, rest = spring_geometry(ends, np.arange(ends.shape[0]).reshape(-1, 2))
-            fmax = self.growth.adjust_thresholds(t, 0.5 * (ends[0::2, 2] + ends[1::2, 2]),
-                                                 self.mechanics.thresholds(len(pairs), self.rng))
-            s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool))
+            mid = 0.5 * (ends[0::2, 2] + ends[1::2, 2])
+            fmax = self.growth.adjust_thresholds(t, mid, self.mechanics.thresholds(len(pairs), self.rng))
+            made = Made(per="spring", t=t, ids=np.arange(s.n_springs, s.n_springs + len(pairs)), z=mid,
+                        offset=pairs[:, 1].astype(np.int64) - pairs[:, 0], rest=rest)
+            s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool), **self._initial(made))
         self._tension = _rows(self._tension, s.n_springs)
         return ids
+
+    def _initial(self, made: Made) -> dict[str, np.ndarray]:
+        """The first values of the declared fields of the springs or bases ``made``, each from the
+        strategy that declares it (``Strategy.initial``, in the order of :meth:`strategies`), checked:
+        one finite float each, and exactly the fields it declares."""
+        values: dict[str, np.ndarray] = {}
+        for strategy in self.strategies():
+            names = [d.name for d in type(strategy).declares if d.per == made.per]
+            if not names:
+                continue
+            given = strategy.initial(made, self.rng)
+            what = f"{type(strategy).__name__}.initial"
+            if not isinstance(given, dict) or sorted(given) != sorted(names):
+                raise BarkError(f"{what} gave {sorted(given) if isinstance(given, dict) else type(given).__name__} "
+                                f"for new {made.per}s: give exactly its declared fields {names}")
+            for name in names:
+                try:
+                    value = np.array(np.broadcast_to(np.asarray(given[name], dtype=np.float64), (len(made),)))
+                except (TypeError, ValueError) as err:
+                    raise BarkError(f"{what}: {name!r} is not one number per {made.per} ({err})") from None
+                if not np.isfinite(value).all():
+                    raise BarkError(f"{what}: {name!r} holds NaN or infinite values")
+                values[name] = value
+        return values
 
     def _new_bases(self, theta, z, t: float) -> dict[str, np.ndarray]:
         """The fields of bases joining at time ``t`` at angles ``theta`` and heights ``z``: on the trunk

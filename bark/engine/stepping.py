@@ -281,23 +281,24 @@ class _PythonCall(Call):
 
     def __init__(self, sim, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.sim, self.state, self.mech, self.plan, self.tension = sim, state, mech, plan, tension
-        self.start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+        self.start = (state._rows("x").copy(order="F"), state._rows("v").copy(order="F"), state._rows("anchor").copy(order="F"))
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         sim, state = self.sim, self.state
-        sim.integrator.step(state, self.plan.h, sim.forces)
+        with state.only(sim.integrator.writable()):  # what it declares it writes, and nothing else
+            sim.integrator.step(state, self.plan.h, sim.forces)
         t = float(times[0])
-        r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))
+        r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))  # read-only to the law
         r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
         sim.backend.constrain(state, r_x, r_a)
         finite = sim.backend.measure(state, self.mech, self.tension) and state.is_finite()
-        loads = [parts.largest_load(p, state, self.tension, state.intact) for p in {b.part_ for b in sim.breakers}
+        loads = [parts.largest_load(p, state, self.tension, state._rows("intact")) for p in {b.part_ for b in sim.breakers}
                  if p is not None]
         load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
         return 1, load, False
 
     def undo(self) -> None:
-        for saved, arr in zip(self.start, (self.state.x, self.state.v, self.state.anchor)):
+        for saved, arr in zip(self.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             arr[...] = saved
 
     def result(self, done: int, load: float, picked: bool) -> Steps:

@@ -7,6 +7,8 @@ fast; ``np.load(..., allow_pickle=False)`` reads it) holding:
   velocities, anchors and their directions (the sites), birth times; the springs' ends, rest
   lengths, thresholds and ``intact`` mask — the topology, so that a run whose bases joined along
   the way is restored as it was, not rebuilt from the scene;
+* the fields the strategies declare (``field_<name>``, with meta's ``declared`` saying which are
+  per spring and which per base);
 * the break log so far (``breaks_*`` columns);
 * what was recorded along the way (``rec_series_*``: the statistics series; ``rec_frames_*``: the
   animation's frames; ``rec_trees_*``: the tree series' ages), so that a resumed run's files are the whole run's;
@@ -183,6 +185,17 @@ def _check_parts(arrays: dict[str, np.ndarray], meta: dict, bad: Callable[[str],
             raise bad(f"array {name!r} holds NaN or infinite values")
     if m and arrays["pairs"].max() >= n:
         raise bad("a spring joins a base that does not exist")
+    declared = meta.get("declared", {})
+    if not isinstance(declared, dict) or not all(isinstance(k, str) and v in ("spring", "base") for k, v in declared.items()):
+        raise bad("its record of declared fields has the wrong shape")
+    for name, per in declared.items():  # the strategies' own fields (``field_<name>``)
+        a = arrays.get(f"field_{name}")
+        if a is None:
+            raise bad(f"array 'field_{name}' is missing")
+        if a.dtype != np.float64 or a.shape != ((n if per == "base" else m),):
+            raise bad(f"array 'field_{name}' is {a.dtype}{list(a.shape)}, expected float64 with one value per {per}")
+        if not np.isfinite(a).all():
+            raise bad(f"array 'field_{name}' holds NaN or infinite values")
     lengths = {k: arrays[f"breaks_{k}"].shape[0] for k in BREAKS}
     if len(set(lengths.values())) != 1:
         raise bad("the break log's columns have different lengths (" + ", ".join(f"{k} {v}" for k, v in lengths.items()) + ")")

@@ -8,7 +8,8 @@ Every file is written to a temporary name in the same folder and moved into plac
 * ``summary.json`` — every setting, the seed, bark's version, the stop condition and why the run
   stopped, t and radius at the end, counts and pattern statistics, degenerate events.
 * ``state.npz`` — the mechanical state at the end (x, v, anchor, pairs, rest, fmax, intact, patch
-  labels, t); ``np.load(path)`` reads it with ``allow_pickle=False``.
+  labels, t, and ``field_<name>`` for each field a strategy declares); ``np.load(path)`` reads it
+  with ``allow_pickle=False``.
 """
 
 from __future__ import annotations
@@ -241,7 +242,7 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
         attempt("state.npz", lambda: write_npz(  # stored, not deflated: float arrays shrink by ~10 % for seconds of work at a million bases
             out / "state.npz", compress=False,
             x=s.x, v=s.v, anchor=s.anchor, pairs=s.pairs.astype(np.int64), rest=s.rest, fmax=s.fmax, intact=s.intact,
-            labels=sim.patch_labels(), t=np.float64(s.t),
+            labels=sim.patch_labels(), t=np.float64(s.t), **{f"field_{d.name}": s[d.name] for d in s.declared},
         ), failed, (out / "state.npz",))
     if scene.has("graphml"):
         attempt("graph.graphml", lambda: write_graphml(out / "graph.graphml", sim), failed, (out / "graph.graphml",))

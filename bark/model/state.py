@@ -18,12 +18,16 @@ lanes, and numpy's column operations are faster too.
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import attrs
 import numpy as np
 
-__all__ = ["State", "BASE_FIELDS", "SPRING_FIELDS", "cylinder_points", "unit_xy", "grown"]
+from bark.errors import BarkError, StateWriteError
+from bark.validators import one_of
+
+__all__ = ["State", "Declared", "Field", "BASE_FIELDS", "SPRING_FIELDS", "FIXED", "cylinder_points", "unit_xy", "grown"]
 
 BASE_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
     "x": ((3,), "float64"),           # position
@@ -34,8 +38,8 @@ BASE_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
 }
 SPRING_FIELDS: dict[str, tuple[tuple[int, ...], str]] = {
     "pairs": ((2,), "uint32"),        # the two bases (i, j); d = x_j − x_i; never changed (springs are appended)
-    "rest": ((), "float64"),          # rest length, taken when the spring was made; never changed
-    "fmax": ((), "float64"),          # breaking threshold, per spring (never per base), set then too
+    "rest": ((), "float64"),          # rest length, taken when the spring was made; changed only by declared writes
+    "fmax": ((), "float64"),          # breaking threshold, per spring (never per base), set then too; ditto
     "intact": ((), "bool"),           # changed only by State.set_intact (Simulation.break_springs, mend_springs)
 }
 MIN_CAPACITY = 64
@@ -63,27 +67,96 @@ def _alloc(capacity: int, shape: tuple[int, ...], dtype: str) -> np.ndarray:
     return np.zeros((capacity, *shape), dtype=dtype, order="F")
 
 
+FIXED: dict[str, str] = {
+    "pairs": "springs are only appended (Simulation.join); a spring's ends never change",
+    "intact": "it changes only through Simulation.break_springs and mend_springs",
+}
+"""Fields no declared write may open, and why."""
+
+
+def _refusal(name: str) -> str:
+    if name in FIXED:
+        return f"state.{name} is read-only: {FIXED[name]}"
+    shown = f"state.{name}" if name in BASE_FIELDS or name in SPRING_FIELDS else f"state[{name!r}]"
+    return (f"{shown} is read-only outside the engine: a strategy writes only the fields its class "
+            f"declares (`writes`), and a script or a test edits the state inside "
+            f"`with state.writing({name!r}): ...`, so that every backend is told")
+
+
+class Field(np.ndarray):
+    """A field's rows as the state hands them out where they may not be written: a read-only view
+    whose writes (``a[i] = v``, ``a += v``) raise :class:`~bark.errors.StateWriteError` in one line
+    saying how to declare the write.  Arithmetic on it gives plain arrays."""
+
+    _bark_field: str = ""
+
+    def __array_finalize__(self, obj) -> None:
+        self._bark_field = getattr(obj, "_bark_field", "")
+
+    def __setitem__(self, key, value) -> None:
+        if not self.flags.writeable:
+            raise StateWriteError(_refusal(self._bark_field))
+        super().__setitem__(key, value)
+
+    def __array_ufunc__(self, ufunc, method, *inputs, out=None, **kwargs):
+        if out is not None:
+            for o in out:
+                if isinstance(o, Field) and not o.flags.writeable:
+                    raise StateWriteError(_refusal(o._bark_field))
+            kwargs["out"] = tuple(o.view(np.ndarray) if isinstance(o, Field) else o for o in out)
+        inputs = tuple(a.view(np.ndarray) if isinstance(a, Field) else a for a in inputs)
+        return getattr(ufunc, method)(*inputs, **kwargs)
+
+    def __array_wrap__(self, out, context=None, return_scalar=False):
+        plain = out.view(np.ndarray)
+        return plain[()] if return_scalar else plain
+
+
 def _field(name: str, doc: str) -> property:
-    """A field's active rows (a view); assigning to it writes into them (``state.x += dx`` works)."""
-
-    def set_rows(self, value) -> None:
-        self._view(name)[...] = value
-
-    return property(lambda self: self._view(name), set_rows, doc=doc)
-
-
-def _flags(name: str, doc: str) -> property:
-    """A field of flags that only :meth:`State.set_intact` changes: a read-only view of its rows."""
+    """A field's active rows (a view): writable where the state is open to writes of it (the engine,
+    a declared write), else a read-only :class:`Field`.  Assigning to the attribute writes into the
+    rows where that is allowed (``state.x += dx`` in an integrator's ``step``)."""
 
     def get(self) -> np.ndarray:
-        rows = self._view(name)
-        rows.flags.writeable = False
-        return rows
+        return self._public(name)
 
-    def refuse(self, value) -> None:
-        raise AttributeError(f"state.{name} changes only through Simulation.break_springs and mend_springs")
+    def set_rows(self, value) -> None:
+        if name not in self._open:
+            raise StateWriteError(_refusal(name))
+        self._view(name)[...] = value
 
-    return property(get, refuse, doc=doc)
+    return property(get, set_rows, doc=doc)
+
+
+PER = ("spring", "base")
+RESERVED = ("tension", "length", "inv_fmax")
+"""Names a declared field may not take: what a breaker's part reads of every spring besides the
+state's fields (``bark.contract.parts.SPRING_INPUTS``)."""
+
+
+def _field_name(instance, attribute, value) -> None:
+    if not isinstance(value, str) or not value.isidentifier() or value.startswith("_"):
+        raise BarkError(f"a declared field's name must be a Python identifier not starting with '_', not {value!r}")
+    if value in BASE_FIELDS or value in SPRING_FIELDS or value in RESERVED:
+        raise BarkError(f"a declared field may not be called {value!r}: the engine has a field of that name")
+
+
+@attrs.frozen(kw_only=True)
+class Declared:
+    """A per-spring or per-base quantity a strategy owns (after LAMMPS's per-atom fields and OpenMM's
+    per-bond parameters): the state carries it beside its own fields — grown, copied, snapshot,
+    checkpointed and restored with them, by both backends — and the strategy that declares it makes
+    each new spring's or base's value (``Strategy.initial``).  Read-only outside its declared writes,
+    as every field is.  Values are float64."""
+
+    name: str = attrs.field(validator=_field_name)
+    """How it is read: ``state[name]``, and by name in a part's ``reads``."""
+    per: str = attrs.field(validator=one_of(*PER))
+    """``spring``: one value per spring; ``base``: one per leaf base."""
+    unit: str = attrs.field(default="", validator=attrs.validators.instance_of(str))
+    """Its unit, in the model's (``force``, ``length``, ``time``, ``1`` for a number)."""
+    doc: str = attrs.field(default="", validator=attrs.validators.instance_of(str))
+    """What it is, in a line."""
 
 
 @attrs.define(eq=False)
@@ -91,11 +164,15 @@ class State:
     """Positions, velocities and springs of the leaf-base layer at time ``t``.
 
     ``x``, ``v``, ``anchor``, ``anchor_dir``, ``born`` (per base) and ``pairs``, ``rest``, ``fmax``,
-    ``intact`` (per spring) are views of the active rows; assigning into them (``state.x[:] = ...``)
-    writes the state.  Integrators change ``x`` and ``v``; the simulation changes ``t``, applies the
-    surface constraint, breaks springs and adds bases.  A spring's ``rest`` and ``fmax`` are its
-    material, set when it is made and never changed afterwards, and its ``pairs`` too: springs are only
-    appended (backends keep derived data of them, extended when springs are added).
+    ``intact`` (per spring) are views of the active rows, **read-only outside the engine and the
+    writes declared to it**: the engine writes what its step computes; a strategy's Python verb may
+    write the fields its kind declares (``Strategy.writes``: an integrator's ``step`` writes ``x``
+    and ``v``, a breaker's ``select`` nothing); a script or a test opens a field with
+    :meth:`writing`.  Any other write raises :class:`~bark.errors.StateWriteError` at once, so no
+    backend's copy of a field (the numba frame keeps the rest lengths and thresholds in its own
+    order) can go stale unseen: every declared write is counted (:attr:`version`, :meth:`edited`)
+    and the copies key on that count.  ``pairs`` never changes (springs are only appended) and
+    ``intact`` only through :meth:`set_intact`.
     """
 
     n_bases: int = 0
@@ -108,21 +185,117 @@ class State:
     """How many times the intact flags have been edited (``set_intact``): a backend's copy of them
     is in step while this is the count it saw.  Appended springs do not count (backends extend
     their copies with them)."""
+    version: int = 0
+    """The state's one edit counter: every edit made outside the hot loop (a declared write, a
+    change of the intact flags) takes the next number, and each field keeps the number of its last
+    edit (:meth:`edited`).  Every cache of a field (a backend's copy of the rest lengths, the patch
+    labels) keys on it; appending bases and springs is not an edit (caches extend themselves)."""
     _store: dict[str, np.ndarray] = attrs.field(factory=dict, repr=False)
+    _stamps: dict[str, int] = attrs.field(factory=dict, repr=False)
+    _open: frozenset = attrs.field(default=frozenset(), repr=False)
+    _declared: dict[str, Declared] = attrs.field(factory=dict, repr=False)
+    _of: dict[str, dict] = attrs.field(factory=lambda: {"base": dict(BASE_FIELDS), "spring": dict(SPRING_FIELDS)},
+                                       repr=False)
 
     @classmethod
-    def empty(cls, bases: int = MIN_CAPACITY, springs: int = MIN_CAPACITY) -> "State":
-        """A state with no bases or springs yet, with room for ``bases`` and ``springs``."""
+    def empty(cls, bases: int = MIN_CAPACITY, springs: int = MIN_CAPACITY, declared=()) -> "State":
+        """A state with no bases or springs yet, with room for ``bases`` and ``springs``, and the
+        fields ``declared`` (:class:`Declared`) beside its own."""
         state = cls()
         state._store = {name: _alloc(max(bases, 1), shape, dt) for name, (shape, dt) in BASE_FIELDS.items()}
         state._store.update({name: _alloc(max(springs, 1), shape, dt) for name, (shape, dt) in SPRING_FIELDS.items()})
+        state.declare(declared)
         return state
+
+    def declare(self, fields) -> None:
+        """Carry the fields ``fields`` (:class:`Declared`) from now on.  Only before the state has
+        rows of their kind (a simulation declares its strategies' fields when it lays out its
+        lattice), and each name once."""
+        for spec in fields:
+            if spec.name in self._store:
+                raise BarkError(f"two declarations of the field {spec.name!r}: each field has one owner")
+            if (self.n_springs if spec.per == "spring" else self.n_bases) > 0:
+                raise BarkError(f"the field {spec.name!r} is declared after {spec.per}s were made: declare it first")
+            self._of[spec.per][spec.name] = ((), "float64")
+            self._store[spec.name] = _alloc(self._store["pairs" if spec.per == "spring" else "x"].shape[0], (), "float64")
+            self._declared[spec.name] = spec
+
+    @property
+    def declared(self) -> tuple[Declared, ...]:
+        """The fields declared beside the state's own, in the order declared."""
+        return tuple(self._declared.values())
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """A field by name, the state's own or a declared one (read-only where the attribute is)."""
+        if name not in self._store:
+            raise KeyError(f"the state has no field {name!r}: it has {', '.join(self._store)}")
+        return self._public(name)
 
     # -- the arrays ----------------------------------------------------------------------------
 
     def _view(self, name: str) -> np.ndarray:
-        n = self.n_bases if name in BASE_FIELDS else self.n_springs
+        n = self.n_bases if name in self._of["base"] else self.n_springs
         return self._store[name][:n]
+
+    def _public(self, name: str) -> np.ndarray:
+        rows = self._view(name)
+        if name in self._open and name not in FIXED:
+            return rows
+        rows = rows.view(Field)
+        rows._bark_field = name
+        rows.flags.writeable = False
+        return rows
+
+    def _rows(self, name: str) -> np.ndarray:
+        """A field's active rows as a plain array, for the engine's own work (the backends): writable
+        but for ``intact``, which only :meth:`set_intact` changes.  Not for strategies or scripts."""
+        rows = self._view(name)
+        if name == "intact":
+            rows.flags.writeable = False
+        return rows
+
+    @contextlib.contextmanager
+    def writing(self, *names: str, stamp: bool = True):
+        """Open ``names`` to writes inside the block (``with state.writing("x"): state.x[3] += 1e-9``):
+        a declared write, for scripts, tests and tools.  On leaving, each field is marked edited
+        (:meth:`edited`), so that every backend's copy of it is made again.  Opening ``pairs`` or
+        ``intact`` is refused.  Nested blocks open the union; the engine opens its own writes so and
+        narrows them to a strategy's declared ones around its Python verbs (:meth:`only`)."""
+        unknown = [n for n in names if n not in self._store]
+        fixed = [n for n in names if n in FIXED]
+        if unknown or fixed:
+            raise StateWriteError(_refusal(fixed[0]) if fixed else
+                                  f"the state has no field {unknown[0]!r}: it has {', '.join(self._store)}")
+        before = self._open
+        self._open = before | frozenset(names)
+        try:
+            yield self
+        finally:
+            self._open = before
+            if stamp:
+                self._stamp(names)
+
+    @contextlib.contextmanager
+    def only(self, names: tuple[str, ...]):
+        """Inside the block exactly ``names`` are open to writes (a strategy's declared ones, around
+        its Python verb), whatever was open outside; marked edited on leaving."""
+        before = self._open
+        self._open = frozenset(n for n in names if n not in FIXED)
+        try:
+            yield self
+        finally:
+            self._open = before
+            self._stamp(names)
+
+    def _stamp(self, names) -> None:
+        if names:
+            self.version += 1
+            for name in names:
+                self._stamps[name] = self.version
+
+    def edited(self, *names: str) -> int:
+        """The :attr:`version` of the last edit of any of ``names`` (0: never edited)."""
+        return max((self._stamps.get(n, 0) for n in names), default=0)
 
     x = _field("x", "Positions of the bases, ``(n, 3)``.")
     v = _field("v", "Velocities of the bases, ``(n, 3)``.")
@@ -132,7 +305,7 @@ class State:
     pairs = _field("pairs", "Spring ends ``(i, j)``, ``(m, 2)``; row = spring id.")
     rest = _field("rest", "Rest length of every spring, ``(m,)``.")
     fmax = _field("fmax", "Breaking threshold of every spring, ``(m,)``.")
-    intact = _flags("intact", "Whether each spring is intact, ``(m,)`` bool (read-only: ``set_intact``).")
+    intact = _field("intact", "Whether each spring is intact, ``(m,)`` bool (read-only: ``set_intact``).")
 
     @property
     def capacity(self) -> tuple[int, int]:
@@ -140,8 +313,9 @@ class State:
         return self._store["x"].shape[0], self._store["pairs"].shape[0]
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """Every field's active rows, by name (views)."""
-        return {name: self._view(name) for name in (*BASE_FIELDS, *SPRING_FIELDS)}
+        """Every field's active rows, by name, the declared ones after the state's own (views,
+        read-only where the fields are)."""
+        return {name: self._public(name) for name in self._store}
 
     def set_intact(self, ids: np.ndarray, value: bool) -> None:
         """Mark springs ``ids`` intact (``value`` true) or broken: the one way the flags change, one
@@ -149,6 +323,7 @@ class State:
         are keyed).  ``Simulation.break_springs`` and ``mend_springs`` call it."""
         self._store["intact"][np.asarray(ids, dtype=np.int64)] = bool(value)
         self.intact_version += 1
+        self._stamp(("intact",))
 
     # -- growing --------------------------------------------------------------------------------
 
@@ -163,12 +338,14 @@ class State:
             self._store[name] = bigger
 
     def add_bases(self, **values: np.ndarray) -> np.ndarray:
-        """Append bases with the given fields (every one of ``BASE_FIELDS``); returns their ids."""
-        return self._append(BASE_FIELDS, "n_bases", values)
+        """Append bases with the given fields (every one of ``BASE_FIELDS`` and the declared
+        per-base fields); returns their ids."""
+        return self._append(self._of["base"], "n_bases", values)
 
     def add_springs(self, **values: np.ndarray) -> np.ndarray:
-        """Append springs with the given fields (every one of ``SPRING_FIELDS``); returns their ids."""
-        return self._append(SPRING_FIELDS, "n_springs", values)
+        """Append springs with the given fields (every one of ``SPRING_FIELDS`` and the declared
+        per-spring fields); returns their ids."""
+        return self._append(self._of["spring"], "n_springs", values)
 
     def _append(self, fields: dict, counter: str, values: dict[str, Any]) -> np.ndarray:
         if set(values) != set(fields):
@@ -185,24 +362,26 @@ class State:
     # -- whole states ---------------------------------------------------------------------------
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], t: float = 0.0, h: float = 0.0) -> "State":
-        """A state holding copies of ``arrays`` (every field), e.g. from a checkpoint."""
+    def from_arrays(cls, arrays: dict[str, np.ndarray], t: float = 0.0, h: float = 0.0, declared=()) -> "State":
+        """A state holding copies of ``arrays`` (every field, the ``declared`` ones too), e.g. from a
+        checkpoint."""
         n, m = len(arrays["x"]), len(arrays["pairs"])
-        state = cls.empty(n, m)
-        state.add_bases(**{k: arrays[k] for k in BASE_FIELDS})
-        state.add_springs(**{k: arrays[k] for k in SPRING_FIELDS})
+        state = cls.empty(n, m, declared)
+        state.add_bases(**{k: arrays[k] for k in state._of["base"]})
+        state.add_springs(**{k: arrays[k] for k in state._of["spring"]})
         state.t, state.h = float(t), float(h)
         return state
 
     def copy(self) -> "State":
-        return State.from_arrays(self.arrays(), self.t, self.h)
+        return State.from_arrays(self.arrays(), self.t, self.h, self.declared)
 
     def __getstate__(self) -> dict:
         """Pickles the active rows only (spare capacity is not data)."""
-        return {"arrays": {k: np.array(v) for k, v in self.arrays().items()}, "t": self.t, "h": self.h}
+        return {"arrays": {k: np.array(v) for k, v in self.arrays().items()}, "t": self.t, "h": self.h,
+                "declared": self.declared}
 
     def __setstate__(self, data: dict) -> None:
-        restored = State.from_arrays(data["arrays"], data["t"], data["h"])
+        restored = State.from_arrays(data["arrays"], data["t"], data["h"], data.get("declared", ()))
         for a in attrs.fields(State):
             object.__setattr__(self, a.name, getattr(restored, a.name))
 

@@ -73,13 +73,13 @@ _ends_call = inline(ends_call)
 
 
 @inline
-def _never(tension, length, rest, fmax, inv_fmax, params):
+def _never(tension, length, rest, fmax, inv_fmax, own, q, params):
     """The kernel's rule where none is asked (a pass for forces alone)."""
     return False
 
 
 @inline
-def _no_load(tension, length, rest, fmax, inv_fmax, params):
+def _no_load(tension, length, rest, fmax, inv_fmax, own, q, params):
     """The kernel's load where none is asked."""
     return -np.inf
 
@@ -91,12 +91,13 @@ on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,19
 
 
 @inline
-def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp):
+def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp):
     """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
     with ``loads``, also the breaker part's load into ``wl`` and whether its ``rule`` picks each live
-    spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, bp)``:
-    the generated adapters pass on what the part reads), and return whether every live tension is
-    finite and every live load a number (not NaN) and whether the rule picked a live spring."""
+    spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, own, q,
+    bp)``, ``own[q]`` the spring's declared fields: the generated adapters pass on what the part
+    reads), and return whether every live tension is finite and every live load a number (not NaN)
+    and whether the rule picked a live spring."""
     finite = True
     hit = False
     for q in range(rest.shape[0]):
@@ -113,8 +114,8 @@ def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, k, w0, w1, w2, wt
         w1[q] = g * d1
         w2[q] = g * d2
         if loads:
-            lq = load(t, length, rest[q], fmax[q], inv[q], bp)
-            pq = on & rule(t, length, rest[q], fmax[q], inv[q], bp)
+            lq = load(t, length, rest[q], fmax[q], inv[q], own, q, bp)
+            pq = on & rule(t, length, rest[q], fmax[q], inv[q], own, q, bp)
             wl[q] = lq
             wp[q] = pq
             finite = finite & (((abs(t) < np.inf) & (lq == lq)) | (not on))
@@ -160,7 +161,7 @@ def _largest_load(wl, live):
 
 
 @inline
-def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, breaking, rule, load, bp,
+def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, tops, breaking, rule, load, bp,
                  log_id, log_step, log_t, n_log, step, block):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
     finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
@@ -188,7 +189,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
     for r in range(r_start.shape[0]):
         s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
-        fm, inv = fmax[s0:s0 + n], inv_fmax[s0:s0 + n]
+        fm, inv, ow = fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n]
         nb = _blocks(n, block)
         block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
         for blk in prange(nb):  # the springs' forces, a block at a time
@@ -196,8 +197,8 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, f, work, loads, tops, b
             a, e = i0 + lo, i0 + hi
             block_finite[blk], block_hit[blk] = _run_forces(
                 x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
-                fm[lo:hi], inv[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi], loads,
-                rule, load, bp)
+                fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
+                loads, rule, load, bp)
             if loads and tops:
                 block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
         hit = False
@@ -356,7 +357,7 @@ def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, 
 
 
 @inline
-def _refresh(x, runs, rest, k, live, f, work, first):
+def _refresh(x, runs, rest, own, k, live, f, work, first):
     """The spring forces of the bases from ``first`` on, made again (the others' left as they are):
     for each run, the springs with an end there, computed as the full pass computes them and added
     in its order — so each of those bases gets the bits of a full pass."""
@@ -376,7 +377,7 @@ def _refresh(x, runs, rest, k, live, f, work, first):
         a, m = i0 + lo, n - lo
         _run_forces(x0[a:a + m], x1[a:a + m], x2[a:a + m], x0[a + o:a + o + m], x1[a + o:a + o + m],
                     x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n],
-                    rest[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest)
+                    rest[s0 + lo:s0 + n], own[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest)
         ours = max(0, first - a)  # of these, the first whose first end is a base from `first` on
         for u, w in ((f0, w0), (f1, w1), (f2, w2)):
             second = u[a + o:a + o + m]
@@ -388,8 +389,8 @@ def _refresh(x, runs, rest, k, live, f, work, first):
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags, log,
-                  heights, start, update, rule, load, radius, prepare, radii):
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, flags,
+                  log, heights, start, update, rule, load, radius, prepare, radii):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log, whether the rule named a candidate in the last
     step)``, the load NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
@@ -419,10 +420,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
         f0[:] = 0.0
         f1[:] = 0.0
         f2[:] = 0.0
-        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work, False, False, False, rule, load,
-                     bp, log_id, log_step, log_t, 0, 0, block)
+        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
+                     load, bp, log_id, log_step, log_t, 0, 0, block)
     elif fresh < x0.shape[0]:
-        _refresh((x0, x1, x2), runs, rest, k, live, f, work, fresh)
+        _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh)
     may_relax = False
     for step in range(relax.shape[0]):
         may_relax = may_relax or relax[step]
@@ -442,9 +443,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
                             uniform and step > 0, heights, block)
         r_before = r_now
         before = n_log
-        top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, f, work,
-                                                          True, tops, breaking, rule, load, bp, log_id, log_step,
-                                                          log_t, n_log, step + 1, block)
+        top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f,
+                                                          work, True, tops, breaking, rule, load, bp, log_id,
+                                                          log_step, log_t, n_log, step + 1, block)
         finite = finite and springs_finite
         done = step + 1
         if _ends_call(finite, top, accept_load, picked, n_log - before, return_on_break, max_batch, relax[step]):
@@ -454,7 +455,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, time
             ax[q] = r_before * dx[q]
             ay[q] = r_before * dy[q]
     if finite and not tops and done > 0:
-        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, work, log_id[before:n_log], load, bp)
+        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work, log_id[before:n_log], load, bp)
     if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
     return done, (top if finite else np.nan), n_log, picked and finite
@@ -502,7 +503,7 @@ def _copy_blocks(source, target, first, block):
 
 
 @inline
-def _last_load(x, runs, rest, k, live, fmax, inv_fmax, work, broke, load, bp):
+def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, bp):
     """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
     those it broke): what that step's own pass finds when it looks (the same loads, and a maximum
     is exact), taken once per call instead of every step."""
@@ -516,8 +517,8 @@ def _last_load(x, runs, rest, k, live, fmax, inv_fmax, work, broke, load, bp):
         s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
         _run_forces(x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n], x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n],
-                    x2[i0 + o:i0 + o + n], rr, lv, fmax[s0:s0 + n], inv_fmax[s0:s0 + n], k, w0, w1, w2, wt, wl, wp,
-                    True, _never, load, bp)
+                    x2[i0 + o:i0 + o + n], rr, lv, fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n], k, w0, w1,
+                    w2, wt, wl, wp, True, _never, load, bp)
         top = max(top, _largest_load(wl, lv))
     for s in broke:
         live[s] = False
@@ -539,22 +540,22 @@ _radii = {radii}
 {adapters}
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags, log, heights,
-          start):
-    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags,
-                         log, heights, start, _update, _rule, _load, _radius, _prepare, _radii)
+def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, flags, log,
+          heights, start):
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip,
+                         flags, log, heights, start, _update, _rule, _load, _radius, _prepare, _radii)
 '''
 
 _ADAPTERS = '''
 
 @inline
-def _rule(tension, length, rest, fmax, inv_fmax, params):
+def _rule(tension, length, rest, fmax, inv_fmax, own, q, params):
     return _rule_part({rule_args})
 {load}'''
 _LOAD_ADAPTER = '''
 
 @inline
-def _load(tension, length, rest, fmax, inv_fmax, params):
+def _load(tension, length, rest, fmax, inv_fmax, own, q, params):
     return _load_part({load_args})
 '''
 
@@ -584,13 +585,16 @@ def _time_of(growth):
     return prepare
 
 
-def _adapters(part) -> str:
+def _adapters(part, columns: tuple[str, ...]) -> str:
     """The source of ``_rule`` and ``_load``: the kernel's per-spring signature ``(tension, length,
-    rest, fmax, inv_fmax, params)`` passed on as the breaker part reads it (``_rule_part`` and
-    ``_load_part`` its functions); ``_load = _no_load`` for a part without one."""
-    load = "\n_load = _no_load\n" if part.load is None else \
-        _LOAD_ADAPTER.format(load_args=", ".join((*part.load_reads, "params")))
-    return _ADAPTERS.format(rule_args=", ".join((*part.reads, "params")), load=load)
+    rest, fmax, inv_fmax, own, q, params)`` passed on as the breaker part reads it (``_rule_part``
+    and ``_load_part`` its functions), a declared field as its column of ``own`` (``columns``: the
+    declared per-spring fields in the frame's order); ``_load = _no_load`` for a part without one."""
+    def args(reads) -> str:
+        return ", ".join((*(f"own[q, {columns.index(r)}]" if r in columns else r for r in reads), "params"))
+
+    load = "\n_load = _no_load\n" if part.load is None else _LOAD_ADAPTER.format(load_args=args(part.load_reads))
+    return _ADAPTERS.format(rule_args=args(part.reads), load=load)
 
 
 _SPECIALIZED: dict[tuple, object] = {}
@@ -655,32 +659,34 @@ def each_height(radius):
     return inline(radii)
 
 
-def adapted(part):
+def adapted(part, columns: tuple[str, ...] = ()):
     """The breaker part's rule and load as the kernel calls them, ``(tension, length, rest, fmax,
-    inv_fmax, params)`` (inlined where called), compiled in this process."""
+    inv_fmax, own, q, params)`` (inlined where called), compiled in this process."""
     _make_jitable([h for fn in (part.rule, part.load) if fn is not None for h in _helpers(fn)[1:]])
     scope = {"inline": inline, "_no_load": _no_load, "_rule_part": inline(part.rule),
              "_load_part": None if part.load is None else inline(part.load)}
-    exec(_adapters(part), scope)
+    exec(_adapters(part, columns), scope)
     return scope["_rule"], scope["_load"]
 
 
-def part_on_springs(part):
-    """``evaluate(tension, length, rest, fmax, inv_fmax) -> (picked, load)``: the part's rule and
-    load at each spring of the arrays, compiled as the stepping kernel compiles them (the contract
-    kit holds them against the part's functions on whole arrays, ``bark.testing``)."""
-    rule, load = adapted(part)
+def part_on_springs(part, columns: tuple[str, ...] = ()):
+    """``evaluate(tension, length, rest, fmax, inv_fmax, own) -> (picked, load)``: the part's rule
+    and load at each spring of the arrays (``own``: the declared fields ``columns``, a column each),
+    compiled as the stepping kernel compiles them (the contract kit holds them against the part's
+    functions on whole arrays, ``bark.testing``)."""
+    rule, load = adapted(part, columns)
     params = part.params
 
     @numba.njit(error_model="numpy")
-    def each(tension, length, rest, fmax, inv_fmax, params, picked, loads):
+    def each(tension, length, rest, fmax, inv_fmax, own, params, picked, loads):
         for q in range(tension.shape[0]):
-            picked[q] = rule(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], params)
-            loads[q] = load(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], params)
+            picked[q] = rule(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], own, q, params)
+            loads[q] = load(tension[q], length[q], rest[q], fmax[q], inv_fmax[q], own, q, params)
 
-    def evaluate(tension, length, rest, fmax, inv_fmax):
+    def evaluate(tension, length, rest, fmax, inv_fmax, own=None):
+        own = np.zeros((len(tension), 0)) if own is None else np.ascontiguousarray(own, dtype=float)
         picked, loads = np.zeros(len(tension), np.bool_), np.empty(len(tension))
-        each(*(np.ascontiguousarray(a, dtype=float) for a in (tension, length, rest, fmax, inv_fmax)), params,
+        each(*(np.ascontiguousarray(a, dtype=float) for a in (tension, length, rest, fmax, inv_fmax)), own, params,
              picked, loads)
         return picked, loads
 
@@ -729,14 +735,15 @@ def update_on_axis(part):
     return evaluate
 
 
-def specialized(integrator, breaker, growth, parallel=False):
+def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = ()):
     """The stepping kernel with the integrator part's ``update`` (``integrator``, an
     :class:`~bark.contract.parts.IntegratorPart`), the breaker part's rule and load (``breaker``, a
     :class:`~bark.contract.parts.BreakerPart`) and the growth part's functions (``growth``, a
     :class:`~bark.contract.parts.GrowthPart`: its radius, its per-step ``time`` — given its inner
     part's functions when it has one — and its block form, or its radius per height) inlined
     (compiled once per combination and kept on disk; see the module's docstring), its block loops
-    shared among threads if ``parallel``.  Functions that cannot be imported by name (lambdas, local
+    shared among threads if ``parallel``, the breaker reading the declared per-spring fields by their
+    ``columns`` of the frame's ``own``.  Functions that cannot be imported by name (lambdas, local
     functions) get a wrapper compiled in this process only."""
     inner = growth.inner
     named = {"update": integrator.update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
@@ -744,7 +751,8 @@ def specialized(integrator, breaker, growth, parallel=False):
              "inner_time": inner.time if inner is not None else None,
              "inner_radius": inner.radius if inner is not None else None}
     named = {k: fn for k, fn in named.items() if fn is not None}
-    key = (breaker.reads, breaker.load_reads, *named.items(), bool(parallel))
+    columns = tuple(c for c in columns if c in (*breaker.reads, *breaker.load_reads)) and tuple(columns)
+    key = (breaker.reads, breaker.load_reads, columns, *named.items(), bool(parallel))
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
     helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
@@ -754,17 +762,17 @@ def specialized(integrator, breaker, growth, parallel=False):
         u, g = inline(integrator.update), inline(growth.radius)
         p = _time_of(growth)
         block = each_height(g) if growth.radii is None else inline(growth.radii)
-        rule, load = adapted(breaker)
+        rule, load = adapted(breaker, columns)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
-        def steps(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip, flags, log,
-                  heights, start):
-            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, live, constants, times, relax, params, bp, ip,
-                                 flags, log, heights, start, u, rule, load, g, p, block)
+        def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, flags,
+                  log, heights, start):
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp,
+                                 ip, flags, log, heights, start, u, rule, load, g, p, block)
 
         _SPECIALIZED[key] = steps
         return steps
-    adapters = _adapters(breaker)
+    adapters = _adapters(breaker, columns)
     digest = hashlib.sha256()
     for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), _source(ends_call), *(_source(fn) for fn in named.values()),
                   *(_source(fn) for fn in helpers), *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters,
@@ -890,8 +898,9 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
         f[:, axis] = 0.0  # a column at a time: a vector fill (the whole 2-D array is filled elementwise)
     no = np.empty(0)
     no_i = np.empty(0, dtype=np.int64)
-    _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, (f[:, 0], f[:, 1], f[:, 2]), work,
-                 False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK)
+    own = np.empty((rest.shape[0], 0))  # forces alone read no declared field
+    _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, own, (f[:, 0], f[:, 1], f[:, 2]),
+                 work, False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK)
 
 
 @jit
@@ -1003,8 +1012,9 @@ class _Frame:
     first_keys: np.ndarray
     """Each run's first spring's sort key (``bark.model.forces.order_keys``), to place appended springs."""
     springs: tuple
-    """Rest lengths, thresholds and ``1 / fmax`` by position (a spring's rest length and threshold are
-    set when it is made and never change; see ``bark.model.state``)."""
+    """Rest lengths, thresholds, ``1 / fmax`` and the declared per-spring fields (``own``, a column
+    each: ``columns``) by position: copies, taken again whenever a declared write has edited the
+    state's (``material``; see ``bark.model.state``)."""
     ids: np.ndarray
     """Spring id at each position (``-1``: a free one)."""
     live: np.ndarray
@@ -1030,6 +1040,8 @@ class _Frame:
     made again at the next call, the others' kept (``NumbaBackend.steps``)."""
     weights: "_Weights | None" = None
     """The anchors' growth-law weights (``NumbaBackend._heights``)."""
+    material: int = 0
+    """``State.edited`` of the springs' material when ``springs`` was last taken from the state."""
 
 
 @attrs.define(eq=False)
@@ -1064,13 +1076,25 @@ def _check_weights(growth: GrowthPart, t: float, z: np.ndarray, weights: np.ndar
                         "at its anchors' heights: they must give q[0] + w[0]·q[1] + w[1]·q[2] + ... exactly")
 
 
+MATERIAL = ("rest", "fmax")
+"""The state's own per-spring fields the frame keeps copies of, by position (and the declared ones:
+``columns``)."""
+
+
+def columns(state) -> tuple[str, ...]:
+    """The declared per-spring fields of ``state``, in its order: the columns of a frame's ``own``."""
+    return tuple(d.name for d in state.declared if d.per == "spring")
+
+
 def _place(springs: tuple, live: np.ndarray, at: np.ndarray, ids: np.ndarray, state) -> None:
     """The state's springs ``ids`` at positions ``at`` of a frame: rest lengths, thresholds, their
-    inverses and intact flags."""
-    rest, fmax, inv_fmax = springs
-    rest[at], fmax[at] = state.rest[ids], state.fmax[ids]
-    inv_fmax[at] = 1.0 / state.fmax[ids]
-    live[at] = state.intact[ids]
+    inverses, the declared fields and intact flags."""
+    rest, fmax, inv_fmax, own = springs
+    rest[at], fmax[at] = state._rows("rest")[ids], state._rows("fmax")[ids]
+    inv_fmax[at] = 1.0 / state._rows("fmax")[ids]
+    for c, name in enumerate(columns(state)):
+        own[at, c] = state._rows(name)[ids]
+    live[at] = state._rows("intact")[ids]
 
 
 def _store_of(state) -> tuple:
@@ -1109,17 +1133,28 @@ class NumbaBackend(Backend):
         fr = self._frame
         sizes = (state.n_bases, state.n_springs, *_store_of(state))
         if fr is not None and fr.state is state and _same(fr.sizes, sizes):
-            return fr
+            return self._material(fr, state)
         if fr is None or fr.state is not state or not (fr.sizes[0] <= state.n_bases and fr.sizes[1] <= state.n_springs) \
                 or not self._extend(fr, state):
             fr = self._frame = self._make(state)
         fr.sizes = sizes
         self._views(fr, state)
+        return self._material(fr, state)
+
+    @staticmethod
+    def _material(fr: _Frame, state) -> _Frame:
+        """The frame's copies of the springs' material (rest lengths, thresholds) taken again when a
+        declared write has edited them since (``State.edited``): never a stale copy."""
+        edited = state.edited(*MATERIAL, *columns(state))
+        if edited != fr.material:
+            valid = np.flatnonzero(fr.ids >= 0)
+            _place(fr.springs, fr.live, valid, fr.ids[valid], state)
+            fr.material, fr.forces = edited, None  # the forces it kept are of the old material
         return fr
 
     def _make(self, state) -> _Frame:
         """A frame made from scratch: the springs in summation order, laid out run by run with room."""
-        ids = self._order.of(state.pairs, state)
+        ids = self._order.of(state._rows("pairs"), state)
         ids = np.arange(state.n_springs) if ids is None else ids
         starts, lengths, first_i, offsets = self._order.runs()
         room = lengths + np.where(lengths >= SLACK_RUN, lengths, 0)
@@ -1128,13 +1163,14 @@ class NumbaBackend(Backend):
         size = int(room.sum())
         by_position = np.full(size, -1, np.int64)
         by_position[where] = ids
-        springs, live = tuple(np.zeros(size) for _ in range(3)), np.zeros(size, bool)
+        springs = (*(np.zeros(size) for _ in range(3)), np.zeros((size, len(columns(state)))))
+        live = np.zeros(size, bool)
         _place(springs, live, where, ids, state)
         return _Frame(state=state, sizes=(), bases=(), runs=(position, lengths.copy(), first_i, offsets), room=room,
                       first_keys=self._order.keys[starts] if len(starts) else np.empty(0, np.uint64),
                       springs=springs, ids=by_position, live=live, n_live=int(np.count_nonzero(live)),
                       pending=_NO_IDS, version=state.intact_version, work=(),
-                      start=(), log=())
+                      start=(), log=(), material=state.edited(*MATERIAL, *columns(state)))
 
     def _extend(self, fr: _Frame, state) -> bool:
         """Place the springs appended since ``fr`` was made at the ends of the runs they continue;
@@ -1144,7 +1180,7 @@ class NumbaBackend(Backend):
         if seen == state.n_springs:
             return True
         new = np.arange(seen, state.n_springs)
-        keys = order_keys(state.pairs[seen:])
+        keys = order_keys(state._rows("pairs")[seen:])
         by_key = np.argsort(keys, kind="stable")
         keys, new = keys[by_key], new[by_key]
         run = np.searchsorted(fr.first_keys, keys, side="right") - 1
@@ -1160,14 +1196,14 @@ class NumbaBackend(Backend):
         at = position[run] + lengths[run] + rank
         fr.ids[at] = new
         _place(fr.springs, fr.live, at, new, state)
-        fr.n_live += int(np.count_nonzero(state.intact[new]))
+        fr.n_live += int(np.count_nonzero(state._rows("intact")[new]))
         np.add.at(lengths, run, 1)
-        fr.refresh_from = min(fr.refresh_from, int(state.pairs[seen:].min()))  # and the bases they join
+        fr.refresh_from = min(fr.refresh_from, int(state._rows("pairs")[seen:].min()))  # and the bases they join
         return True
 
     def _views(self, fr: _Frame, state) -> None:
         """The frame's base vectors and work space for the state's present sizes."""
-        x, v, a, d = state.x, state.v, state.anchor, state.anchor_dir
+        x, v, a, d = state._rows("x"), state._rows("v"), state._rows("anchor"), state._rows("anchor_dir")
         n, m = state.n_bases, state.n_springs
         f = self._space("f", (n, 3))
         fr.bases = (*(x[:, i] for i in range(3)), *(v[:, i] for i in range(3)), *(f[:, i] for i in range(3)),
@@ -1198,12 +1234,12 @@ class NumbaBackend(Backend):
         state's frame, when the caller has it."""
         fr = fr or self.frame(state)
         edits = state.intact_version - fr.version
-        took_breaks = edits == 1 and fr.pending.size > 0 and fr.n_live == np.count_nonzero(state.intact) \
-            and not state.intact[fr.pending].any()
+        took_breaks = edits == 1 and fr.pending.size > 0 and fr.n_live == np.count_nonzero(state._rows("intact")) \
+            and not state._rows("intact")[fr.pending].any()
         if not (edits == 0 and fr.pending.size == 0 or took_breaks):
             fr.forces = None  # of other springs
             valid = fr.ids >= 0
-            fr.live[valid] = state.intact[fr.ids[valid]]
+            fr.live[valid] = state._rows("intact")[fr.ids[valid]]
             fr.n_live = int(np.count_nonzero(fr.live))
         fr.version, fr.pending = state.intact_version, _NO_IDS
         return fr.live
@@ -1223,7 +1259,7 @@ class NumbaBackend(Backend):
             w = fr.weights = _Weights(key=key)
         n = state.n_bases
         if w.count < n:
-            z = np.ascontiguousarray(state.anchor[w.count:n, 2])
+            z = np.ascontiguousarray(state._rows("anchor")[w.count:n, 2])
             new = np.atleast_2d(np.asarray(growth.weights(z, growth.params), dtype=float))
             if new.shape[1:] != z.shape:
                 _check_weights(growth, state.t, z, new)  # refuses them
@@ -1234,7 +1270,7 @@ class NumbaBackend(Backend):
             w.table[:, w.count:n] = new
             w.count = n
             if w.checked == 0 or n - w.checked >= CHECK_BATCH:
-                _check_weights(growth, state.t, np.ascontiguousarray(state.anchor[w.checked:n, 2]), w.table[:, w.checked:n])
+                _check_weights(growth, state.t, np.ascontiguousarray(state._rows("anchor")[w.checked:n, 2]), w.table[:, w.checked:n])
                 w.checked = n
         return w.table.ravel(), w.table.shape[1]
 
@@ -1245,10 +1281,10 @@ class NumbaBackend(Backend):
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
-        return bool(_measure(state.x, state.pairs[:, 0], state.pairs[:, 1], state.rest, mech.k, out))
+        return bool(_measure(state._rows("x"), state._rows("pairs")[:, 0], state._rows("pairs")[:, 1], state._rows("rest"), mech.k, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
-        _constrain(state.x, state.v, state.anchor, state.anchor_dir, _radii(r_x), _radii(r_anchor))
+        _constrain(state._rows("x"), state._rows("v"), state._rows("anchor"), state._rows("anchor_dir"), _radii(r_x), _radii(r_anchor))
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "_NumbaCall":
         """One kernel call's steps.  The spring forces the last call left in f are kept where they
@@ -1263,7 +1299,7 @@ class NumbaBackend(Backend):
 
     def patch_labels(self, state) -> np.ndarray:
         labels = np.empty(state.n_bases, dtype=np.int32)
-        _components(state.n_bases, state.pairs[:, 0], state.pairs[:, 1], state.intact, labels)
+        _components(state.n_bases, state._rows("pairs")[:, 0], state._rows("pairs")[:, 1], state._rows("intact"), labels)
         return labels
 
 
@@ -1272,7 +1308,8 @@ class _NumbaCall(Call):
 
     def __init__(self, backend: NumbaBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
-        self.kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=backend.threads > 1)
+        self.kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=backend.threads > 1,
+                                  columns=columns(state))
         fr = self.frame = backend.frame(state)
         self.live = backend._live(state, fr)
         self.k = float(mech.k)
@@ -1287,17 +1324,17 @@ class _NumbaCall(Call):
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         plan, fr = self.plan, self.frame
-        rest, fmax, inv_fmax = fr.springs
+        rest, fmax, inv_fmax, own = fr.springs
         flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(self.fresh),
                  self.backend.block, int(self.kept))
         done, load, self.n_log, picked = self.kernel(
-            fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, self.live, self.constants, times, relax,
+            fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, times, relax,
             plan.growth.params, plan.breaker.params, plan.integrator.params, flags, fr.log, self.heights, self.start)
         return done, load, picked
 
     def undo(self) -> None:
         fr = self.frame
-        for keep, arr in zip(fr.start, (self.state.x, self.state.v, self.state.anchor)):
+        for keep, arr in zip(fr.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             np.copyto(arr, keep)
         self.live[fr.log[0][:self.n_log]] = True  # what the call broke is intact again at its start
         self.n_log, self.fresh, self.kept = 0, 0, -1  # a replay makes every force again

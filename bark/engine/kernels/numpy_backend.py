@@ -30,26 +30,26 @@ class NumpyBackend(Backend):
         A sparse product sums spring forces onto bases 2.5× faster than ``bincount`` at 70 000 bases."""
         key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
         if key != self._inc_key:  # each base's sum runs over its springs in the order the compiled pass adds them
-            self._inc = incidence(state.pairs, state.n_bases, self._order.of(state.pairs, state))
+            self._inc = incidence(state._rows("pairs"), state.n_bases, self._order.of(state._rows("pairs"), state))
             self._inc_key = key
         return self._inc
 
     def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
-        d, length = spring_geometry(x, state.pairs)
-        t = physics.tension(length, state.rest, mech.k)
+        d, length = spring_geometry(x, state._rows("pairs"))
+        t = physics.tension(length, state._rows("rest"), mech.k)
         g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
         return np.asarray(self.incidence(state) @ (d * g[:, None]))
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
-        return self._spring_forces(state, mech, x, state.intact)
+        return self._spring_forces(state, mech, x, state._rows("intact"))
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
-        _, length = spring_geometry(state.x, state.pairs)
-        out[:] = physics.tension(length, state.rest, mech.k)
+        _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
+        out[:] = physics.tension(length, state._rows("rest"), mech.k)
         return bool(np.isfinite(out).all())
 
     def constrain(self, state, r_x, r_anchor) -> None:
-        x, v = state.x, state.v
+        x, v = state._rows("x"), state._rows("v")
         r = np.asarray(r_x, dtype=float)
         scale = physics.surface_scale(x[:, 0], x[:, 1], r)
         x[:, 0] *= scale
@@ -57,7 +57,7 @@ class NumpyBackend(Backend):
         vr = physics.radial_speed(v[:, 0], v[:, 1], x[:, 0], x[:, 1], 1.0 / (r * r))
         v[:, 0] -= vr * x[:, 0]
         v[:, 1] -= vr * x[:, 1]
-        state.anchor[:, :2] = np.reshape(r_anchor, (-1, 1)) * state.anchor_dir
+        state._rows("anchor")[:, :2] = np.reshape(r_anchor, (-1, 1)) * state._rows("anchor_dir")
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "_NumpyCall":
         return _NumpyCall(self, state, mech, plan, tension)
@@ -66,7 +66,7 @@ class NumpyBackend(Backend):
         """Connected components of the intact springs (scipy.sparse.csgraph)."""
         from bark.model.graph import components
 
-        return components(state.n_bases, state.pairs, state.intact)
+        return components(state.n_bases, state._rows("pairs"), state._rows("intact"))
 
 
 class _NumpyCall(Call):
@@ -74,30 +74,30 @@ class _NumpyCall(Call):
 
     def __init__(self, backend: NumpyBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
-        self.start = (state.x.copy(order="F"), state.v.copy(order="F"), state.anchor.copy(order="F"))
+        self.start = (state._rows("x").copy(order="F"), state._rows("v").copy(order="F"), state._rows("anchor").copy(order="F"))
         self.log: list[tuple[np.ndarray, int, np.ndarray]] = []
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         state, mech, plan = self.state, self.mech, self.plan
         part, breaking = plan.breaker, plan.breaks == "kernel"
-        live = state.intact.copy()
+        live = state._rows("intact").copy()
         self.log = log = []
-        fs = self.backend._spring_forces(state, mech, state.x, live)
+        fs = self.backend._spring_forces(state, mech, state._rows("x"), live)
         hm = plan.h / mech.m
         update, ip = plan.integrator.update, plan.integrator.params
         growth = plan.growth
-        z0 = state.anchor[:, 2]
+        z0 = state._rows("anchor")[:, 2]
         done, load, candidate = 0, -math.inf, False
         for step, t in enumerate(times.tolist(), start=1):
-            x, v, a = state.x, state.v, state.anchor
+            x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")
             for axis in range(3):
                 g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
                 x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
             q = growth.at(t)
             r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
             self.backend.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
-            _, length = spring_geometry(x, state.pairs)
-            t_all = physics.tension(length, state.rest, mech.k)
+            _, length = spring_geometry(x, state._rows("pairs"))
+            t_all = physics.tension(length, state._rows("rest"), mech.k)
             load = largest_load(part, state, t_all, live, length)
             finite = bool(np.isfinite(x).all() and np.isfinite(t_all[live]).all()) and not math.isnan(load)
             load, done = (load if finite else math.nan), step
@@ -115,7 +115,7 @@ class _NumpyCall(Call):
         return done, load, candidate
 
     def undo(self) -> None:
-        for keep, arr in zip(self.start, (self.state.x, self.state.v, self.state.anchor)):
+        for keep, arr in zip(self.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             arr[...] = keep
         self.log = []
 
