@@ -39,7 +39,7 @@ import numpy as np
 
 from bark.errors import BarkError
 from bark.contract.parts import spring_inputs
-from bark.contract.strategies import KINDS, Breaker, Growth, Integrator, Made, Strategy, check_recordable
+from bark.contract.strategies import KINDS, Breaker, Growth, Integrator, Made, Resin, Strategy, check_recordable
 from bark.validators import construct
 
 __all__ = ["check_strategy"]
@@ -54,7 +54,7 @@ def check_strategy(cls: type, params: dict[str, Any] | None = None, *, examples:
     from hypothesis import HealthCheck, settings
 
     assert isinstance(cls, type) and issubclass(cls, Strategy) and cls.kind in KINDS, \
-        f"{cls!r} is not a bark strategy class (a subclass of Growth, Integrator, Breaker or Analyzer)"
+        f"{cls!r} is not a bark strategy class (a subclass of Growth, Integrator, Breaker, Resin or Analyzer)"
     assert attrs.has(cls), f"{cls.__name__} is not an attrs class: decorate it with @attrs.frozen(kw_only=True)"
     params = dict(params or {})
     strategy = construct(cls, params, f"{cls.kind} {cls.__name__}")
@@ -67,7 +67,9 @@ def check_strategy(cls: type, params: dict[str, Any] | None = None, *, examples:
         ran += _growth(strategy, profile)
     elif isinstance(strategy, Integrator):
         ran += _integrator(strategy, profile)
-    if not isinstance(strategy, (Breaker, Growth, Integrator)):
+    elif isinstance(strategy, Resin):
+        ran += _resin(strategy, profile)
+    if not isinstance(strategy, (Breaker, Growth, Integrator, Resin)):
         return ran
     ran.append(_life_cycle(strategy))
     ran.append(_backends(strategy) if _have_numba() else "numpy = numba: skipped (numba is not installed)")
@@ -144,7 +146,7 @@ def _validation(cls, params, profile) -> str:
 def _use(strategy) -> None:
     """What the engine asks of a strategy before it runs: a breaker's part, a growth law's radius and
     compiled parameters."""
-    if isinstance(strategy, Breaker):
+    if isinstance(strategy, (Breaker, Resin)):
         strategy.part()
     elif isinstance(strategy, Growth):
         strategy.part()
@@ -240,6 +242,55 @@ def _compiled(part, how: str, *args):
     return getattr(numba_backend, how)(part, *args)
 
 
+# -- resin laws ------------------------------------------------------------------------------------
+
+def _resin(resin, profile) -> list[str]:
+    """A resin law's part: its tension and flow elementwise (arrays give what each spring gives), the
+    flow giving one value per field it writes, and compiled (numba) the same bits."""
+    from hypothesis import given
+    from hypothesis import strategies as st
+    from hypothesis.extra import numpy as hnp
+
+    name, part = type(resin).__name__, resin.part_
+    assert part is not None, f"{name} gives no part: a resin law runs inside the kernel (ResinPart)"
+    columns = tuple(d.name for d in resin.declares if d.per == "spring")
+    evaluate = _compiled(part, "resin_on_springs", columns)
+
+    @profile
+    @given(st.integers(1, 30).flatmap(lambda m: st.tuples(
+        hnp.arrays(float, m, elements=st.floats(1e-3, 1.0)), hnp.arrays(float, m, elements=st.floats(0.5, 2.0)),
+        st.floats(1e-3, 10.0), st.floats(1e-4, 1.0), st.integers(0, 2**32))))
+    def law_is_elementwise_and_compiled_the_same(data):
+        rest, stretch, k, h, seed = data
+        length, m = rest * stretch, len(rest)
+        own = {}
+        if columns:
+            made = Made(per="spring", t=0.0, ids=np.arange(m), z=np.zeros(m), offset=np.full(m, 21), rest=rest)
+            own = {c: np.asarray(v, dtype=float) for c, v in resin.initial(made, np.random.default_rng(seed)).items()}
+        reads = [own[r] for r in part.reads]
+        t = np.broadcast_to(part.tension(length, rest, k, *reads, part.params), (m,))
+        each = [float(part.tension(length[i], rest[i], k, *(r[i] for r in reads), part.params)) for i in range(m)]
+        assert np.array_equal(t, each, equal_nan=True), f"{name}'s tension on arrays is not its tension on each spring"
+        flowed = {"rest": rest, **own}
+        if part.evolve is not None:
+            new = part.evolve(length, rest, h, *reads, part.params)
+            assert isinstance(new, tuple) and len(new) == len(part.writes), \
+                f"{name}'s evolve gives {type(new).__name__}, not a tuple of its {len(part.writes)} written field(s)"
+            flowed.update({w: np.broadcast_to(v, (m,)) for w, v in zip(part.writes, new)})
+        if evaluate is not None:
+            got_t, got_rest, got_own = evaluate(length, rest, k, h, np.column_stack([own[c] for c in columns])
+                                                if columns else None)
+            assert np.array_equal(got_t, t, equal_nan=True), f"{name}'s tension compiled (numba) differs from numpy"
+            assert np.array_equal(got_rest, flowed["rest"], equal_nan=True), \
+                f"{name}'s flow of the rest length compiled (numba) differs from numpy"
+            for c, column in enumerate(columns):
+                assert np.array_equal(got_own[:, c], flowed[column], equal_nan=True), \
+                    f"{name}'s flow of {column!r} compiled (numba) differs from numpy"
+
+    law_is_elementwise_and_compiled_the_same()
+    return ["resin part: elementwise" + (", compiled = numpy" if evaluate else "")]
+
+
 # -- growth laws and integrators -------------------------------------------------------------------
 
 def _growth(growth, profile) -> list[str]:
@@ -315,7 +366,7 @@ def _short_run(strategy, backend: str, seed: int = 1):
     from bark.engine.simulation import Simulation, Stop
     from bark.engine.stepping import Numerics
 
-    parts = {kind: registry.create(kind, DEFAULT_STRATEGIES[kind]) for kind in ("growth", "integrator", "breaker")}
+    parts = {kind: registry.create(kind, DEFAULT_STRATEGIES[kind]) for kind in ("growth", "integrator", "breaker", "resin")}
     parts[strategy.kind] = strategy
     parts["breakers"] = [parts.pop("breaker")]
     lattice = Lattice(n_bases=300, n_start=240, join_rate=3.0, join_every=1.0, jitter=0.05)  # joins to t = 20

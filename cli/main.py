@@ -283,7 +283,7 @@ def _notice(message: str) -> None:
 
 def scene_of(params: dict) -> Scene:
     """The scene ``bark simulate`` runs for its parsed options ``params`` (one-line BarkError if bad)."""
-    strategies = {kind: params[f"{kind}_name"] for kind in ("growth", "integrator", "breaker", "analyzer")}
+    strategies = {kind: params[f"{kind}_name"] for kind in KINDS}
     settings = {k: v for k, v in params.items() if "__" in k}  # the options generated from scene fields
     return resolve_scene(params["scene_file"], strategies, {"r0": params["r0"], "G": params["G"]}, params["sets"],
                          settings, {"picture_format": params["picture_format"], "picture_dpi": params["dpi"]})
@@ -295,6 +295,7 @@ def scene_of(params: dict) -> Scene:
 @_strategy_option("growth")
 @_strategy_option("integrator")
 @_strategy_option("breaker")
+@_strategy_option("resin")
 @_strategy_option("analyzer")
 @click.option("--r0", type=float, default=None, help="Initial trunk radius r_i of the growth law, length units (1 = 0.3 m). [default: 0.2]")
 @click.option("-G", "--growth-rate", "G", type=float, default=None,
@@ -320,7 +321,7 @@ def scene_of(params: dict) -> Scene:
               help="Format of the still pictures (pattern.pdf, ...; the animation stays a GIF). [default: png]")
 @click.option("--dpi", type=click.IntRange(30, 1200), default=None, help="Resolution of the pictures, dots per inch. [default: 150]")
 @click.pass_context
-def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, analyzer_name, r0, G, sets, out, overwrite,
+def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, resin_name, analyzer_name, r0, G, sets, out, overwrite,
              resume, checkpoint_every, quiet, progress_every, as_json, picture_format, dpi, **kwargs):
     """Grow the trunk and let the bark crack; write what the scene's effects ask for (by default
     pattern.png, patches.csv, breaks.csv, summary.json, state.npz, checkpoint.npz) to --out.

@@ -25,8 +25,9 @@ sys.path.insert(0, str(REPO_ROOT / "examples" / "plugin"))  # the example plugin
 
 from bark_example_plugin import MostOverloadedBreaker, PowerLawGrowth, StrainBreaker  # noqa: E402
 from bark_example_plugin.disorder import ParastichyWeibull  # noqa: E402
+from bark_example_plugin.zener import Zener  # noqa: E402
 
-BUILT_IN = [(kind, name) for kind in ("growth", "integrator", "breaker", "analyzer") for name in registry.available(kind)
+BUILT_IN = [(kind, name) for kind in ("growth", "integrator", "breaker", "resin", "analyzer") for name in registry.available(kind)
             if registry.available(kind)[name].value.startswith("bark_plugins.")]
 
 
@@ -39,7 +40,8 @@ def test_every_built_in_keeps_the_contract(kind, name):
 @pytest.mark.slow
 @pytest.mark.parametrize("cls, params", [(StrainBreaker, {"eps": 0.3}), (PowerLawGrowth, {"a": 0.6}),
                                          (MostOverloadedBreaker, {"max_per_step": 2}),
-                                         (ParastichyWeibull, {"m": 4.0, "scale_steep": 0.002})])
+                                         (ParastichyWeibull, {"m": 4.0, "scale_steep": 0.002}),
+                                         (Zener, {"ratio": 2.0, "tau": 3.0})])
 def test_the_example_plugin_keeps_the_contract(cls, params):
     ran = check_strategy(cls, params)
     assert any(r.startswith("numpy = numba to the bit") for r in ran), ran

@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -375,3 +376,37 @@ def test_a_message_given_to_sys_exit_is_written_and_the_status_is_1():
     program = "from bark_cli.__main__ import _leave\n_leave('bark: gone')\n"
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, cwd=REPO_ROOT, timeout=60)
     assert (done.returncode, done.stderr) == (1, "bark: gone\n")
+
+
+# a third party's resin law and breaker, each with a declared field (the Zener arm, the quenched
+# thresholds), by import path from a folder on PYTHONPATH, on a segment whose bases join as it runs
+PLUGINS = ["--scene", "growing", "--n-bases", "1200", "--set", "lattice.n_start=900",
+           "--resin", "bark_example_plugin.zener:Zener", "--set", "resin.tau=20",
+           "--breaker", "bark_example_plugin.disorder:ParastichyWeibull", "--until-time", "40", "--quiet"]
+
+
+def _plugin_command(*args: str) -> list[str]:
+    return [sys.executable, "-m", "bark_cli", "simulate", *args]
+
+
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
+def test_a_plugin_run_with_declared_fields_stopped_by_sigint_resumes_to_the_same_bits(tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT / "examples" / "plugin")}
+    whole = tmp_path / "whole"
+    done = subprocess.run(_plugin_command(*PLUGINS, "--out", str(whole)), cwd=REPO_ROOT, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    with np.load(whole / "state.npz") as data:
+        assert {"field_arm", "field_threshold"} <= set(data.files)
+    out = tmp_path / "out"
+    proc = subprocess.Popen(_plugin_command(*PLUGINS, "--checkpoint-every", "0.05", "--out", str(out)),
+                            cwd=REPO_ROOT, env=env, stderr=subprocess.PIPE, text=True)
+    _wait_for_time(out, proc, 20.0)  # bases still joining, springs breaking
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate()
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    resumed = subprocess.run(_plugin_command("--resume", str(out), "--quiet"), cwd=REPO_ROOT, env=env,
+                             capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    for name in ("breaks.csv", "state.npz"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name

@@ -15,6 +15,8 @@ BUILTINS = {
     "bark.growth": {"sqrt": strategies.Growth, "linear": strategies.Growth},
     "bark.integrator": {"euler-cromer": strategies.Integrator},
     "bark.breaker": {"threshold": strategies.Breaker},
+    "bark.resin": {"hookean": strategies.Resin, "maxwell": strategies.Resin, "plastic": strategies.Resin,
+                   "nonlinear": strategies.Resin},
     "bark.analyzer": {"patches": strategies.Analyzer},
 }
 

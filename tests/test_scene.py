@@ -37,7 +37,8 @@ def test_empty_scene_is_table_2_vertical_regime():
     assert s.lattice.jitter > 0  # symmetry breaking on by default
     m = s.mechanics
     assert (m.k, m.c, m.b, m.m, m.f_max) == (0.4, 0.1, 5.0, 1.0, 0.0028)
-    assert s.names == {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
+    assert s.names == {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "resin": "hookean",
+                       "analyzer": "patches"}
     assert s.strategies["growth"].r0 == 0.2 and s.strategies["growth"].G == 0.014
     # numerics: adaptive steps of at most 0.3, overshoot at a break at most 0.2 % (on the measured
     # work-precision front; the paper's fixed dt = 0.01 is one option away)

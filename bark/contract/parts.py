@@ -30,6 +30,21 @@ An integrator's part (:class:`IntegratorPart`)
     Euler–Cromer is ``v ← v + f·hm; x ← x + v·h``.  The surface constraint, the breaking and the
     clock are the engine's.
 
+A resin law's part (:class:`ResinPart`)
+---------------------------------------
+``tension(length, rest, k, *reads, params) -> t``
+    a spring's tension (force units, positive when stretched) from its length and rest length, the
+    layer's stiffness ``k`` and the declared per-spring fields it ``reads`` (the paper's spring:
+    ``k (length − rest)``).  Its force on the two bases is along the spring.
+``evolve(length, rest, h, *reads, params) -> (values, ...)``, or ``None``
+    how the resin flows in a step ``h``: new values of the fields it ``writes`` (``rest``, or its own
+    declared fields), in that order, as a tuple.  Inside a step: forces, velocities, positions,
+    the surface, the tensions (judged by the breaker), then the flow of every spring intact then,
+    then the next step's forces from the new values.
+``stiffness``
+    the largest tangent stiffness ``dt/dlength`` over ``k`` (at least 1): the stability bound of an
+    explicit integrator is taken with ``k`` times it.
+
 A growth law's part (:class:`GrowthPart`)
 ------------------------------------------
 ``radius(t, z, q) -> r``
@@ -66,7 +81,8 @@ import numpy as np
 from bark.model import physics
 from bark.errors import BarkError
 
-__all__ = ["BreakerPart", "GrowthPart", "IntegratorPart", "SPRING_INPUTS", "NO_BREAKING", "spring_inputs", "picks", "largest_load", "how_it_runs"]
+__all__ = ["BreakerPart", "GrowthPart", "IntegratorPart", "ResinPart", "SPRING_INPUTS", "NO_BREAKING", "HOOKEAN",
+           "spring_inputs", "picks", "largest_load", "resin_tension", "resin_evolve", "how_it_runs"]
 
 SPRING_INPUTS: tuple[str, ...] = ("tension", "length", "rest", "fmax", "inv_fmax")
 """What a breaker's part may read of each spring besides the per-spring fields declared by the
@@ -196,6 +212,74 @@ class IntegratorPart(_ByKey):
         return (self.update, self.params.tobytes())
 
 
+def _fields(value) -> tuple[str, ...]:
+    names = tuple(value)
+    if any(not isinstance(n, str) or not n.isidentifier() or n.startswith("_") for n in names) \
+            or len(set(names)) != len(names):
+        raise BarkError(f"a resin part's fields {', '.join(map(repr, names))}: each once, a field's name")
+    return names
+
+
+def _stiffness(instance, attribute, value) -> None:
+    if not (isinstance(value, (int, float)) and 1.0 <= value < float("inf")):
+        raise BarkError(f"a resin part's stiffness must be a finite number of at least 1, not {value!r}")
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class ResinPart(_ByKey):
+    """A resin law's compiled work (see the module's docstring)."""
+
+    tension: Callable = attrs.field(validator=_callable)
+    """``tension(length, rest, k, *reads, params) -> t``."""
+    reads: tuple[str, ...] = attrs.field(default=(), converter=_fields)
+    """The declared per-spring fields both functions take after ``rest``, in order."""
+    evolve: Callable | None = attrs.field(default=None, validator=_optional_callable)
+    """``evolve(length, rest, h, *reads, params) -> tuple`` of new values of ``writes``; ``None``: no flow."""
+    writes: tuple[str, ...] = attrs.field(default=(), converter=_fields)
+    """What ``evolve`` gives, in order: ``rest`` and the resin's own declared fields."""
+    params: np.ndarray = attrs.field(factory=lambda: np.empty(0), converter=_params)
+    """The law's own numbers, passed last."""
+    stiffness: float = attrs.field(default=1.0, converter=float, validator=_stiffness)
+    """The largest tangent stiffness over ``k``, for the stability bound."""
+
+    def __attrs_post_init__(self) -> None:
+        if (self.evolve is None) != (not self.writes):
+            raise BarkError("a resin part that flows gives both evolve and the fields it writes; one that does not, neither")
+
+    @property
+    def evolves(self) -> bool:
+        """Whether it flows (writes fields every step)."""
+        return self.evolve is not None
+
+    @property
+    def key(self) -> tuple:
+        """What makes two parts the same work."""
+        return (self.tension, self.evolve, self.reads, self.writes, self.params.tobytes(), self.stiffness)
+
+
+HOOKEAN = ResinPart(tension=physics.hookean)
+"""The paper's spring (eq. 1), a resin law's part: a simulation without a resin law has this one."""
+
+
+def _resin_args(part: ResinPart, state) -> list:
+    return [state._rows(name) for name in part.reads]
+
+
+def resin_tension(part: ResinPart, state, length: np.ndarray, k: float) -> np.ndarray:
+    """Every spring's tension at ``length`` by the resin law ``part`` (on whole arrays: the kernel's bits)."""
+    return part.tension(length, state._rows("rest"), k, *_resin_args(part, state), part.params)
+
+
+def resin_evolve(part: ResinPart, state, length: np.ndarray, h: float, which: np.ndarray) -> None:
+    """The resin flows for a step ``h`` at ``length``: the fields ``part`` writes, of the springs
+    ``which`` (a mask), take their new values (on whole arrays: the kernel's bits).  The engine's."""
+    new = part.evolve(length, state._rows("rest"), h, *_resin_args(part, state), part.params)
+    for name, value in zip(part.writes, new):
+        rows = state._rows(name)
+        rows[which] = np.broadcast_to(value, rows.shape)[which]
+    state._stamp(part.writes)  # an edit every cache of these fields must see
+
+
 NO_BREAKING = BreakerPart(rule=physics.no_breaking, reads=("tension",))
 """The part of a layer without fracture: nothing breaks, nothing steers the step."""
 
@@ -240,4 +324,6 @@ def how_it_runs(strategy) -> str:
         return "compiled" if strategy.part_ is not None else "Python (radius, one step a call)"
     if kind == "integrator":
         return "compiled" if strategy.part_ is not None else "Python (step, one step a call)"
+    if kind == "resin":
+        return "compiled" if strategy.part_ is not None else "cannot run (no part)"
     return "Python (after the run)"

@@ -55,12 +55,12 @@ from typing import Any, ClassVar
 import attrs
 import numpy as np
 
-from bark.contract.parts import BreakerPart, GrowthPart, IntegratorPart, picks
+from bark.contract.parts import BreakerPart, GrowthPart, IntegratorPart, ResinPart, picks
 from bark.errors import BarkError
 from bark.model.effects import Effect
 from bark.model.state import Declared
 
-__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Analyzer", "Analysis", "KINDS", "pattern_of",
+__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Resin", "Analyzer", "Analysis", "KINDS", "pattern_of",
            "check_recordable", "Declared", "Made"]
 
 
@@ -310,6 +310,27 @@ class Breaker(Strategy):
 
 
 @attrs.frozen(kw_only=True)
+class Resin(Strategy):
+    """The resin between two leaf bases: a spring's tension from its length, and how the resin flows
+    (after LAMMPS's bond styles: the bond law a chosen style with its own coefficients and its own
+    per-bond history).  A law declares its work as a :class:`~bark.contract.parts.ResinPart`
+    (``part()``), which runs inside the stepping kernel on both backends: the tension is in the
+    innermost loop, so a resin law has no Python path.  Its per-spring history (a Maxwell arm's rest
+    length) is a field it declares (``declares``); it may write ``rest`` (a viscoelastic or plastic
+    resin's rest length follows the length).  A simulation without one has the paper's spring."""
+
+    kind: ClassVar[str] = "resin"
+    verb: ClassVar[str] = "tension"
+
+    def tension(self, length, rest, k: float, *fields) -> np.ndarray:
+        """Tension of springs of ``length`` and ``rest`` length (and the fields the part reads), from the part."""
+        part: ResinPart | None = _declared_part(self)
+        if part is None:
+            raise NotImplementedError(f"{type(self).__name__} gives no part: a resin law runs inside the kernel")
+        return part.tension(length, rest, k, *fields, part.params)
+
+
+@attrs.frozen(kw_only=True)
 class Analysis:
     """What an analyzer returns: a flat summary, its patches if it measures them, named tables."""
 
@@ -346,4 +367,4 @@ class Analyzer(Strategy):
         """Statistics of the pattern given by ``points`` and their patch labels."""
 
 
-KINDS: tuple[str, ...] = ("growth", "integrator", "breaker", "analyzer")
+KINDS: tuple[str, ...] = ("growth", "integrator", "breaker", "resin", "analyzer")

@@ -9,6 +9,7 @@ vertical regime of Table 2)::
     [growth]      name = "sqrt" + that strategy's fields (r0, G)
     [integrator]  name = "euler-cromer" + its fields
     [breaker]     name = "threshold" + its fields
+    [resin]       name = "hookean" + its fields          (the spring's law: maxwell tau, plastic yield_strain, ...)
     [analyzer]    name = "patches" + its fields          (min_size)
     [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
     [effects]     want = [...] (bark.model.effects), frame_every, series_every, tree_every, window  (what is simulated and written)
@@ -77,8 +78,10 @@ class RunSettings(attrs.make_class(
 
 
 STOP_KEYS = ("until_time", "until_radius", "until_patches")
-STRATEGY_SECTIONS: dict[str, str] = {"growth": "growth", "integrator": "integrator", "breaker": "breaker", "analyzer": "analyzer"}
-DEFAULT_STRATEGIES: dict[str, str] = {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold", "analyzer": "patches"}
+STRATEGY_SECTIONS: dict[str, str] = {"growth": "growth", "integrator": "integrator", "breaker": "breaker", "resin": "resin",
+                                     "analyzer": "analyzer"}
+DEFAULT_STRATEGIES: dict[str, str] = {"growth": "sqrt", "integrator": "euler-cromer", "breaker": "threshold",
+                                      "resin": "hookean", "analyzer": "patches"}
 PARAM_SECTIONS: dict[str, type] = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings, "dome": Dome,
                                    "leaves": Leaves}
 SECTIONS = ("scene", *PARAM_SECTIONS, *STRATEGY_SECTIONS, "effects")
@@ -370,6 +373,7 @@ class Scene:
             growth=chosen["growth"].on(self.lattice),
             integrator=chosen["integrator"],
             breakers=[chosen["breaker"]] if "fracture" in has else [],
+            resin=chosen["resin"],
             analyzers=[chosen["analyzer"]] if "patch-statistics" in has else [],
             record_breaks="break-log" in has,
             numerics=self.run.numerics(),

@@ -25,8 +25,9 @@ from bark.model.state import State, cylinder_points, grown
 from bark.model.tree import Packing
 from bark.units import headed
 from bark.engine.stepping import Clock, Numerics
-from bark.contract.parts import SPRING_INPUTS
-from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integrator, Made, check_recordable
+from bark.contract.parts import HOOKEAN, SPRING_INPUTS
+from bark.contract.strategies import (Analysis, Analyzer, Breaker, Growth, Integrator, Made, Resin,
+                                     check_recordable)
 
 if TYPE_CHECKING:
     from bark.model.graph import LeafBaseGraph
@@ -138,6 +139,8 @@ class Simulation:
     growth: Growth
     integrator: Integrator
     breakers: tuple[Breaker, ...] = attrs.field(converter=tuple)
+    resin: Resin | None = None
+    """The resin law of the springs (``None``: the paper's spring, eq. 1)."""
     analyzers: tuple[Analyzer, ...] = attrs.field(default=(), converter=tuple)
     numerics: Numerics = attrs.field(factory=Numerics)
     seed: int = attrs.field(default=0, validator=int_in(0, 2**63 - 1))
@@ -198,6 +201,7 @@ class Simulation:
         self.growth = self.growth.on(self.lattice)  # features placed relative to the growing top
         self.packing = Packing.of(self.lattice, self.growth)
         self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
+        self.backend.resin = self.resin_part
         self.forces = ForceField(self.mechanics, self.backend)
         from bark.model.graph import LeafBaseGraph
 
@@ -219,8 +223,14 @@ class Simulation:
         return self
 
     def strategies(self) -> tuple:
-        """Every strategy of the simulation: growth law, integrator, breakers, analyzers."""
-        return (self.growth, self.integrator, *self.breakers, *self.analyzers)
+        """Every strategy of the simulation: growth law, integrator, breakers, resin law, analyzers."""
+        return (self.growth, self.integrator, *self.breakers, *(() if self.resin is None else (self.resin,)),
+                *self.analyzers)
+
+    @property
+    def resin_part(self):
+        """The resin law's part (``bark.contract.parts.ResinPart``): the paper's spring without one."""
+        return HOOKEAN if self.resin is None else self.resin.part_
 
     def declared(self) -> tuple:
         """The fields the strategies declare (``Strategy.declares``), which the state carries beside its
@@ -239,7 +249,23 @@ class Simulation:
                 if name not in SPRING_INPUTS and name not in springs:
                     raise BarkError(f"{type(b).__name__}'s part reads {name!r}, which is neither one of "
                                     f"{', '.join(SPRING_INPUTS)} nor a per-spring field a strategy declares")
+        if self.resin is not None:
+            self._check_resin(springs)
         return tuple(spec for st in owners.values() for spec in type(st).declares if owners[spec.name] is st)
+
+    def _check_resin(self, springs: set) -> None:
+        """A resin law has a part, reads and writes only what there is, and runs with an integrator
+        whose step is compiled (the tension is the kernel's innermost work)."""
+        name, part = type(self.resin).__name__, self.resin.part_
+        if part is None:
+            raise BarkError(f"the resin law {name} gives no part: a resin law runs inside the kernel (ResinPart)")
+        for field in (*part.reads, *part.writes):
+            if field != "rest" and field not in springs or field == "rest" and field in part.reads:
+                raise BarkError(f"the resin law {name} names {field!r}: it reads per-spring fields declared by a "
+                                "strategy, and writes those or rest")
+        if part.key != HOOKEAN.key and self.integrator.part_ is None:
+            raise BarkError(f"the resin law {name} needs an integrator with a compiled step: "
+                            f"{type(self.integrator).__name__} takes the stiffness of the paper's spring")
 
     def snapshot(self) -> Snapshot:
         """The run where it stands (:class:`Snapshot`): a value, which the run going on leaves as it is.
@@ -291,8 +317,10 @@ class Simulation:
                 plan = stepping.plan(sim, stop)     # n steps of h, and what may happen inside them
                 result = backend.steps(plan)        # each step: forces (eq. 4) -> velocities (eq. 7)
                                                     #   -> positions (eq. 8) -> surface r(t, z) (eq. 9,
-                                                    #   radial velocity removed) -> tensions k(|d| - l)
-                                                    #   -> the breakers' part: its rule, its load
+                                                    #   radial velocity removed) -> tensions (the resin
+                                                    #   law; eq. 1: k(|d| - l)) -> the breakers' part:
+                                                    #   its rule, its load -> the resin's flow (springs
+                                                    #   intact then) -> the next step's forces
                 clock.advance(result.done); t = clock.t     # integer ticks: exact time
                 break_springs(what the rule broke)  # the intact flags (the graph sees them); logged
                 if the last step went NaN or a load overshot (adaptive): it was undone;

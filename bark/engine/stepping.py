@@ -135,9 +135,11 @@ def stable_step(sim) -> tuple[float, float]:
     """``(stability limit, full step)``: the integrator's limit — of the lattice as it will be, when
     bases are still to join — and the step, ``dt`` or ``dt`` split into equal sub-steps below the
     limit (``auto``, ``adaptive``).  A ``dt`` above the limit with ``fixed`` stepping is refused."""
-    limit = float(sim.integrator.stability_limit(sim.state, sim.forces))
+    stiff = sim.resin_part.stiffness  # a resin stiffer than k·(its stretch) lowers the bound
+    forces = sim.forces if stiff == 1.0 else ForceField(attrs.evolve(sim.mechanics, k=sim.mechanics.k * stiff), sim.backend)
+    limit = float(sim.integrator.stability_limit(sim.state, forces))
     if sim.lattice.initial < sim.lattice.n_bases:  # its own forces: their caches are of the simulation's state
-        limit = min(limit, float(sim.integrator.stability_limit(sim.whole_lattice(), ForceField(sim.mechanics, sim.backend))))
+        limit = min(limit, float(sim.integrator.stability_limit(sim.whole_lattice(), ForceField(forces.mechanics, sim.backend))))
     h = sim.numerics.dt
     if h <= limit:
         return limit, h
@@ -282,6 +284,7 @@ class _PythonCall(Call):
     def __init__(self, sim, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.sim, self.state, self.mech, self.plan, self.tension = sim, state, mech, plan, tension
         self.start = (state._rows("x").copy(order="F"), state._rows("v").copy(order="F"), state._rows("anchor").copy(order="F"))
+        self.flowed = {name: state._rows(name).copy() for name in sim.resin_part.writes}  # what the resin changes
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         sim, state = self.sim, self.state
@@ -295,11 +298,20 @@ class _PythonCall(Call):
         loads = [parts.largest_load(p, state, self.tension, state._rows("intact")) for p in {b.part_ for b in sim.breakers}
                  if p is not None]
         load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
+        resin = sim.resin_part
+        if resin.evolves and finite:  # the intact springs flow, after their loads were judged (the kernel's order)
+            from bark.model.forces import spring_geometry
+
+            _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
+            parts.resin_evolve(resin, state, length, self.plan.h, state._rows("intact"))
+            sim.backend.measure(state, self.mech, self.tension)
         return 1, load, False
 
     def undo(self) -> None:
         for saved, arr in zip(self.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             arr[...] = saved
+        for name, saved in self.flowed.items():
+            self.state._rows(name)[...] = saved
 
     def result(self, done: int, load: float, picked: bool) -> Steps:
         empty = np.empty(0, np.int64)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["length", "tension", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold",
+__all__ = ["length", "tension", "hookean", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold",
            "threshold_load", "no_breaking", "as_given", "weighted_radius"]
 
 
@@ -26,6 +26,12 @@ def length(d0, d1, d2):
 
 def tension(length, rest, k):
     """Tension of a spring of rest length ``rest`` stretched to ``length`` (eq. 1): ``k (|d| − l)``."""
+    return k * (length - rest)
+
+
+def hookean(length, rest, k, params):
+    """Eq. 1 as a resin law's tension (``bark.contract.parts.ResinPart``): ``k (|d| − l)``, the same
+    arithmetic as :func:`tension`, so that the paper's spring gives the same bits as ever."""
     return k * (length - rest)
 
 

@@ -10,6 +10,7 @@ run)::
     python examples/paper/figures.py packing    # Ridley's packing: what each leaf-size law keeps
     python examples/paper/figures.py recovery   # bark fit finds known (G, f_max) again: 5 points
     python examples/paper/figures.py fit        # posteriors for the two photographs' summaries
+    python examples/paper/figures.py resins     # viscoelastic, plastic, disordered resin: the three regimes
 
 Options: ``--out DIR`` (default ``runs/paper``), ``--workers N`` (sweeps).  Runs already there are
 reused: ``bark sweep`` skips finished points, and a regime's run folder with its summary is kept.
@@ -266,8 +267,104 @@ def fit(out: Path, workers: int) -> None:
             print(f"    {label}: {100 * entry['hpd_level']:.0f} % of the posterior is more probable")
 
 
+TABLE2 = {name: SCENES / f"{name}.toml" for name in ("vertical", "reticulate", "diamond")}
+RESIN_FAMILIES = {  # family: (settings of every point, the swept setting, its values, their label)
+    "maxwell": (["resin.name=maxwell"], "resin.tau", (300.0, 1000.0, 3000.0, 10000.0), "relaxation time τ (time units)"),
+    "plastic": (["resin.name=plastic", "resin.hardening=1.0"], "resin.yield_strain", (0.2, 0.3, 0.5, 1.0),
+                "yield strain (hardening 1)"),
+    "weibull": ([], "mechanics.fmax_weibull_shape", (2.0, 4.0, 8.0), "Weibull modulus m of the thresholds"),
+}
+RESIN_STATISTICS = (("mean_orientation_deg", "mean orientation (°)"), ("circular_sd_deg", "circular SD (°)"),
+                    ("mean_anisotropy", "anisotropy 2A − 1"), ("n_patches", "patches"),
+                    ("n_bar", "junctions per patch n̄"), ("t", "time at the stop"))
+PATTERN_ONLY = ("mean_orientation_deg", "circular_sd_deg", "mean_anisotropy", "n_bar")
+"""Statistics of a pattern: taken only over runs that cracked into at least ``CRACKED`` patches (a
+layer still whole, or in a few pieces, at its time cap has no distribution of orientations)."""
+CRACKED = 10
+
+
+def resins(out: Path, workers: int) -> None:
+    """The paper's open question — what the resin's own mechanics does to the pattern — on the three
+    Table 2 regimes (3000 bases, each to its own patch count): a Maxwell (viscoelastic) resin over
+    its relaxation time, a plastic one over its yield strain, and quenched Weibull disorder of the
+    thresholds over its modulus, against the paper's Hookean spring; three seeds a point.  One
+    figure (a column per family, a row per statistic, a line per regime, bars: the seeds' range;
+    a pattern's statistics over the runs that cracked into at least ``CRACKED`` patches) and a table
+    of means."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    folder = out / "resins"
+    stats = [k for k, _ in RESIN_STATISTICS]
+    found: dict[tuple, list[dict]] = {}
+    for regime, scene in TABLE2.items():
+        base = folder / regime / "hookean"  # the paper's spring: every family's reference
+        bark("sweep", "--scene", str(scene), "--grid", "resin.name=hookean", "--seeds", "3", "--workers", str(workers),
+             "--out", str(base), "--quiet")
+        found[(regime, "hookean", None)] = _rows(base, stats)
+        for family, (sets, axis, values, _) in RESIN_FAMILIES.items():
+            where = folder / regime / family
+            bark("sweep", "--scene", str(scene), "--grid", f"{axis}={','.join(f'{v:g}' for v in values)}",
+                 *(a for s in sets for a in ("--set", s)), "--seeds", "3", "--workers", str(workers),
+                 "--out", str(where), "--quiet")
+            for value in values:
+                found[(regime, family, value)] = _rows(where, stats, axis, value)
+    fig, axes = plt.subplots(len(stats), len(RESIN_FAMILIES), figsize=(4.2 * len(RESIN_FAMILIES), 2.3 * len(stats)),
+                             sharex="col", squeeze=False, constrained_layout=True)
+    colours = {"vertical": "#0072B2", "reticulate": "#E69F00", "diamond": "#009E73"}
+    for col, (family, (_, axis, values, label)) in enumerate(RESIN_FAMILIES.items()):
+        for row, (key, name) in enumerate(RESIN_STATISTICS):
+            ax = axes[row][col]
+            for regime in TABLE2:
+                ref = _values(found[(regime, "hookean", None)], key)
+                if ref:
+                    ax.axhline(np.mean(ref), color=colours[regime], lw=0.8, ls=":")
+                got = [_values(found[(regime, family, v)], key) for v in values]
+                x = [v for v, g in zip(values, got) if g]
+                mean = [np.mean(g) for g in got if g]
+                low = [np.mean(g) - min(g) for g in got if g]
+                high = [max(g) - np.mean(g) for g in got if g]
+                ax.errorbar(x, mean, yerr=[low, high], color=colours[regime], marker="o", ms=3, lw=1, capsize=2,
+                            label=regime if row == 0 else None)
+            ax.set_xscale("log")
+            if col == 0:
+                ax.set_ylabel(name, fontsize=9)
+            if row == 0:
+                ax.set_title(family, fontsize=10)
+            if row == len(stats) - 1:
+                ax.set_xlabel(label, fontsize=9)
+    axes[0][0].legend(fontsize=8, title="regime (dotted: Hookean)", title_fontsize=8)
+    fig.savefig(folder / "resins.png", dpi=150)
+    print(f"figure: {folder / 'resins.png'}")
+    print("| regime | resin | " + " | ".join(n for _, n in RESIN_STATISTICS) + " |\n|---|---|" + "---|" * len(stats))
+    for (regime, family, value), rows in found.items():
+        cells = []
+        for key in stats:
+            got = _values(rows, key)
+            cells.append(f"{np.mean(got):.3g} ({min(got):.3g}–{max(got):.3g})" if got else "no pattern")
+        what = family if value is None else f"{family} {RESIN_FAMILIES[family][1].split('.')[1]} = {value:g}"
+        print(f"| {regime} | {what} | " + " | ".join(cells) + " |")
+
+
+def _values(rows: list[dict], key: str) -> list[float]:
+    """``key`` of each run of ``rows`` that has it (a pattern's statistics: of the runs that cracked)."""
+    return [r[key] for r in rows if r[key] is not None and (key not in PATTERN_ONLY or (r["n_patches"] or 0) >= CRACKED)]
+
+
+def _rows(folder: Path, stats: list[str], axis: str | None = None, value: float | None = None) -> list[dict]:
+    """The runs of a sweep's table (at ``axis = value``), their ``stats`` each."""
+    con = sqlite3.connect(folder / "sweep.sqlite")
+    where = f' WHERE abs("{axis}" - {value!r}) < 1e-12' if axis is not None else ""
+    got = con.execute(f"SELECT {', '.join(stats)} FROM runs{where} ORDER BY seed").fetchall()
+    con.close()
+    return [dict(zip(stats, r)) for r in got]
+
+
 FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11, "packing": packing,
-           "recovery": recovery, "fit": fit}
+           "recovery": recovery, "fit": fit, "resins": resins}
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -42,7 +42,7 @@ import attrs
 import numpy as np
 
 from bark.errors import BarkError, BarkWarning, Ref
-from bark.contract.parts import NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
+from bark.contract.parts import HOOKEAN, NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
 
 __all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "ends_call", "take_steps", "available", "resolve", "load"]
 
@@ -161,6 +161,9 @@ class Backend:
     """The hot loop's operations (see the module's docstring)."""
 
     name = ""
+    resin = HOOKEAN
+    """The springs' resin law (``bark.contract.parts.ResinPart``), which every tension and force of
+    this backend's follows: set once, by the simulation that loads it."""
 
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
         """Up to ``len(plan.times)`` whole steps (:func:`take_steps` of :meth:`call`)."""

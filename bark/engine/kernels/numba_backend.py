@@ -54,7 +54,7 @@ from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
 from bark.errors import BarkError, BarkWarning
 from bark.model.state import grown
 from bark.model.physics import weighted_radius
-from bark.contract.parts import GrowthPart
+from bark.contract.parts import HOOKEAN, GrowthPart, resin_tension
 
 NAME = "numba"
 LOG = logging.getLogger("bark")
@@ -83,6 +83,19 @@ def _no_load(tension, length, rest, fmax, inv_fmax, own, q, params):
     """The kernel's load where none is asked."""
     return -np.inf
 
+
+@inline
+def _hooke(length, rest, own, q, k, params):
+    """The kernel's resin law where the paper's spring is asked (eq. 1), as the adapters call a law."""
+    return _tension(length, rest[q], k)
+
+
+@inline
+def _no_flow(length, rest, own, q, h, params):
+    """The flow of a resin that does not flow."""
+    return None
+
+
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
 block's loops in SIMD lanes); in a parallel kernel the blocks are shared among threads.  Every base's
@@ -91,13 +104,18 @@ on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,19
 
 
 @inline
-def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp):
+def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp,
+                law, flow, resin):
     """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
     with ``loads``, also the breaker part's load into ``wl`` and whether its ``rule`` picks each live
     spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, own, q,
     bp)``, ``own[q]`` the spring's declared fields: the generated adapters pass on what the part
     reads), and return whether every live tension is finite and every live load a number (not NaN)
-    and whether the rule picked a live spring."""
+    and whether the rule picked a live spring.  The tension is the resin law's (``law(length, rest,
+    own, q, k, rp)``); with ``resin = (rp, h, evolve)``'s ``evolve``, each live spring then flows for
+    a step ``h`` (``flow`` writes its new rest length or own fields in place) and its force is of
+    the tension after the flow — the next step's (``tests/test_resins.py``: the bits of numpy's)."""
+    rp, h, evolve = resin
     finite = True
     hit = False
     for q in range(rest.shape[0]):
@@ -105,9 +123,13 @@ def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w
         d1 = b1[q] - a1[q]
         d2 = b2[q] - a2[q]
         length = _length(d0, d1, d2)
-        t = _tension(length, rest[q], k)
-        g = _force_scale(t, length)
+        t = law(length, rest, own, q, k, rp)
         on = live[q]
+        tf = t
+        if evolve and on:
+            flow(length, rest, own, q, h, rp)
+            tf = law(length, rest, own, q, k, rp)
+        g = _force_scale(tf, length)
         g = g if (length > 0.0) & on else 0.0  # a spring of zero length has no direction
         wt[q] = t
         w0[q] = g * d0
@@ -162,7 +184,7 @@ def _largest_load(wl, live):
 
 @inline
 def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, tops, breaking, rule, load, bp,
-                 log_id, log_step, log_t, n_log, step, block):
+                 log_id, log_step, log_t, n_log, step, block, law, flow, resin):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
     finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
     ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
@@ -198,7 +220,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
             block_finite[blk], block_hit[blk] = _run_forces(
                 x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
                 fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
-                loads, rule, load, bp)
+                loads, rule, load, bp, law, flow, resin)
             if loads and tops:
                 block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
         hit = False
@@ -357,7 +379,7 @@ def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, 
 
 
 @inline
-def _refresh(x, runs, rest, own, k, live, f, work, first):
+def _refresh(x, runs, rest, own, k, live, f, work, first, law, rp):
     """The spring forces of the bases from ``first`` on, made again (the others' left as they are):
     for each run, the springs with an end there, computed as the full pass computes them and added
     in its order — so each of those bases gets the bits of a full pass."""
@@ -377,7 +399,8 @@ def _refresh(x, runs, rest, own, k, live, f, work, first):
         a, m = i0 + lo, n - lo
         _run_forces(x0[a:a + m], x1[a:a + m], x2[a:a + m], x0[a + o:a + o + m], x1[a + o:a + o + m],
                     x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n],
-                    rest[s0 + lo:s0 + n], own[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest)
+                    rest[s0 + lo:s0 + n], own[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest,
+                    law, _no_flow, (rp, 0.0, False))
         ours = max(0, first - a)  # of these, the first whose first end is a base from `first` on
         for u, w in ((f0, w0), (f1, w1), (f2, w2)):
             second = u[a + o:a + o + m]
@@ -389,8 +412,8 @@ def _refresh(x, runs, rest, own, k, live, f, work, first):
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, flags,
-                  log, heights, start, update, rule, load, radius, prepare, radii):
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, rp, flags,
+                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log, whether the rule named a candidate in the last
     step)``, the load NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
@@ -411,7 +434,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
     k, c, b, m, h, accept_load, max_batch = constants
-    uniform, breaking, return_on_break, fresh, block, kept = flags
+    uniform, breaking, return_on_break, fresh, block, kept, evolve = flags
+    resin = (rp, h, evolve)
     log_id, log_step, log_t = log
     hm = h / m
     if not _kept_and_started(bases, start, kept, block):
@@ -421,13 +445,14 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         f1[:] = 0.0
         f2[:] = 0.0
         _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
-                     load, bp, log_id, log_step, log_t, 0, 0, block)
+                     load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
     elif fresh < x0.shape[0]:
-        _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh)
+        _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh, law, rp)
     may_relax = False
     for step in range(relax.shape[0]):
         may_relax = may_relax or relax[step]
-    tops = accept_load < np.inf or may_relax  # every step's load is needed; else only the last one's (below)
+    tops = accept_load < np.inf or may_relax or evolve  # every step's load is needed; else only the last one's
+    # (below: taken after the call, which a resin that flows has changed since)
     top = -np.inf
     finite = True
     done = 0
@@ -445,7 +470,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         before = n_log
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f,
                                                           work, True, tops, breaking, rule, load, bp, log_id,
-                                                          log_step, log_t, n_log, step + 1, block)
+                                                          log_step, log_t, n_log, step + 1, block, law, flow, resin)
         finite = finite and springs_finite
         done = step + 1
         if _ends_call(finite, top, accept_load, picked, n_log - before, return_on_break, max_batch, relax[step]):
@@ -455,7 +480,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             ax[q] = r_before * dx[q]
             ay[q] = r_before * dy[q]
     if finite and not tops and done > 0:
-        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work, log_id[before:n_log], load, bp)
+        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work, log_id[before:n_log], load, bp,
+                         law, rp)
     if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
     return done, (top if finite else np.nan), n_log, picked and finite
@@ -503,7 +529,7 @@ def _copy_blocks(source, target, first, block):
 
 
 @inline
-def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, bp):
+def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, bp, law, rp):
     """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
     those it broke): what that step's own pass finds when it looks (the same loads, and a maximum
     is exact), taken once per call instead of every step."""
@@ -518,7 +544,7 @@ def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, b
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
         _run_forces(x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n], x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n],
                     x2[i0 + o:i0 + o + n], rr, lv, fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n], k, w0, w1,
-                    w2, wt, wl, wp, True, _never, load, bp)
+                    w2, wt, wl, wp, True, _never, load, bp, law, _no_flow, (rp, 0.0, False))
         top = max(top, _largest_load(wl, lv))
     for s in broke:
         live[s] = False
@@ -529,7 +555,7 @@ def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, b
 
 _WRAPPER = '''"""Generated by bark: its stepping kernel specialised for {names}.  Safe to delete."""
 import numba
-from bark.engine.kernels.numba_backend import _no_load, _steps_kernel, each_height, inline
+from bark.engine.kernels.numba_backend import _no_flow, _no_load, _steps_kernel, each_height, inline
 {imports}
 _update = inline({update})
 _rule_part = inline({rule})
@@ -537,13 +563,16 @@ _load_part = {load}
 _radius = inline({radius})
 {prepare}
 _radii = {radii}
+_law_part = inline({law})
+_flow_part = {flow}
 {adapters}
+{resin}
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, flags, log,
+def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, rp, flags, log,
           heights, start):
     return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip,
-                         flags, log, heights, start, _update, _rule, _load, _radius, _prepare, _radii)
+                         rp, flags, log, heights, start, _update, _rule, _load, _radius, _prepare, _radii, _law, _flow)
 '''
 
 _ADAPTERS = '''
@@ -557,6 +586,21 @@ _LOAD_ADAPTER = '''
 @inline
 def _load(tension, length, rest, fmax, inv_fmax, own, q, params):
     return _load_part({load_args})
+'''
+
+
+_RESIN = '''
+
+@inline
+def _law(length, rest, own, q, k, params):
+    return _law_part(length, rest[q], k, {law_args})
+{flow}'''
+_FLOW = '''
+
+@inline
+def _flow(length, rest, own, q, h, params):
+    new = _flow_part(length, rest[q], h, {law_args})
+{stores}
 '''
 
 
@@ -595,6 +639,52 @@ def _adapters(part, columns: tuple[str, ...]) -> str:
 
     load = "\n_load = _no_load\n" if part.load is None else _LOAD_ADAPTER.format(load_args=args(part.load_reads))
     return _ADAPTERS.format(rule_args=args(part.reads), load=load)
+
+
+def _resin_adapters(part, columns: tuple[str, ...]) -> str:
+    """The source of ``_law`` and ``_flow``: the kernel's per-spring resin calls ``(length, rest,
+    own, q, k or h, params)`` passed on as the resin part reads its fields (``_law_part``,
+    ``_flow_part`` its functions), its flow's values stored into ``rest`` and its ``own`` columns;
+    ``_flow = _no_flow`` for a law that does not flow."""
+    def at(name: str) -> str:
+        return "rest[q]" if name == "rest" else f"own[q, {columns.index(name)}]"
+
+    law_args = ", ".join((*(at(r) for r in part.reads), "params"))
+    if part.evolve is None:
+        return _RESIN.format(law_args=law_args, flow="\n_flow = _no_flow\n")
+    stores = "\n".join(f"    {at(name)} = new[{i}]" for i, name in enumerate(part.writes))
+    return _RESIN.format(law_args=law_args, flow=_FLOW.format(law_args=law_args, stores=stores))
+
+
+def resin_adapted(part, columns: tuple[str, ...] = ()):
+    """The resin part's law and flow as the kernel calls them (inlined where called), compiled here."""
+    _make_jitable([h for fn in (part.tension, part.evolve) if fn is not None for h in _helpers(fn)[1:]])
+    scope = {"inline": inline, "_no_flow": _no_flow, "_law_part": inline(part.tension),
+             "_flow_part": None if part.evolve is None else inline(part.evolve)}
+    exec(_resin_adapters(part, columns), scope)
+    return scope["_law"], scope["_flow"]
+
+
+def resin_on_springs(part, columns: tuple[str, ...] = ()):
+    """``evaluate(length, rest, k, h, own) -> (tension, flowed rest, flowed own)``: the resin part's
+    law and flow at each spring, compiled as the stepping kernel compiles them (for the contract kit)."""
+    law, flow = resin_adapted(part, columns)
+    params = part.params
+
+    @numba.njit(error_model="numpy")
+    def each(length, rest, k, h, own, params, out):
+        for q in range(length.shape[0]):
+            out[q] = law(length[q], rest, own, q, k, params)
+            flow(length[q], rest, own, q, h, params)
+
+    def evaluate(length, rest, k, h, own=None):
+        rest = np.array(rest, dtype=float)
+        own = np.zeros((len(rest), 0)) if own is None else np.array(own, dtype=float)
+        out = np.empty(len(rest))
+        each(np.ascontiguousarray(length, dtype=float), rest, float(k), float(h), own, params, out)
+        return out, rest, own
+
+    return evaluate
 
 
 _SPECIALIZED: dict[tuple, object] = {}
@@ -735,24 +825,28 @@ def update_on_axis(part):
     return evaluate
 
 
-def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = ()):
+def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None):
     """The stepping kernel with the integrator part's ``update`` (``integrator``, an
     :class:`~bark.contract.parts.IntegratorPart`), the breaker part's rule and load (``breaker``, a
     :class:`~bark.contract.parts.BreakerPart`) and the growth part's functions (``growth``, a
     :class:`~bark.contract.parts.GrowthPart`: its radius, its per-step ``time`` — given its inner
     part's functions when it has one — and its block form, or its radius per height) inlined
     (compiled once per combination and kept on disk; see the module's docstring), its block loops
-    shared among threads if ``parallel``, the breaker reading the declared per-spring fields by their
-    ``columns`` of the frame's ``own``.  Functions that cannot be imported by name (lambdas, local
+    shared among threads if ``parallel``, the breaker and the resin law (``resin``, a
+    :class:`~bark.contract.parts.ResinPart`; the paper's spring by default) reading the declared
+    per-spring fields by their ``columns`` of the frame's ``own``.  Functions that cannot be imported by name (lambdas, local
     functions) get a wrapper compiled in this process only."""
     inner = growth.inner
+    resin = HOOKEAN if resin is None else resin
     named = {"update": integrator.update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
-             "load": breaker.load, "radii": growth.radii,
+             "load": breaker.load, "radii": growth.radii, "law": resin.tension, "flow": resin.evolve,
              "inner_time": inner.time if inner is not None else None,
              "inner_radius": inner.radius if inner is not None else None}
     named = {k: fn for k, fn in named.items() if fn is not None}
-    columns = tuple(c for c in columns if c in (*breaker.reads, *breaker.load_reads)) and tuple(columns)
-    key = (breaker.reads, breaker.load_reads, columns, *named.items(), bool(parallel))
+    columns = tuple(columns)
+    if not set(columns) & {*breaker.reads, *breaker.load_reads, *resin.reads, *resin.writes}:
+        columns = ()  # it reads no declared field: one kernel, whatever fields the state carries
+    key = (breaker.reads, breaker.load_reads, resin.reads, resin.writes, columns, *named.items(), bool(parallel))
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
     helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
@@ -763,19 +857,21 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
         p = _time_of(growth)
         block = each_height(g) if growth.radii is None else inline(growth.radii)
         rule, load = adapted(breaker, columns)
+        law, flow = resin_adapted(resin, columns)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
-        def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, flags,
+        def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, rp, flags,
                   log, heights, start):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp,
-                                 ip, flags, log, heights, start, u, rule, load, g, p, block)
+                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow)
 
         _SPECIALIZED[key] = steps
         return steps
     adapters = _adapters(breaker, columns)
+    resin_text = _resin_adapters(resin, columns)
     digest = hashlib.sha256()
     for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), _source(ends_call), *(_source(fn) for fn in named.values()),
-                  *(_source(fn) for fn in helpers), *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters,
+                  *(_source(fn) for fn in helpers), *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters, resin_text,
                   f"parallel={bool(parallel)}"):
         digest.update(piece.encode())
     imports, refs = [], {}
@@ -789,7 +885,8 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
                            update=refs["update"], rule=refs["rule"], radius=refs["radius"], prepare=prepare,
                            load=f"inline({refs['load']})" if "load" in refs else "None",
                            radii="each_height(_radius)" if "radii" not in refs else f"inline({refs['radii']})",
-                           adapters=adapters, parallel=bool(parallel))
+                           adapters=adapters, parallel=bool(parallel), law=refs["law"],
+                           flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text)
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     path = _write_once(name, text)
     if not _compiled_before(path):
@@ -898,9 +995,10 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
         f[:, axis] = 0.0  # a column at a time: a vector fill (the whole 2-D array is filled elementwise)
     no = np.empty(0)
     no_i = np.empty(0, dtype=np.int64)
-    own = np.empty((rest.shape[0], 0))  # forces alone read no declared field
+    own = np.empty((rest.shape[0], 0))  # the paper's spring reads no declared field
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, own, (f[:, 0], f[:, 1], f[:, 2]),
-                 work, False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK)
+                 work, False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK, _hooke, _no_flow,
+                 (no, 0.0, False))
 
 
 @jit
@@ -1275,12 +1373,24 @@ class NumbaBackend(Backend):
         return w.table.ravel(), w.table.shape[1]
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
+        if self.resin.key != HOOKEAN.key:  # outside the kernel, another law's forces on whole arrays (the same bits)
+            from bark.engine.kernels.numpy_backend import NumpyBackend
+
+            other = NumpyBackend()
+            other.resin = self.resin
+            return other.spring_forces(state, mech, x)
         fr = self.frame(state)
         f = np.empty_like(x, order="F")
         _spring_forces(x, fr.runs, fr.work, fr.springs[0], mech.k, self._live(state, fr), f)
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
+        if self.resin.key != HOOKEAN.key:  # another law's tensions on whole arrays: the kernel's bits
+            from bark.model.forces import spring_geometry
+
+            _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
+            out[:] = resin_tension(self.resin, state, length, mech.k)
+            return bool(np.isfinite(out).all())
         return bool(_measure(state._rows("x"), state._rows("pairs")[:, 0], state._rows("pairs")[:, 1], state._rows("rest"), mech.k, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
@@ -1309,7 +1419,7 @@ class _NumbaCall(Call):
     def __init__(self, backend: NumbaBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
         self.kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=backend.threads > 1,
-                                  columns=columns(state))
+                                  columns=columns(state), resin=backend.resin)
         fr = self.frame = backend.frame(state)
         self.live = backend._live(state, fr)
         self.k = float(mech.k)
@@ -1320,16 +1430,20 @@ class _NumbaCall(Call):
         self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                           float(plan.accept_load), float(plan.max_batch))
         self.heights = backend._heights(state, plan, fr)
+        self.resin = backend.resin
+        # a resin that flows changes the frame's rest lengths or own fields: kept to replay from, written back after
+        self.flowed = (fr.springs[0].copy(), fr.springs[3].copy()) if self.resin.evolves else None
         self.n_log, self.valid = 0, True  # valid: the forces in f are of the positions the last call ended with
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         plan, fr = self.plan, self.frame
         rest, fmax, inv_fmax, own = fr.springs
         flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(self.fresh),
-                 self.backend.block, int(self.kept))
+                 self.backend.block, int(self.kept), self.resin.evolves)
         done, load, self.n_log, picked = self.kernel(
             fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, times, relax,
-            plan.growth.params, plan.breaker.params, plan.integrator.params, flags, fr.log, self.heights, self.start)
+            plan.growth.params, plan.breaker.params, plan.integrator.params, self.resin.params, flags, fr.log,
+            self.heights, self.start)
         return done, load, picked
 
     def undo(self) -> None:
@@ -1337,6 +1451,9 @@ class _NumbaCall(Call):
         for keep, arr in zip(fr.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             np.copyto(arr, keep)
         self.live[fr.log[0][:self.n_log]] = True  # what the call broke is intact again at its start
+        if self.flowed is not None:  # and the resin as it was
+            np.copyto(fr.springs[0], self.flowed[0])
+            np.copyto(fr.springs[3], self.flowed[1])
         self.n_log, self.fresh, self.kept = 0, 0, -1  # a replay makes every force again
         self.valid = False
 
@@ -1344,6 +1461,12 @@ class _NumbaCall(Call):
         state, fr, n_log = self.state, self.frame, self.n_log
         if self.valid or done > 0:  # for the next call (the kernel has put the positions it ended with in start)
             fr.forces, fr.kept, fr.refresh_from = self.k, state.n_bases, state.n_bases
+        if self.flowed is not None:  # the resin's flow, into the state (the frame's copies are its source)
+            valid = np.flatnonzero(fr.ids >= 0)
+            ids, names = fr.ids[valid], columns(state)
+            for name in self.resin.writes:
+                rows = state._rows(name)
+                rows[ids] = fr.springs[0][valid] if name == "rest" else fr.springs[3][valid, names.index(name)]
         if self.plan.breaks != "kernel":  # the breakers judge in Python: they see every tension of the state left
             self.backend.measure(state, self.mech, self.tension)
         positions, step, t = (a[:n_log] for a in fr.log)

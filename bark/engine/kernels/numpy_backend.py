@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from bark.model import physics
 from bark.model.forces import SpringOrder, incidence, spring_geometry
 from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
-from bark.contract.parts import largest_load, picks
+from bark.contract.parts import largest_load, picks, resin_evolve, resin_tension
 
 NAME = "numpy"
 
@@ -36,7 +36,7 @@ class NumpyBackend(Backend):
 
     def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
         d, length = spring_geometry(x, state._rows("pairs"))
-        t = physics.tension(length, state._rows("rest"), mech.k)
+        t = resin_tension(self.resin, state, length, mech.k)
         g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
         return np.asarray(self.incidence(state) @ (d * g[:, None]))
 
@@ -45,7 +45,7 @@ class NumpyBackend(Backend):
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
         _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
-        out[:] = physics.tension(length, state._rows("rest"), mech.k)
+        out[:] = resin_tension(self.resin, state, length, mech.k)
         return bool(np.isfinite(out).all())
 
     def constrain(self, state, r_x, r_anchor) -> None:
@@ -75,11 +75,13 @@ class _NumpyCall(Call):
     def __init__(self, backend: NumpyBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
         self.start = (state._rows("x").copy(order="F"), state._rows("v").copy(order="F"), state._rows("anchor").copy(order="F"))
+        self.flowed = {name: state._rows(name).copy() for name in backend.resin.writes}  # what the resin changes
         self.log: list[tuple[np.ndarray, int, np.ndarray]] = []
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         state, mech, plan = self.state, self.mech, self.plan
         part, breaking = plan.breaker, plan.breaks == "kernel"
+        resin = self.backend.resin
         live = state._rows("intact").copy()
         self.log = log = []
         fs = self.backend._spring_forces(state, mech, state._rows("x"), live)
@@ -97,7 +99,7 @@ class _NumpyCall(Call):
             r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
             self.backend.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
             _, length = spring_geometry(x, state._rows("pairs"))
-            t_all = physics.tension(length, state._rows("rest"), mech.k)
+            t_all = resin_tension(resin, state, length, mech.k)
             load = largest_load(part, state, t_all, live, length)
             finite = bool(np.isfinite(x).all() and np.isfinite(t_all[live]).all()) and not math.isnan(load)
             load, done = (load if finite else math.nan), step
@@ -105,6 +107,9 @@ class _NumpyCall(Call):
             candidate, broke = bool(picked.size) and not breaking, picked.size if breaking else 0
             if not plan.undoes(load):
                 self.tension[:] = t_all
+                if resin.evolves:  # the springs intact this step flow; the next forces, and the tensions
+                    resin_evolve(resin, state, length, plan.h, live)  # Python's breakers see, follow them
+                    self.tension[:] = resin_tension(resin, state, length, mech.k)
                 if broke:
                     live[picked] = False
                     log.append((picked, step, t_all[picked]))
@@ -117,6 +122,8 @@ class _NumpyCall(Call):
     def undo(self) -> None:
         for keep, arr in zip(self.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             arr[...] = keep
+        for name, keep in self.flowed.items():
+            self.state._rows(name)[...] = keep
         self.log = []
 
     def result(self, done: int, load: float, picked: bool) -> Steps:

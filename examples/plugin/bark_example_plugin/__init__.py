@@ -1,9 +1,14 @@
 """An example bark plugin, outside the bark package.
 
-Three strategies, each registered under bark's entry-point groups exactly as bark's own:
+Five strategies, each registered under bark's entry-point groups exactly as bark's own:
 
 * ``strain`` (:mod:`.strain`): a spring breaks when its strain ``|d|/l − 1`` exceeds ``eps``; its
   compiled part runs inside bark's kernel, and adaptive stepping holds its own load (strain / eps).
+* ``parastichy-weibull`` (:mod:`.disorder`): quenched disorder — each spring's own threshold, a field
+  the breaker declares, drawn once when the spring is made from a Weibull law whose scale depends
+  on the spring's parastichy; its part reads the field inside the kernel.
+* ``zener`` (:mod:`.zener`): a resin law, the standard linear solid — a spring in parallel with a
+  Maxwell arm whose own rest length (a declared field) relaxes every step, compiled.
 * ``power-law`` (:mod:`.power_law`): the trunk radius ``r0 + G·t^a``, compiled.
 * ``most-overloaded`` (here): bark's threshold breaker with the quasi-static rule of lattice fracture
   models: of the springs over their threshold, only the ``max_per_step`` most overloaded (largest
