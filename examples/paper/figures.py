@@ -321,14 +321,12 @@ def resins(out: Path, workers: int) -> None:
             for regime in TABLE2:
                 ref = _values(found[(regime, "hookean", None)], key)
                 if ref:
-                    ax.axhline(np.mean(ref), color=colours[regime], lw=0.8, ls=":")
+                    ax.axhline(_spread(key, ref)[0], color=colours[regime], lw=0.8, ls=":")
                 got = [_values(found[(regime, family, v)], key) for v in values]
                 x = [v for v, g in zip(values, got) if g]
-                mean = [np.mean(g) for g in got if g]
-                low = [np.mean(g) - min(g) for g in got if g]
-                high = [max(g) - np.mean(g) for g in got if g]
-                ax.errorbar(x, mean, yerr=[low, high], color=colours[regime], marker="o", ms=3, lw=1, capsize=2,
-                            label=regime if row == 0 else None)
+                spread = np.array([_spread(key, g) for g in got if g]).reshape(-1, 3)
+                ax.errorbar(x, spread[:, 0], yerr=[spread[:, 0] - spread[:, 1], spread[:, 2] - spread[:, 0]],
+                            color=colours[regime], marker="o", ms=3, lw=1, capsize=2, label=regime if row == 0 else None)
             ax.set_xscale("log")
             if col == 0:
                 ax.set_ylabel(name, fontsize=9)
@@ -344,9 +342,23 @@ def resins(out: Path, workers: int) -> None:
         cells = []
         for key in stats:
             got = _values(rows, key)
-            cells.append(f"{np.mean(got):.3g} ({min(got):.3g}–{max(got):.3g})" if got else "no pattern")
+            cells.append("{:.3g} ({:.3g}–{:.3g})".format(*_spread(key, got)) if got else "no pattern")
         what = family if value is None else f"{family} {RESIN_FAMILIES[family][1].split('.')[1]} = {value:g}"
         print(f"| {regime} | {what} | " + " | ".join(cells) + " |")
+
+
+def _spread(key: str, values: list[float]) -> tuple[float, float, float]:
+    """``(centre, lowest, highest)`` of the seeds' ``values``: for an orientation (axial, degrees in
+    [0, 180)) the axial mean, each seed's taken within ±90° of it; else the mean."""
+    import numpy as np
+    from scipy.stats import circmean
+
+    v = np.asarray(values, dtype=float)
+    if key != "mean_orientation_deg":
+        return float(v.mean()), float(v.min()), float(v.max())
+    centre = float(circmean(v, high=180.0, low=0.0))
+    near = centre + (v - centre + 90.0) % 180.0 - 90.0
+    return centre, float(near.min()), float(near.max())
 
 
 def _values(rows: list[dict], key: str) -> list[float]:
