@@ -187,3 +187,25 @@ def test_a_strategy_whose_parameters_cannot_be_recorded_is_refused_before_the_ru
 def test_params_are_the_constructors_keywords_only():
     assert _Hidden().params() == {}
     assert ParastichyWeibull().params() == {"m": 6.0, "scale_steep": 0.0028, "scale_shallow": 0.0028, "steep": 34}
+
+
+@attrs.frozen(kw_only=True)
+class _TwoFields(Breaker):
+    """A breaker owning a per-spring and a per-base field (its Python select reads them)."""
+
+    declares = (Declared(name="toughness", per="spring"), Declared(name="age", per="base", unit="time"))
+
+    def initial(self, made, rng):
+        return {"toughness": np.full(len(made), 1e9)} if made.per == "spring" else {"age": np.full(len(made), made.t)}
+
+    def select(self, state, tension, rng):
+        return np.flatnonzero(state.intact & (tension > state["toughness"]))
+
+
+def test_a_strategy_may_own_several_fields_of_both_kinds():
+    sim = build_sim(n_bases=300, lattice=GROWING, seed=1, breakers=[_TwoFields()])
+    sim.run(Stop(until_time=25.0))
+    s = sim.state
+    assert [d.name for d in s.declared] == ["toughness", "age"]
+    assert s["age"].shape == (300,) and np.array_equal(s["age"], s.born)  # made when each base joined
+    assert s["toughness"].shape == (s.n_springs,) and sim.n_broken == 0

@@ -236,13 +236,15 @@ class Simulation:
         """The fields the strategies declare (``Strategy.declares``), which the state carries beside its
         own; one owner each, and a part reads only the fields the state has."""
         owners: dict[str, Any] = {}
+        specs = []
         for strategy in self.strategies():
             for spec in type(strategy).declares:
                 if spec.name in owners:
                     raise BarkError(f"{type(owners[spec.name]).__name__} and {type(strategy).__name__} both declare the "
                                     f"field {spec.name!r}: a field has one owner")
                 owners[spec.name] = strategy
-        springs = {n for n, st in owners.items() if any(d.name == n and d.per == "spring" for d in type(st).declares)}
+                specs.append(spec)
+        springs = {spec.name for spec in specs if spec.per == "spring"}
         for b in self.breakers:
             part = b.part_
             for name in () if part is None else (*part.reads, *part.load_reads):
@@ -251,7 +253,7 @@ class Simulation:
                                     f"{', '.join(SPRING_INPUTS)} nor a per-spring field a strategy declares")
         if self.resin is not None:
             self._check_resin(springs)
-        return tuple(spec for st in owners.values() for spec in type(st).declares if owners[spec.name] is st)
+        return tuple(specs)
 
     def _check_resin(self, springs: set) -> None:
         """A resin law has a part, reads and writes only what there is, and runs with an integrator
