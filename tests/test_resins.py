@@ -46,15 +46,21 @@ def _same(a, b) -> None:
     assert all(np.array_equal(la[k], lb[k]) for k in la)
 
 
-@pytest.mark.parametrize("stepping", ["fixed", "adaptive"])
-@pytest.mark.parametrize("resin", RESINS, ids=lambda r: type(r).__name__)
+def _cases(*cases):
+    """The quick subset keeps the first case of a class; the full suite (``slow``) runs the others."""
+    return [pytest.param(*c, id="-".join(type(v).__name__ if not isinstance(v, str) else v for v in c),
+                         marks=() if i == 0 else pytest.mark.slow) for i, c in enumerate(cases)]
+
+
+@pytest.mark.parametrize("resin, stepping", _cases(*((r, s) for r in (RESINS[-1], *RESINS[:-1])
+                                                     for s in ("adaptive", "fixed"))))
 def test_every_resin_runs_identically_on_numpy_and_numba_on_a_growing_segment(resin, stepping):
     a, b = _run("numpy", resin, stepping=stepping), _run("numba", resin, stepping=stepping)
     assert a.n_broken > 10 and a.state.n_bases == 300
     _same(a, b)
 
 
-@pytest.mark.parametrize("resin", RESINS, ids=lambda r: type(r).__name__)
+@pytest.mark.parametrize("resin", _cases(*((r,) for r in (RESINS[-1], *RESINS[:-1]))))
 def test_a_snapshot_of_a_flowing_resin_goes_on_exactly(resin):
     whole = _run("numba", resin)
     half = _run("numba", resin, until=12.0)

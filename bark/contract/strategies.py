@@ -60,7 +60,7 @@ from bark.errors import BarkError
 from bark.model.effects import Effect
 from bark.model.state import Declared
 
-__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Resin", "Analyzer", "Analysis", "KINDS", "pattern_of",
+__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Resin", "Analyzer", "Analysis", "Springs", "KINDS", "pattern_of",
            "check_recordable", "Declared", "Made"]
 
 
@@ -342,7 +342,23 @@ class Analysis:
     ...), or ``None`` from an analyzer that does not measure patches.  A run's patches.csv, its
     pattern statistics and their regions come from the first analysis that has them."""
     tables: dict[str, list[dict[str, Any]]] = attrs.field(factory=dict)
-    """Further tables of rows, by name."""
+    """Further tables of rows, by name: a run writes each as ``analysis-<analyzer>-<table>.csv``
+    (the analyzer's recorded name, its characters outside letters, digits, ``.``, ``_`` and ``-``
+    written ``-``), a column per key of the first row."""
+
+
+@attrs.frozen(kw_only=True)
+class Springs:
+    """The springs of a simulated pattern, for an analyzer that reads them (``reads_springs``): which
+    bases each joins, which are intact, and the lattice's index offsets (a spring's parastichy is
+    its offset ``j − i``).  A photograph has none."""
+
+    pairs: np.ndarray
+    """``(m, 2)``: the two bases of each spring, ``i < j``."""
+    intact: np.ndarray
+    """``(m,)`` bool: whether each spring is intact (a broken one is a crack)."""
+    offsets: tuple[int, ...]
+    """The lattice's index offsets."""
 
 
 def pattern_of(analyses) -> Analysis | None:
@@ -361,10 +377,14 @@ class Analyzer(Strategy):
     """
 
     kind: ClassVar[str] = "analyzer"
+    reads_springs: ClassVar[bool] = False
+    """Whether ``analyze`` takes the springs too, as a third argument (:class:`Springs`, or ``None`` for
+    a pattern without them: a photograph's)."""
 
     @abc.abstractmethod
     def analyze(self, points: np.ndarray, patches: np.ndarray) -> Analysis:
-        """Statistics of the pattern given by ``points`` and their patch labels."""
+        """Statistics of the pattern given by ``points`` and their patch labels (an analyzer that
+        ``reads_springs``: ``analyze(points, patches, springs)``)."""
 
 
 KINDS: tuple[str, ...] = ("growth", "integrator", "breaker", "resin", "analyzer")

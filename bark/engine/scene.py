@@ -10,7 +10,8 @@ vertical regime of Table 2)::
     [integrator]  name = "euler-cromer" + its fields
     [breaker]     name = "threshold" + its fields
     [resin]       name = "hookean" + its fields          (the spring's law: maxwell tau, plastic yield_strain, ...)
-    [analyzer]    name = "patches" + its fields          (min_size)
+    [analyzer]    name = "patches" + its fields          (min_size); or [[analyzer]] tables, one an analyzer:
+                  the first measures the pattern, each writes its own summary and tables
     [run]         RunSettings fields                     (dt, seed, until_*, degenerate_*)
     [effects]     want = [...] (bark.model.effects), frame_every, series_every, tree_every, window  (what is simulated and written)
     [dome]        bark.model.tree.Dome fields                  (shape, height, exponent, points: the apical dome)
@@ -206,6 +207,11 @@ def _check_effects_act(lattice: Lattice, growth, resolved: dict) -> None:
                           BarkWarning, stacklevel=4)
 
 
+def _analyzer_tables(section: str, value) -> bool:
+    """Whether ``value`` is ``[[analyzer]]``: the analyzer section as a list of one or more tables."""
+    return section == "analyzer" and isinstance(value, list) and bool(value) and all(isinstance(t, dict) for t in value)
+
+
 def merge(base: dict, overrides: dict) -> dict:
     """``base`` updated table by table with ``overrides`` (a new dict; neither input changes).
 
@@ -215,10 +221,15 @@ def merge(base: dict, overrides: dict) -> dict:
     """
     out = copy.deepcopy(base)
     for section, table in [*base.items(), *overrides.items()]:
-        if not isinstance(table, dict):
+        if not isinstance(table, dict) and not _analyzer_tables(section, table):
             raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
     for section, table in overrides.items():
+        if isinstance(table, list):  # [[analyzer]] given: they replace the base's
+            out[section] = copy.deepcopy(table)
+            continue
         target = out.setdefault(section, {})
+        if isinstance(target, list):  # an override of [[analyzer]]'s first (the one options name)
+            target = target[0]
         current = target.get("name", DEFAULT_STRATEGIES.get(section))
         if section in STRATEGY_SECTIONS and "name" in table and table["name"] != current:
             target.clear()
@@ -239,7 +250,9 @@ class Scene:
     mechanics: Mechanics
     run: RunSettings
     strategies: dict[str, Any]
-    """The strategy instances, by section: growth, integrator, breaker, analyzer."""
+    """The strategy instances, by section: growth, integrator, breaker, resin, analyzer (the first)."""
+    more_analyzers: tuple = ()
+    """Analyzers after the first (``[[analyzer]]`` tables), in order."""
     wanted: tuple[str, ...] = effects.DEFAULT
     """The effects the scene asked for (``[effects] want``)."""
     frame_every: float = 10.0
@@ -296,6 +309,8 @@ class Scene:
         patch count more patches than the bases can make, a radius the trunk starts above or never
         reaches."""
         for section, table in data.items():
+            if _analyzer_tables(section, table):
+                continue  # [[analyzer]]: several
             if not isinstance(table, dict):
                 raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
         unknown = sorted(set(data) - set(SECTIONS), key=str)
@@ -311,14 +326,21 @@ class Scene:
         _place("run", run.stop)  # at least one stop condition (Stop says so)
         eff = _build("effects", EffectSettings, dict(data.get("effects", {})))
         strategies = {}
+        analyzers = data.get("analyzer", {})
+        analyzers = analyzers if isinstance(analyzers, list) else [analyzers]
         for section, kind in STRATEGY_SECTIONS.items():
-            params = dict(data.get(section, {}))
+            params = dict(analyzers[0] if section == "analyzer" else data.get(section, {}))
             name = params.pop("name", DEFAULT_STRATEGIES[section])
             if not isinstance(name, str):
                 raise BarkError("{0}: must be a string naming a " + kind + " strategy", Ref(section, "name", name))
             strategies[section] = _place(section, lambda: registry.create(kind, name, **params))
         strategies["analyzer"], run = _one_patch_size(strategies["analyzer"], run, "min_patch_size" in tables["run"],
-                                                      "min_size" in data.get("analyzer", {}))
+                                                      "min_size" in analyzers[0])
+        more = tuple(_more_analyzer(i, dict(t), run) for i, t in enumerate(analyzers[1:], start=1))
+        names = [registry.name_of(a) for a in (strategies["analyzer"], *more)]
+        if len(set(names)) != len(names):
+            twice = next(n for n in names if names.count(n) > 1)
+            raise BarkError(f"two analyzers {twice!r} in [[analyzer]]: each writes its results under its name; give it once")
         parts["run"] = run
         known = _known(strategies)
         wanted = eff.want
@@ -341,6 +363,7 @@ class Scene:
             name=meta.name,
             description=meta.description,
             strategies=strategies,
+            more_analyzers=more,
             wanted=tuple(wanted),
             frame_every=eff.frame_every,
             series_every=eff.series_every,
@@ -374,7 +397,7 @@ class Scene:
             integrator=chosen["integrator"],
             breakers=[chosen["breaker"]] if "fracture" in has else [],
             resin=chosen["resin"],
-            analyzers=[chosen["analyzer"]] if "patch-statistics" in has else [],
+            analyzers=[chosen["analyzer"], *self.more_analyzers] if "patch-statistics" in has else [],
             record_breaks="break-log" in has,
             numerics=self.run.numerics(),
             **self.run._part(Simulation),
@@ -432,10 +455,29 @@ class Scene:
             out[section] = {k: v for k, v in attrs.asdict(getattr(self, section)).items()}
         for section, strategy in self.strategies.items():
             out[section] = {"name": self.names[section], **plain(strategy.params())}
+        if self.more_analyzers:  # [[analyzer]]
+            out["analyzer"] = [out["analyzer"], *({"name": registry.name_of(a), **plain(a.params())}
+                                                  for a in self.more_analyzers)]
         out["effects"] = {"want": list(self.wanted), "frame_every": self.frame_every, "series_every": self.series_every,
                           "history_every": self.history_every, "window": self.window, "tree_every": self.tree_every,
                           "picture_format": self.picture_format, "picture_dpi": self.picture_dpi}
         return out
+
+
+def _more_analyzer(index: int, params: dict, run: RunSettings):
+    """An analyzer after the first of ``[[analyzer]]`` (its ``index``), counting the run's patch size
+    when it drops small patches (``min_size``), as the first does."""
+    name = params.pop("name", None)
+    if not isinstance(name, str):
+        raise BarkError("{0}: each [[analyzer]] table names its analyzer", Ref("analyzer", f"[{index}].name", name))
+    analyzer = _place("analyzer", lambda: registry.create("analyzer", name, **params))
+    if "min_size" in attrs.fields_dict(type(analyzer)) and analyzer.min_size != run.min_patch_size:
+        if "min_size" in params:
+            raise BarkError("{0} and {1} disagree: a run counts one size of patch",
+                            Ref("run", "min_patch_size", run.min_patch_size),
+                            Ref("analyzer", f"[{index}].min_size", analyzer.min_size))
+        analyzer = attrs.evolve(analyzer, min_size=run.min_patch_size)
+    return analyzer
 
 
 def _one_patch_size(analyzer, run: RunSettings, run_given: bool, analyzer_given: bool):

@@ -568,9 +568,15 @@ class Simulation:
         return count_patches(self.patch_labels(), min_size)
 
     def analyze(self) -> dict[str, Analysis]:
-        """Run every analyzer on the current pattern; results by analyzer class name."""
-        labels = self.patch_labels()
-        return {type(a).__name__: a.analyze(self.state.x, labels) for a in self.analyzers}
+        """Run every analyzer on the current pattern; results by the analyzer's recorded name (its
+        entry-point name, or ``module:Class``).  An analyzer that reads springs gets them."""
+        from bark.contract.registry import name_of
+        from bark.contract.strategies import Springs
+
+        labels, s = self.patch_labels(), self.state
+        springs = Springs(pairs=s.pairs, intact=s.intact, offsets=tuple(self.lattice.offsets))
+        return {name_of(a): (a.analyze(s.x, labels, springs) if a.reads_springs else a.analyze(s.x, labels))
+                for a in self.analyzers}
 
     # -- pickling -------------------------------------------------------------------------------
 

@@ -262,8 +262,11 @@ def _check_strategies(scene: dict, path: Path) -> None:
     from bark.engine.scene import STRATEGY_SECTIONS
 
     for section, kind in STRATEGY_SECTIONS.items():
-        name = scene.get(section, {}).get("name") if isinstance(scene.get(section), dict) else None
-        if isinstance(name, str):
+        tables = scene.get(section)
+        for table in tables if isinstance(tables, list) else [tables]:
+            name = table.get("name") if isinstance(table, dict) else None
+            if not isinstance(name, str):
+                continue
             try:
                 registry.load(kind, name)
             except BarkError as err:

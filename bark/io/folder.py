@@ -37,10 +37,11 @@ except ImportError:  # pragma: no cover - not POSIX: no locking
 
 __all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
 
-RUN_FILES = ("summary.json", "scene.toml", "report.html",
+RUN_FILES = ("summary.json", "scene.toml", "report.html", "analysis-*.csv",
              *dict.fromkeys(in_format(f, fmt) for effect in EFFECTS.values() for f in effect.files
                             for fmt in PICTURE_FORMATS))
-"""Every file a run may write: summary.json, scene.toml, the report ``bark report`` writes about it and
+"""Every file a run may write: summary.json, scene.toml, the report ``bark report`` writes about it, its
+analyzers' tables (``analysis-<analyzer>-<table>.csv``) and
 each effect's files in every picture format (``Effect.files``; a
 name may be a pattern in a folder of the run's, such as the history's ``history/tree-*.vtu``).  A fresh
 run removes these (and only these) from its folder."""

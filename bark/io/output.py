@@ -182,6 +182,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
     return {
         "bark_version": __version__,
         "seed": sim.seed,
+        "analyses": {name: a.summary for name, a in analyses.items()},
         "settings": scene.to_dict(),
         "effects": effects,
         "stop": {k: getattr(scene.run, k) for k in ("until_time", "until_radius", "until_patches", "min_patch_size")},
@@ -252,12 +253,33 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
         leaves = scene.leaves if scene.has("leaves") else None
         attempt("tree.vtu, tree.ply", lambda: write_mesh(sim, out, scene.run.min_patch_size, leaves, scene.dome), failed,
                 (out / "tree.vtu", out / "tree.ply"))
+    for name, table, rows in analysis_tables(analyses):
+        path = out / analysis_file(name, table)
+        attempt(path.name, lambda path=path, rows=rows: write_csv(path, rows, list(rows[0]) if rows else []), failed,
+                (path,))
     attempt("scene.toml", lambda: atomic_write(out / "scene.toml", lambda fh: fh.write(scene.to_toml().encode())),
             failed, (out / "scene.toml",))
     summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
     if not failed:
         attempt("summary.json", lambda: write_json(out / "summary.json", summary), failed)
     return summary
+
+
+def analysis_file(analyzer: str, table: str) -> str:
+    """The file of an analyzer's table: ``analysis-<analyzer>-<table>.csv``, each name's characters
+    outside letters, digits, ``.``, ``_`` and ``-`` written ``-``."""
+    return f"analysis-{_safe(analyzer)}-{_safe(table)}.csv"
+
+
+def _safe(name: str) -> str:
+    import re
+
+    return re.sub(r"[^A-Za-z0-9._-]", "-", name)
+
+
+def analysis_tables(analyses: dict):
+    """``(analyzer, table, rows)`` of every table the analyses hold (``Analysis.tables``)."""
+    return [(name, table, rows) for name, a in analyses.items() for table, rows in a.tables.items()]
 
 
 def write_graphml(path: str | Path, sim) -> Path:

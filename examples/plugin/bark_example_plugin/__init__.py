@@ -1,6 +1,9 @@
 """An example bark plugin, outside the bark package.
 
-Five strategies, each registered under bark's entry-point groups exactly as bark's own:
+Six strategies, each registered under bark's entry-point groups exactly as bark's own:
+
+* ``cracks-by-parastichy`` (:mod:`.cracks`): an analyzer that reads the springs — per lattice
+  direction, the cracked share and the spacing of cracks — beside bark's own (``[[analyzer]]``).
 
 * ``strain`` (:mod:`.strain`): a spring breaks when its strain ``|d|/l − 1`` exceeds ``eps``; its
   compiled part runs inside bark's kernel, and adaptive stepping holds its own load (strain / eps).
