@@ -11,12 +11,22 @@ import pytest
 
 from bark.engine.scene import Scene
 from bark.errors import BarkError
+from bark.io.output import analysis_file
 from bark.studies import runner
 from conftest import REPO_ROOT
 
 sys.path.insert(0, str(REPO_ROOT / "examples" / "plugin"))  # the example plugin, as its author tests it
 
-CRACKS = "bark_example_plugin.cracks:CracksByParastichy"
+CRACKS = "bark_example_plugin.cracks:CracksByParastichy"  # how a scene names it, installed or not
+
+
+def _recorded() -> str:
+    """How a run records the plugin's analyzer: its entry-point name where the plugin is installed
+    (its metadata on the path), else its import path."""
+    from bark.contract import registry
+    from bark_example_plugin.cracks import CracksByParastichy
+
+    return registry.name_of(CracksByParastichy)
 SMALL = {"lattice": {"n_bases": 400}, "growth": {"G": 0.05}, "run": {"until_time": 20.0, "backend": "numpy"},
          "effects": {"want": ["patch-statistics", "break-log", "state-snapshot"]}}
 
@@ -31,20 +41,21 @@ def _run(tmp_path, analyzer, name="out"):
 def test_two_analyzers_each_write_under_their_name_and_the_paper_s_statistics_stay(tmp_path):
     one, alone = _run(tmp_path, {"name": "patches"}, "alone")
     two, both = _run(tmp_path, [{"name": "patches"}, {"name": CRACKS}], "both")
-    assert set(both["analyses"]) == {"patches", CRACKS} and set(alone["analyses"]) == {"patches"}
+    assert set(both["analyses"]) == {"patches", _recorded()} and set(alone["analyses"]) == {"patches"}
     for key in ("n_patches", "mean_orientation_deg", "circular_sd_deg", "mean_anisotropy", "network", "regions"):
         assert both[key] == alone[key], key
     assert both["analyses"]["patches"] == alone["analyses"]["patches"]
     assert (two / "patches.csv").read_bytes() == (one / "patches.csv").read_bytes()
     assert (two / "breaks.csv").read_bytes() == (one / "breaks.csv").read_bytes()
-    table = two / "analysis-bark_example_plugin.cracks-CracksByParastichy-by_parastichy.csv"
+    table = two / analysis_file(_recorded(), "by_parastichy")
     with table.open(newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [int(r["offset"]) for r in rows] == [21, 34]
     assert sum(int(r["cracks"]) for r in rows) == both["n_broken"] > 0
     for r in rows:
-        assert both["analyses"][CRACKS][f"cracked_share_{r['offset']}"] == pytest.approx(float(r["cracked_share"]))
-    assert both["settings"]["analyzer"] == [{"name": "patches", "min_size": 7}, {"name": CRACKS}]
+        assert both["analyses"][_recorded()][f"cracked_share_{r['offset']}"] == pytest.approx(float(r["cracked_share"]))
+    assert both["settings"]["analyzer"] == [{"name": "patches", "min_size": 7}, {"name": _recorded()}]
+    assert analysis_file(CRACKS, "by_parastichy") == "analysis-bark_example_plugin.cracks-CracksByParastichy-by_parastichy.csv"
 
 
 def test_a_scene_file_with_analyzer_tables_reads_back_as_it_was_written(tmp_path):
