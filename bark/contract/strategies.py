@@ -1,10 +1,13 @@
-"""The four kinds of strategy a :class:`~bark.engine.simulation.Simulation` is composed of.
+"""The five kinds of strategy a :class:`~bark.engine.simulation.Simulation` is composed of.
 
-Each kind is a small attrs class with **one verb**.  To write your own, subclass the base, decorate
-it with ``@attrs.frozen(kw_only=True)``, declare every parameter as a validated field (no logic in
-``__init__``), implement the verb, and register the class under the kind's entry-point group
-(``bark.growth``, ``bark.integrator``, ``bark.breaker``, ``bark.analyzer``).  The built-in strategies
-in ``bark_plugins`` are registered the same way.
+Each kind is a small attrs class with **one verb**, its work in the step (or, for an analyzer, after
+it).  To write your own, subclass the base, decorate it with ``@attrs.frozen(kw_only=True)``,
+declare every parameter as a validated field (no logic in ``__init__``), implement the verb or
+declare its part, and register the class under the kind's entry-point group (``bark.growth``,
+``bark.integrator``, ``bark.breaker``, ``bark.resin``, ``bark.analyzer``).  The built-in strategies
+in ``bark_plugins`` are registered the same way.  What a strategy draws or computes per spring or
+per base is a field it declares (``declares``, its first values from ``initial``), never an
+attribute of its own: its parameters are its constructor's keywords (``check_recordable``).
 
 =============  ====================================  =================================================
 kind           verb                                  contract
@@ -13,14 +16,17 @@ Growth         ``radius(t, z) -> r``                 trunk radius at time ``t`` 
                                                      array, or a scalar that broadcasts).  Pure.
 Integrator     ``step(state, dt, forces) -> None``   advance ``state.x`` and ``state.v`` by ``dt`` in
                                                      place, with ``forces`` (a ``ForceField``).
-                                                     Touches nothing else: the simulation advances
-                                                     ``t``, applies the surface constraint and breaks
-                                                     springs.  Explicit methods also give
-                                                     ``stability_limit(state, forces)``.
+                                                     Touches nothing else (its ``writes``): the
+                                                     simulation advances ``t``, applies the surface
+                                                     constraint and breaks springs.  Explicit methods
+                                                     also give ``stability_limit(state, forces)``.
 Breaker        ``select(state, tension, rng)``       ids (int array) of *intact* springs to break now.
-               ``-> ids``                            Changes nothing; draws from ``rng`` only.
-Analyzer       ``analyze(points, patches)``          statistics of a pattern, as an :class:`Analysis`.
-               ``-> Analysis``
+               ``-> ids``                            Changes nothing but its own declared fields;
+                                                     draws from ``rng`` only.
+Resin          ``tension(length, rest, k, *fields)`` a spring's tension; its part (required: it runs
+               ``-> t``                              in the kernel) may make the resin flow each step.
+Analyzer       ``analyze(points, patches)``          statistics of a pattern, as an :class:`Analysis`
+               ``-> Analysis``                       (``reads_springs``: also given the springs).
 =============  ====================================  =================================================
 
 **Compiled work: what a strategy declares.**  A strategy whose work fits a pure,
