@@ -255,12 +255,12 @@ class State:
         return rows
 
     @contextlib.contextmanager
-    def writing(self, *names: str, stamp: bool = True):
+    def writing(self, *names: str):
         """Open ``names`` to writes inside the block (``with state.writing("x"): state.x[3] += 1e-9``):
         a declared write, for scripts, tests and tools.  On leaving, each field is marked edited
         (:meth:`edited`), so that every backend's copy of it is made again.  Opening ``pairs`` or
-        ``intact`` is refused.  Nested blocks open the union; the engine opens its own writes so and
-        narrows them to a strategy's declared ones around its Python verbs (:meth:`only`)."""
+        ``intact`` is refused.  Nested blocks open the union.  (The engine writes through its own
+        rows, ``_rows``, and opens a strategy's declared fields around its Python verb: :meth:`only`.)"""
         unknown = [n for n in names if n not in self._store]
         fixed = [n for n in names if n in FIXED]
         if unknown or fixed:
@@ -272,8 +272,7 @@ class State:
             yield self
         finally:
             self._open = before
-            if stamp:
-                self._stamp(names)
+            self._stamp(names)
 
     @contextlib.contextmanager
     def only(self, names: tuple[str, ...]):
