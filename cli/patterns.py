@@ -99,10 +99,14 @@ def _statistics_table(stats):
 @click.argument("pattern", type=click.Path(), metavar="PATTERN")
 @click.option("--min-size", type=click.IntRange(1, 10**9), default=None,
               help="Patches with fewer leaf bases are left out. [default: the run's own, else 7]")
+@click.option("--scene", "scene_file", default=None, metavar="SCENE",
+              help="Also run this scene's analyzers ([analyzer] or [[analyzer]]; a TOML file or a shipped scene's "
+                   "name) on PATTERN: their summaries in statistics.json under 'analyses', each table as "
+                   "analysis-<analyzer>-<table>.csv. A pattern without springs (a photograph) gives them none.")
 @click.option("--out", default="bark-analysis", show_default=True, type=click.Path(file_okay=False),
               help="Folder for statistics.json, patches.csv, radial.png and histogram.png.")
 @picture_options
-def analyze(pattern, min_size, out, picture_format, dpi):
+def analyze(pattern, min_size, scene_file, out, picture_format, dpi):
     """Measure PATTERN (a run folder, a state .npz, a leaf-base .csv or a .toml summary): per-patch orientation and anisotropy (PCA), their
     means, SDs and standard errors; draws the radial plot and the orientation histogram (the
     paper's Fig. 6B, C / 7B, C)."""
@@ -113,13 +117,24 @@ def analyze(pattern, min_size, out, picture_format, dpi):
 
     _namer()
     (stats,) = _read_all([pattern], min_size)
+    analyses = None if scene_file is None else _scene_analyses(Path(pattern), scene_file)
     folder = writable_folder(out)
     console = Console(width=150)
     console.print(_statistics_table([stats]))
     network = _network(Path(pattern), stats, min_size)
     if network is not None:
         console.print("  beyond the paper: " + _network_line(network))
-    writers = {"statistics.json": lambda path: write_json(path, {**stats.as_dict(), "network": network})}
+    document = {**stats.as_dict(), "network": network}
+    writers = {}
+    owned = (*ANALYZE_FILES, *(p.name for p in folder.glob("analysis-*.csv")))
+    if analyses is not None:
+        from bark.io.output import analysis_file, analysis_tables
+
+        document["analyses"] = {name: a.summary for name, a in analyses.items()}
+        for name, table, rows in analysis_tables(analyses):
+            writers[analysis_file(name, table)] = lambda path, rows=rows: write_csv(path, rows, list(rows[0]) if rows else [])
+        console.print(f"  analyzers: {', '.join(analyses)}")
+    writers["statistics.json"] = lambda path: write_json(path, document)
     if stats.patches is not None:
         writers["patches.csv"] = lambda path: write_csv(path, stats.patches.rows(), stats.patches.columns, stats.patches.header)
         if stats.n_patches:
@@ -127,7 +142,27 @@ def analyze(pattern, min_size, out, picture_format, dpi):
 
             writers.update({"radial.png": lambda path: plot_radial(stats, path),
                             "histogram.png": lambda path: plot_histogram(stats, path)})
-    return _wrote(folder, ANALYZE_FILES, pictured(writers, picture_format, dpi))
+    return _wrote(folder, owned, pictured(writers, picture_format, dpi))
+
+
+def _scene_analyzers_of(scene_file) -> list:
+    """The analyzers of the scene ``scene_file`` names (validated as ``bark simulate`` takes it)."""
+    from bark.engine.scene import Scene
+
+    scene = Scene.from_toml(scene_file)
+    return [scene.strategies["analyzer"], *scene.more_analyzers]
+
+
+def _scene_analyses(path: Path, scene_file) -> dict:
+    """The scene's analyzers run on the pattern at ``path``: results by each one's recorded name; one
+    that reads springs gets the pattern's, or ``None`` where it has none (a photograph)."""
+    from bark.analysis.pattern import load, springs_of
+    from bark.contract.registry import name_of
+
+    analyzers = _scene_analyzers_of(scene_file)
+    pattern, springs = load(path), springs_of(path)
+    return {name_of(a): a.analyze(pattern.points, pattern.patches, springs) if a.reads_springs
+            else a.analyze(pattern.points, pattern.patches) for a in analyzers}
 
 
 def _network(path: Path, stats, min_size: int | None) -> dict | None:

@@ -6,10 +6,11 @@ import attrs
 import numpy as np
 
 from bark.validators import positive_int
+from bark.analysis.network import measure
 from bark.analysis.patches import patch_statistics, pattern_summary
 from bark.contract.strategies import Analysis, Analyzer
 
-__all__ = ["PatchAnalyzer"]
+__all__ = ["PatchAnalyzer", "NetworkAnalyzer"]
 
 
 @attrs.frozen(kw_only=True)
@@ -24,3 +25,24 @@ class PatchAnalyzer(Analyzer):
     def analyze(self, points: np.ndarray, patches: np.ndarray) -> Analysis:
         rows = patch_statistics(points, patches, self.min_size)
         return Analysis(summary=pattern_summary(rows), patches=rows)
+
+
+@attrs.frozen(kw_only=True)
+class NetworkAnalyzer(Analyzer):
+    """The statistics beyond the paper's (``bark.analysis.network``): the distribution of patch sizes
+    (power law against log-normal) and, where the pattern has springs, its crack network — junctions
+    in the (n̄, v̄) plane, T and Y junctions, the cracks' nematic order and director, and each spring
+    offset's share of the cracks against its share of the springs (the table ``lattice_bias``).  A
+    photograph, without springs, gets the sizes alone."""
+
+    min_size: int = attrs.field(default=7, validator=positive_int)
+    """Patches with fewer bases are left out (the paper: 7)."""
+
+    reads_springs = True
+
+    def analyze(self, points, patches, springs) -> Analysis:
+        given = () if springs is None else (springs.pairs, springs.intact, springs.offsets)
+        summary = measure(points, patches, self.min_size, *given)
+        bias = summary.pop("lattice_bias", None) or {}
+        return Analysis(summary=summary, tables={"lattice_bias": [{"offset": int(o), **row} for o, row in bias.items()]}
+                        if bias else {})

@@ -97,3 +97,70 @@ def test_a_photograph_gives_an_analyzer_that_reads_springs_none():
 
     points = np.random.default_rng(0).random((50, 2))
     assert CracksByParastichy().analyze(points, np.zeros(50, int), None).summary == {}
+
+
+def _invoke(*args):
+    from click.testing import CliRunner
+
+    from bark_cli.main import cli
+
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def _photograph(run, path):
+    """The run's pattern as a photograph gives it: leaf-base centres in a plane, a patch each, no springs."""
+    import numpy as np
+
+    with np.load(run / "state.npz") as d:
+        x, labels = d["x"], d["labels"]
+    r = np.hypot(x[:, 0], x[:, 1]).mean()
+    rows = "".join(f"{float(a)!r},{float(b)!r},{c}\n" for a, b, c in zip(r * np.mod(np.arctan2(x[:, 1], x[:, 0]), 2 * np.pi), x[:, 2], labels))
+    path.write_text("x,y,patch\n" + rows)
+    return path
+
+
+def test_the_network_statistics_are_an_analyzer_with_the_run_s_numbers_and_its_table(tmp_path):
+    out, summary = _run(tmp_path, [{"name": "patches"}, {"name": "network"}])
+    mine, core = summary["analyses"]["network"], summary["network"]
+    assert mine == {k: v for k, v in core.items() if k != "lattice_bias"} and mine["n_junctions"] > 0
+    with (out / analysis_file("network", "lattice_bias")).open(newline="") as fh:
+        rows = {r["offset"]: r for r in csv.DictReader(fh)}
+    assert set(rows) == set(core["lattice_bias"]) == {"21", "34"}
+    for offset, row in rows.items():
+        assert float(row["bias"]) == pytest.approx(core["lattice_bias"][offset]["bias"])
+
+
+def test_bark_analyze_runs_a_scene_s_analyzers_on_a_run_and_on_a_photograph(tmp_path):
+    out, summary = _run(tmp_path, [{"name": "patches"}, {"name": "network"}, {"name": CRACKS}])
+    scene = tmp_path / "analyzers.toml"
+    scene.write_text(f'[[analyzer]]\nname = "patches"\n\n[[analyzer]]\nname = "network"\n\n[[analyzer]]\nname = "{CRACKS}"\n')
+    result = _invoke("analyze", out, "--scene", scene, "--out", tmp_path / "a")
+    assert result.exit_code == 0, result.output
+    again = json.loads((tmp_path / "a" / "statistics.json").read_text())["analyses"]
+    assert again["network"] == summary["analyses"]["network"]  # from its files, the run's own numbers
+    assert again[_recorded()] == summary["analyses"][_recorded()]
+    for name in (analysis_file("network", "lattice_bias"), analysis_file(_recorded(), "by_parastichy")):
+        assert (tmp_path / "a" / name).read_bytes() == (out / name).read_bytes()
+    photo = _photograph(out, tmp_path / "photo.csv")
+    result = _invoke("analyze", photo, "--scene", scene, "--out", tmp_path / "a")  # the same folder: its tables go
+    assert result.exit_code == 0, result.output
+    seen = json.loads((tmp_path / "a" / "statistics.json").read_text())["analyses"]
+    assert seen[_recorded()] == {} and "n_junctions" not in seen["network"]  # no springs: the sizes alone
+    assert seen["network"]["size_mean"] == pytest.approx(summary["analyses"]["network"]["size_mean"])
+    assert not list((tmp_path / "a").glob("analysis-*.csv"))
+
+
+@pytest.mark.parametrize("pattern, scene, message", [
+    ("summary.toml", "analyzers.toml", "a published summary has no leaf bases"),
+    ("photo.csv", "nosuch.toml", "scene file 'nosuch.toml' does not exist"),
+    ("photo.csv", "bad.toml", "nosuch"),
+])
+def test_bark_analyze_with_a_bad_scene_or_pattern_says_one_line_and_writes_nothing(tmp_path, pattern, scene, message):
+    (tmp_path / "summary.toml").write_text("[pattern]\nn_patches = 10\nmean_orientation_deg = 80.0\nsd_orientation_deg = 10.0\n")
+    (tmp_path / "photo.csv").write_text("x,y,patch\n" + "".join(f"{i % 10},{i // 10},{i // 20}\n" for i in range(100)))
+    (tmp_path / "analyzers.toml").write_text('[[analyzer]]\nname = "network"\n')
+    (tmp_path / "bad.toml").write_text('[[analyzer]]\nname = "nosuch"\n')
+    result = _invoke("analyze", tmp_path / pattern, "--scene", tmp_path / scene if scene != "nosuch.toml" else scene,
+                     "--out", tmp_path / "out")
+    assert result.exit_code != 0 and message in result.output and result.output.count("\n") == 1, result.output
+    assert not (tmp_path / "out").exists()

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-__all__ = ["size_distribution", "crack_network", "of_state", "of_pattern", "SIZE_KEYS", "NETWORK_KEYS"]
+__all__ = ["size_distribution", "crack_network", "measure", "of_state", "of_pattern", "SIZE_KEYS", "NETWORK_KEYS"]
 
 T_ANGLE = 150.0
 """A junction of three patches whose largest angle reaches this (degrees) is a T-junction."""
@@ -228,18 +228,40 @@ def _trios(who: np.ndarray, junctions: np.ndarray) -> dict:
     return {j: who[a:a + 3, 1] for j, a in zip(junctions, starts)}
 
 
+def measure(points: np.ndarray, labels: np.ndarray, s_min: int, pairs=None, intact=None,
+            offsets: tuple[int, ...] | None = None) -> dict:
+    """Every statistic of this module of a pattern: the patch sizes always, the crack network where it
+    has springs (``pairs``, ``intact``) on a lattice of two offsets.  ``points`` are 3-D positions on
+    the trunk (unrolled at their mean radius, a period round it) or 2-D ones in a plane (no period);
+    ``offsets`` the lattice's, else the two commonest among the springs.  What a run writes in
+    summary.json, ``bark analyze`` finds in its files and the network analyzer measures: one function."""
+    labels = np.asarray(labels)
+    sizes = np.unique(labels, return_counts=True)[1] if labels.size else np.empty(0, np.int64)
+    out = size_distribution(sizes, s_min)
+    if pairs is None or len(pairs) == 0:
+        return out
+    pairs = np.asarray(pairs, dtype=np.int64)
+    if offsets is None:
+        family, counts = np.unique(pairs[:, 1] - pairs[:, 0], return_counts=True)
+        offsets = tuple(int(o) for o in family[np.argsort(-counts, kind="stable")][:2])
+    if len(offsets) != 2:
+        return {**out, **dict.fromkeys(NETWORK_KEYS)}
+    points = np.asarray(points, dtype=float)
+    period = None
+    if points.shape[1] == 3:
+        from bark.units import unwrap
+
+        r = float(np.mean(np.hypot(points[:, 0], points[:, 1])))
+        points, period = unwrap(points, r), 2.0 * np.pi * r
+    _, dense = np.unique(labels, return_inverse=True)
+    out.update(crack_network(points, dense.reshape(-1), pairs, intact, tuple(offsets), s_min, period=period))
+    return out
+
+
 def of_state(x: np.ndarray, labels: np.ndarray, pairs: np.ndarray, intact: np.ndarray, s_min: int) -> dict:
-    """:func:`crack_network` of a run's state (positions ``x`` on the trunk, 3-D), its trunk unrolled
-    at its mean radius and its two spring offsets the two commonest."""
-    x = np.asarray(x, dtype=float)
-    r = float(np.mean(np.hypot(x[:, 0], x[:, 1])))
-    theta = np.mod(np.arctan2(x[:, 1], x[:, 0]), 2.0 * np.pi)
-    family, counts = np.unique(np.asarray(pairs)[:, 1] - np.asarray(pairs)[:, 0], return_counts=True)
-    offsets = tuple(int(o) for o in family[np.argsort(-counts)][:2])
-    if len(offsets) < 2:
-        return dict.fromkeys(NETWORK_KEYS)
-    return crack_network(np.column_stack([r * theta, x[:, 2]]), labels, pairs, intact, offsets, s_min,
-                         period=2.0 * np.pi * r)
+    """:func:`measure` of a run's state: positions ``x`` on the trunk (3-D), its springs, the lattice's
+    two offsets taken as the two commonest among them."""
+    return measure(x, labels, s_min, pairs, intact)
 
 
 def of_pattern(path, patch_sizes, min_size: int | None) -> dict:
@@ -255,9 +277,8 @@ def of_pattern(path, patch_sizes, min_size: int | None) -> dict:
     state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
     if min_size is None:  # the run's own, as the statistics took it
         min_size = run_min_size(path if path.is_dir() else path.parent)
-    out = size_distribution(patch_sizes, min_size)
     if state is not None:
         with np.load(state, allow_pickle=False) as d:
             if {"x", "labels", "pairs", "intact"} <= set(d.files):
-                out.update(of_state(d["x"], d["labels"], d["pairs"], d["intact"], min_size))
-    return out
+                return measure(d["x"], d["labels"], min_size, d["pairs"], d["intact"])
+    return size_distribution(patch_sizes, min_size)

@@ -41,7 +41,7 @@ from bark.errors import BarkError
 from bark.paths import is_zip, open_regular
 from bark.units import headed
 
-__all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "run_min_size", "MIN_PATCH_SIZE", "patch_colours",
+__all__ = ["Pattern", "PatchTable", "Axial", "Linear", "PatternStatistics", "read", "load", "springs_of", "run_min_size", "MIN_PATCH_SIZE", "patch_colours",
            "PALETTE", "FRAGMENT_GREY", "simulation_colours", "lineage_colours", "spiral_handedness"]
 
 MIN_PATCH_SIZE = 7
@@ -540,23 +540,53 @@ def read(path: str | Path, min_size: int | None = None) -> PatternStatistics:
     file (``.npz``), a CSV of leaf-base centres (``.csv``) or a published summary (``.toml``, a
     ``[pattern]`` table).  ``min_size`` defaults to the run's own for a run folder, else 7."""
     path = Path(path)
+    if path.suffix.lower() == ".toml" and path.exists():
+        return _summary_file(path)
+    pattern = load(path)
+    if min_size is None:
+        min_size = run_min_size(path) if path.is_dir() else MIN_PATCH_SIZE
+    return attrs.evolve(pattern.statistics(min_size), source=str(path))
+
+
+def load(path: str | Path) -> Pattern:
+    """The leaf bases and patches of the pattern at ``path``: a run's output folder (its ``state.npz``),
+    a state file (``.npz``) or a CSV of leaf-base centres (``.csv``)."""
+    path = Path(path)
     if not path.exists():
         raise BarkError(f"{path}: no such file or folder")
     suffix = path.suffix.lower()
-    if suffix == ".toml":
-        return _summary_file(path)
     if path.is_dir():
-        pattern = _run_folder(path)
-        if min_size is None:
-            min_size = run_min_size(path)
-    elif suffix == ".npz":
-        pattern = Pattern.from_state(path)
-    elif suffix == ".csv":
-        pattern = Pattern.from_csv(path)
-    else:
-        raise BarkError(f"{path}: not a pattern (a run folder, a state .npz, a .csv of leaf-base centres or a .toml summary)")
-    stats = pattern.statistics(MIN_PATCH_SIZE if min_size is None else min_size)
-    return attrs.evolve(stats, source=str(path))
+        return _run_folder(path)
+    if suffix == ".npz":
+        return Pattern.from_state(path)
+    if suffix == ".csv":
+        return Pattern.from_csv(path)
+    if suffix == ".toml":
+        raise BarkError(f"{path}: a published summary has no leaf bases to measure (give a run folder, a state .npz "
+                        "or a .csv of leaf-base centres)")
+    raise BarkError(f"{path}: not a pattern (a run folder, a state .npz, a .csv of leaf-base centres or a .toml summary)")
+
+
+def springs_of(path: str | Path):
+    """The springs of the pattern at ``path`` (``bark.contract.strategies.Springs``: a run folder's or
+    state file's pairs and intact flags, its offsets those of its springs, commonest first); ``None``
+    for a pattern without them (a photograph's CSV, a state file that kept none)."""
+    from bark.contract.strategies import Springs
+
+    path = Path(path)
+    state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
+    if state is None:
+        return None
+    with np.load(state, allow_pickle=False) as d:
+        if not {"pairs", "intact"} <= set(d.files):
+            return None
+        pairs, intact, n = d["pairs"], d["intact"], len(d["x"]) if "x" in d.files else 0
+    if pairs.ndim != 2 or pairs.shape[1:] != (2,) or intact.shape != (len(pairs),) or (
+            pairs.size and (pairs.min() < 0 or pairs.max() >= n)):
+        raise BarkError(f"{state}: its springs are damaged (pairs {pairs.shape}, intact {intact.shape}, {n} bases)")
+    pairs, intact = pairs.astype(np.int64), intact.astype(bool)
+    family, counts = np.unique(pairs[:, 1] - pairs[:, 0], return_counts=True)
+    return Springs(pairs=pairs, intact=intact, offsets=tuple(int(o) for o in family[np.argsort(-counts, kind="stable")]))
 
 
 def run_min_size(folder: Path) -> int:

@@ -126,19 +126,17 @@ def window_summaries(sim, every: np.ndarray, min_size: int, window: float) -> di
             "initial_trunk": None if old is None else region_summaries(sim, old, every[every != YOUNG], labels, False)}
 
 
-def network_summary(sim, rows: list[dict], min_size: int) -> dict | None:
-    """The pattern's statistics beyond the paper's (``bark.analysis.network``): its patch sizes, its
-    crack network's junctions and their angles, the cracks' alignment and their bias to the lattice's
-    springs — on the trunk unrolled at its mean radius; ``None`` for a lattice without two offsets."""
-    from bark.analysis.network import crack_network, size_distribution
-    from bark.units import unwrap
+def network_summary(sim, min_size: int) -> dict | None:
+    """The pattern's statistics beyond the paper's (``bark.analysis.network.measure``, as the network
+    analyzer and ``bark analyze`` take them): its patch sizes, its crack network's junctions and their
+    angles, the cracks' alignment and their bias to the lattice's springs — on the trunk unrolled at
+    its mean radius; ``None`` for a lattice without two offsets."""
+    from bark.analysis.network import measure
 
     if len(sim.lattice.offsets) != 2:
         return None
-    s, r = sim.state, sim.radius
-    return {**size_distribution([row["size"] for row in rows], min_size),
-            **crack_network(unwrap(s.x, r), sim.patch_labels(), s.pairs, s.intact, sim.lattice.offsets, min_size,
-                            period=2.0 * np.pi * r)}
+    s = sim.state
+    return measure(s.x, sim.patch_labels(), min_size, s.pairs, s.intact, tuple(sim.lattice.offsets))
 
 
 LAST_JOINED = 2000
@@ -208,7 +206,7 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
         "regions": region_summaries(sim, rows, every, labels) if every is not None else None,
         "windows": window_summaries(sim, every, scene.run.min_patch_size, scene.window) if every is not None else None,
         "phyllotaxis": _phyllotaxis(sim),
-        "network": network_summary(sim, rows, scene.run.min_patch_size) if rows is not None else None,
+        "network": network_summary(sim, scene.run.min_patch_size) if rows is not None else None,
         "degenerate_events": [e for e in sim.events if e["kind"] == "degenerate"],
         **(extra or {}),
         "wall_time_s": wall_time_s,

@@ -269,7 +269,7 @@ def simulate_statistics(scene: dict, names: Iterable[str]) -> dict[str, float | 
     """Run ``scene`` in memory and measure the statistics of ``names`` (:data:`STATISTICS`), nothing
     more: the crack network only where a network statistic is asked for.  A run whose state went
     non-finite, or that made no patch, has no statistics (``None``): the fit rejects it."""
-    from bark.analysis.network import of_state, size_distribution
+    from bark.analysis.network import measure
     from bark.analysis.pattern import Pattern
     from bark.engine.scene import Scene
     from bark.errors import NonFiniteStateError
@@ -287,9 +287,8 @@ def simulate_statistics(scene: dict, names: Iterable[str]) -> dict[str, float | 
     stats = Pattern(points=s.x, patches=labels).statistics(min_size)
     network = None
     if stats.patches is not None and any(n in names for n in ("size_mean", *NETWORK_STATISTICS)):
-        network = size_distribution(stats.patches.size, min_size)
-        if any(n in names for n in NETWORK_STATISTICS):
-            network.update(of_state(s.x, labels, s.pairs, s.intact, min_size))
+        springs = (s.pairs, s.intact, tuple(sim.lattice.offsets)) if any(n in names for n in NETWORK_STATISTICS) else ()
+        network = measure(s.x, labels, min_size, *springs)
     values = measured(stats, network)
     return {n: values[n] for n in names}
 
