@@ -18,7 +18,10 @@ from bark.contract import registry
 from bark.engine import stepping
 from bark.contract.parts import BreakerPart, how_it_runs
 from bark.testing import check_strategy
+from bark.model.lattice import Lattice
 from bark_plugins.breakers import ProbabilisticBreaker, ThresholdBreaker
+from bark_plugins.growth import SqrtGrowth
+from bark_plugins.integrators import EulerCromer
 from conftest import REPO_ROOT, build_sim
 
 sys.path.insert(0, str(REPO_ROOT / "examples" / "plugin"))  # the example plugin, as its author tests it
@@ -211,3 +214,43 @@ def test_bulges_on_a_third_party_growth_law_run_compiled_with_the_same_bits():
     assert a.n_broken == b.n_broken > 0 and a.state.n_bases == b.state.n_bases > 400
     for name in ("x", "v", "anchor", "intact"):
         assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name
+
+
+@attrs.frozen(kw_only=True)
+class _SqrtByVerb(SqrtGrowth):
+    """The square-root law with its verb written again: no part of its own, so it runs on the Python path."""
+
+    def radius(self, t, z):
+        return super().radius(t, z)
+
+
+@attrs.frozen(kw_only=True)
+class _EulerByVerb(EulerCromer):
+    """Euler–Cromer with its verb written again: the Python path."""
+
+    def step(self, state, dt, forces):
+        super().step(state, dt, forces)
+
+
+@pytest.mark.parametrize("mode", ["fixed", "adaptive"])
+@pytest.mark.parametrize("resin", [None, "maxwell"])
+def test_the_python_path_is_the_array_step_with_the_verbs_to_the_bit(mode, resin):
+    """A strategy without a part steps by the numpy backend's array step with its verb in the part's
+    place: the same law given as a verb gives the run of the law given as a part, bit for bit — bases
+    joining, springs breaking, the resin flowing."""
+    extra = {} if resin is None else {"resin": registry.create("resin", resin, tau=5.0)}
+    lattice = Lattice(n_bases=300, n_start=240, join_rate=3.0, join_every=1.0, jitter=0.05)
+    runs = []
+    for growth, integrator in ((SqrtGrowth(G=0.05), EulerCromer()), (_SqrtByVerb(G=0.05), EulerCromer()),
+                               *(() if resin else ((_SqrtByVerb(G=0.05), _EulerByVerb()),))):
+        sim = build_sim(lattice=lattice, growth=growth, integrator=integrator, backend="numpy", stepping=mode,
+                        fmax_spread=0.05, seed=3, **extra)
+        sim.run(Stop(until_time=12.0))
+        runs.append(sim)
+    assert [stepping.plan(sim, None).compiled for sim in runs] == [True] + [False] * (len(runs) - 1)
+    for other in runs[1:]:
+        assert other.step_count == runs[0].step_count and other.n_broken == runs[0].n_broken > 0
+        for name in ("x", "v", "anchor", "rest", "fmax", "intact"):
+            np.testing.assert_array_equal(getattr(other.state, name), getattr(runs[0].state, name), err_msg=name)
+        for key, column in runs[0].breaks.arrays().items():
+            np.testing.assert_array_equal(other.breaks.arrays()[key], column, err_msg=key)

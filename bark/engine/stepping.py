@@ -20,12 +20,12 @@ import os
 import attrs
 import numpy as np
 
-from bark.contract import parts, registry
+from bark.contract import registry
 from bark.contract.parts import NO_BREAKING, BreakerPart
 from bark.validators import int_in, one_of, positive
 from bark.errors import BarkError, Ref
 from bark.model.forces import ForceField
-from bark.engine.kernels import BACKENDS, Call, Plan, Steps, take_steps
+from bark.engine.kernels import BACKENDS, Plan, Steps, take_steps
 
 __all__ = ["Numerics", "Clock", "plan", "steers_step", "breaking_part", "python_step", "stable_step", "check_countable",
            "DEFAULT_DT", "DEFAULT_STEPPING", "DEFAULT_OVERSHOOT_TOL"]
@@ -206,13 +206,15 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     stepping undoes is replayed from the call's start, its breaks with it); when it names candidates,
     the call ends after the first step in which it names one, and the breakers select in Python.
     Breakers with no part, or with different parts, are asked in Python after every step (one step
-    a call), and the step is held to their loads in Python (``python_step``) if any of them has one."""
+    a call), and the step is held to their loads in Python (``python_step``) if any of them has one.
+    A strategy without a part makes every call one step of ``python_step``, whose breaker part judges
+    inside it as the kernel's does (before the resin flows)."""
     clock = sim.clock
     part = breaking_part(sim.breakers)
     steers = steers_step(sim)
     growth, integrator = sim.growth.part_, sim.integrator.part_
     compiled = integrator is not None and growth is not None and (part is not None or not steers)
-    breaks = "python" if part is None or not compiled else "kernel" if part.decides else "candidates"
+    breaks = "python" if part is None else "kernel" if part.decides else "candidates"  # the Python path's too
     n = 1
     if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
         n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases + sim.state.n_springs, 1), most or CHUNK))
@@ -270,49 +272,32 @@ def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
 
 
 def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
-    """One step for parts without compiled forms, by the backends' step algorithm
-    (:func:`~bark.engine.kernels.take_steps`): a kernel call's result, a step that goes non-finite
-    or over ``plan.accept_load`` undone."""
-    return take_steps(_PythonCall(sim, state, mech, plan, tension), plan)
+    """One step for parts without compiled forms: the array step of the numpy backend
+    (``ArrayCall``) with the integrator's ``step`` and the growth law's ``radius`` in place of their
+    parts, by the backends' step algorithm (:func:`~bark.engine.kernels.take_steps`): a step that
+    goes non-finite or over ``plan.accept_load`` undone."""
+    from bark.engine.kernels.numpy_backend import ArrayCall
+
+    return take_steps(ArrayCall(sim.backend, state, mech, plan, tension, verbs=_Verbs(sim)), plan)
 
 
-class _PythonCall(Call):
-    """A call of one step with the integrator's ``step`` and the growth law's ``radius`` in Python,
-    then the backend's surface constraint and tensions, and the largest of the breakers' loads
-    (their parts', evaluated on whole arrays: the kernel's bits)."""
+@attrs.frozen
+class _Verbs:
+    """The strategies' Python verbs where the array step would use their parts: the integrator moves
+    the bases (changing only what it declares it writes), the growth law gives the radius at the
+    bases' and the anchors' heights; the step is held to each breaker part's load."""
 
-    def __init__(self, sim, state, mech, plan: Plan, tension: np.ndarray) -> None:
-        self.sim, self.state, self.mech, self.plan, self.tension = sim, state, mech, plan, tension
-        self.start = (state._rows("x").copy(order="F"), state._rows("v").copy(order="F"), state._rows("anchor").copy(order="F"))
-        self.flowed = {name: state._rows(name).copy() for name in sim.resin_part.writes}  # what the resin changes
+    sim: object
 
-    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
-        sim, state = self.sim, self.state
-        with state.only(sim.integrator.writable()):  # what it declares it writes, and nothing else
-            sim.integrator.step(state, self.plan.h, sim.forces)
-        t = float(times[0])
-        r_x = np.broadcast_to(sim.growth.radius(t, state.x[:, 2]), (state.n_bases,))  # read-only to the law
-        r_a = np.broadcast_to(sim.growth.radius(t, state.anchor[:, 2]), (state.n_bases,))
-        sim.backend.constrain(state, r_x, r_a)
-        finite = sim.backend.measure(state, self.mech, self.tension) and state.is_finite()
-        loads = [parts.largest_load(p, state, self.tension, state._rows("intact")) for p in {b.part_ for b in sim.breakers}
-                 if p is not None]
-        load = max(loads, default=-math.inf) if finite and not any(map(math.isnan, loads)) else math.nan
-        resin = sim.resin_part
-        if resin.evolves and finite:  # the intact springs flow, after their loads were judged (the kernel's order)
-            from bark.model.forces import spring_geometry
+    @property
+    def parts(self) -> list:
+        return [p for p in {b.part_ for b in self.sim.breakers} if p is not None]
 
-            _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
-            parts.resin_evolve(resin, state, length, self.plan.h, state._rows("intact"))
-            sim.backend.measure(state, self.mech, self.tension)
-        return 1, load, False
+    def move(self, state, h: float) -> None:
+        with state.only(self.sim.integrator.writable()):  # what it declares it writes, and nothing else
+            self.sim.integrator.step(state, h, self.sim.forces)
 
-    def undo(self) -> None:
-        for saved, arr in zip(self.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
-            arr[...] = saved
-        for name, saved in self.flowed.items():
-            self.state._rows(name)[...] = saved
-
-    def result(self, done: int, load: float, picked: bool) -> Steps:
-        empty = np.empty(0, np.int64)
-        return Steps(done=done, load=load, broken=empty, step=empty, tension=np.empty(0))
+    def radii(self, t: float, state) -> tuple[np.ndarray, np.ndarray]:
+        growth, n = self.sim.growth, state.n_bases  # the public, read-only views: the law may not write them
+        return (np.broadcast_to(growth.radius(t, state.x[:, 2]), (n,)),
+                np.broadcast_to(growth.radius(t, state.anchor[:, 2]), (n,)))

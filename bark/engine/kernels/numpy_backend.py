@@ -59,8 +59,8 @@ class NumpyBackend(Backend):
         v[:, 1] -= vr * x[:, 1]
         state._rows("anchor")[:, :2] = np.reshape(r_anchor, (-1, 1)) * state._rows("anchor_dir")
 
-    def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "_NumpyCall":
-        return _NumpyCall(self, state, mech, plan, tension)
+    def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "ArrayCall":
+        return ArrayCall(self, state, mech, plan, tension)
 
     def patch_labels(self, state) -> np.ndarray:
         """Connected components of the intact springs (scipy.sparse.csgraph)."""
@@ -69,38 +69,55 @@ class NumpyBackend(Backend):
         return components(state.n_bases, state._rows("pairs"), state._rows("intact"))
 
 
-class _NumpyCall(Call):
-    """One call's steps on whole arrays: the parts' functions over every base and spring at once."""
+class ArrayCall(Call):
+    """One call's steps on whole arrays: the parts' functions over every base and spring at once.
 
-    def __init__(self, backend: NumpyBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
+    What a step does is written here once for arrays (the numba backend's kernel is the other
+    writing, checked against this one to the bit): the integrator moves the bases, the surface
+    constraint puts them on the trunk at the growth law's radius, the springs' lengths and tensions
+    follow (the resin law's), the breakers' load and rule judge them, and — the step kept — the
+    resin flows and the springs the rule picked break.  The Python path of a strategy without a
+    part (``bark.engine.stepping.python_step``) is this same call given ``verbs``: the integrator's
+    ``step`` and the growth law's ``radius`` in place of their parts, each breaker's load judged
+    after the step, one step a call."""
+
+    def __init__(self, backend, state, mech, plan: Plan, tension: np.ndarray, verbs=None) -> None:
         self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
+        self.verbs = verbs
         self.start = (state._rows("x").copy(order="F"), state._rows("v").copy(order="F"), state._rows("anchor").copy(order="F"))
         self.flowed = {name: state._rows(name).copy() for name in backend.resin.writes}  # what the resin changes
         self.log: list[tuple[np.ndarray, int, np.ndarray]] = []
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
-        state, mech, plan = self.state, self.mech, self.plan
+        state, mech, plan, verbs = self.state, self.mech, self.plan, self.verbs
         part, breaking = plan.breaker, plan.breaks == "kernel"
+        judged = verbs.parts if verbs is not None and plan.breaks == "python" else (part,)  # whose loads steer
         resin = self.backend.resin
         live = state._rows("intact").copy()
         self.log = log = []
-        fs = self.backend._spring_forces(state, mech, state._rows("x"), live)
+        fs = None if verbs is not None else self.backend._spring_forces(state, mech, state._rows("x"), live)
         hm = plan.h / mech.m
-        update, ip = plan.integrator.update, plan.integrator.params
-        growth = plan.growth
+        update, ip, growth = (None, None, None) if verbs is not None else (plan.integrator.update, plan.integrator.params,
+                                                                          plan.growth)
         z0 = state._rows("anchor")[:, 2]
         done, load, candidate = 0, -math.inf, False
-        for step, t in enumerate(times.tolist(), start=1):
+        for step, t in enumerate(times.tolist()[:1] if verbs is not None else times.tolist(), start=1):
             x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")
-            for axis in range(3):
-                g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
-                x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
-            q = growth.at(t)
-            r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
-            self.backend.constrain(state, r_x, r_x if growth.uniform else growth.radius(t, z0, q))
+            if verbs is not None:
+                verbs.move(state, plan.h)
+                r_x, r_a = verbs.radii(t, state)
+            else:
+                for axis in range(3):
+                    g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
+                    x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
+                q = growth.at(t)
+                r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
+                r_a = r_x if growth.uniform else growth.radius(t, z0, q)
+            self.backend.constrain(state, r_x, r_a)
             _, length = spring_geometry(x, state._rows("pairs"))
             t_all = resin_tension(resin, state, length, mech.k)
-            load = largest_load(part, state, t_all, live, length)
+            loads = [largest_load(p, state, t_all, live, length) for p in judged]
+            load = math.nan if any(map(math.isnan, loads)) else max(loads, default=-math.inf)
             finite = bool(np.isfinite(x).all() and np.isfinite(t_all[live]).all()) and not math.isnan(load)
             load, done = (load if finite else math.nan), step
             picked = picks(part, state, t_all, live, length) if finite else np.empty(0, np.int64)
@@ -113,7 +130,8 @@ class _NumpyCall(Call):
                 if broke:
                     live[picked] = False
                     log.append((picked, step, t_all[picked]))
-                fs = self.backend._spring_forces(state, mech, x, live)
+                if verbs is None:
+                    fs = self.backend._spring_forces(state, mech, x, live)
             if ends_call(finite, load, plan.accept_load, candidate, broke, plan.return_on_break, plan.max_batch,
                          relax[step - 1]):
                 break
