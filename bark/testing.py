@@ -369,8 +369,10 @@ def _short_run(strategy, backend: str, seed: int = 1):
     parts = {kind: registry.create(kind, DEFAULT_STRATEGIES[kind]) for kind in ("growth", "integrator", "breaker", "resin")}
     parts[strategy.kind] = strategy
     parts["breakers"] = [parts.pop("breaker")]
+    if strategy.kind != "breaker" and "spread" in attrs.fields_dict(type(parts["breakers"][0])):
+        parts["breakers"] = [attrs.evolve(parts["breakers"][0], spread=0.05)]  # no two springs alike
     lattice = Lattice(n_bases=300, n_start=240, join_rate=3.0, join_every=1.0, jitter=0.05)  # joins to t = 20
-    sim = Simulation(lattice=lattice, mechanics=Mechanics(fmax_spread=0.05), numerics=Numerics(dt=0.05, backend=backend),
+    sim = Simulation(lattice=lattice, mechanics=Mechanics(), numerics=Numerics(dt=0.05, backend=backend),
                      seed=seed, **parts)  # Table 2's k, c, b, m
     return sim, Stop(until_time=RUN_UNTIL)
 

@@ -26,7 +26,7 @@ from bark.errors import BarkError, Ref
 
 __all__ = [
     "REAL_MIN", "REAL_MAX", "INT_MAX", "positive", "non_negative", "positive_int", "int_in", "in_range", "one_of",
-    "optional", "finite", "number", "construct", "MISSING",
+    "optional", "table_of", "finite", "number", "construct", "MISSING",
 ]
 
 Validator = Callable[[Any, Any, Any], None]
@@ -122,6 +122,29 @@ def optional(inner: Validator) -> Validator:
     def check(instance, attribute, value) -> None:
         if value is not None:
             inner(instance, attribute, value)
+
+    check.inner = inner
+    return check
+
+
+@attrs.frozen
+class _Named:
+    """What a validator needs of an attribute: its name (an entry of a table field: ``field.key``)."""
+
+    name: str
+
+
+def table_of(inner: Validator) -> Validator:
+    """A table (``dict``) from names (strings) to values ``inner`` accepts, each named in a message
+    as ``field.name``."""
+
+    def check(instance, attribute, value) -> None:
+        if not isinstance(value, dict):
+            raise _fail(attribute, value, "must be a table of names and values, e.g. {{ bulge = 0.006 }}")
+        for key, item in value.items():
+            if not isinstance(key, str) or not key:
+                raise _fail(attribute, value, f"its keys must be names, not {key!r}")
+            inner(instance, _Named(f"{attribute.name}.{key}"), item)
 
     check.inner = inner
     return check

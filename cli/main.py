@@ -124,7 +124,8 @@ def resolve_scene(scene_file, strategies: dict, shortcuts: dict, sets: tuple, kw
     options = overrides_from(kwargs)
     set_stops = _command_line_stops(sets, options)
     for source, layer in (("option", names), ("--set", sets),
-                          ("option", {"growth": {k: v for k, v in shortcuts.items() if v is not None}}),
+                          ("option", {section: {k: v for k, v in given.items() if v is not None}
+                                      for section, given in shortcuts.items() if any(v is not None for v in given.values())}),
                           ("option", options),
                           ("option", {"effects": {k: v for k, v in (pictures or {}).items() if v is not None}})):
         data = merge(data, prov.add(source, layer))
@@ -285,7 +286,9 @@ def scene_of(params: dict) -> Scene:
     """The scene ``bark simulate`` runs for its parsed options ``params`` (one-line BarkError if bad)."""
     strategies = {kind: params[f"{kind}_name"] for kind in KINDS}
     settings = {k: v for k, v in params.items() if "__" in k}  # the options generated from scene fields
-    return resolve_scene(params["scene_file"], strategies, {"r0": params["r0"], "G": params["G"]}, params["sets"],
+    shortcuts = {"growth": {"r0": params["r0"], "G": params["G"]},
+                 "breaker": {"spread": params["fmax_spread"], "weibull_shape": params["fmax_weibull_shape"]}}
+    return resolve_scene(params["scene_file"], strategies, shortcuts, params["sets"],
                          settings, {"picture_format": params["picture_format"], "picture_dpi": params["dpi"]})
 
 
@@ -300,6 +303,12 @@ def scene_of(params: dict) -> Scene:
 @click.option("--r0", type=float, default=None, help="Initial trunk radius r_i of the growth law, length units (1 = 0.3 m). [default: 0.2]")
 @click.option("-G", "--growth-rate", "G", type=float, default=None,
               help="Growth constant G of the growth law (sqrt: length / time^½; linear: length / time). [default: 0.014]")
+@click.option("--fmax-spread", type=float, default=None,
+              help="Relative spread of the springs' breaking thresholds about f_max (log-normal; the breaker's "
+                   "spread). [default: 0]")
+@click.option("--fmax-weibull-shape", type=float, default=None,
+              help="Instead, draw each threshold from a Weibull law of this shape, mean f_max (the breaker's "
+                   "weibull_shape).")
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE",
               help="Set any scene key, e.g. a plugin's parameter: --set breaker.nu=50 (repeatable).")
 @parameter_options
@@ -321,7 +330,8 @@ def scene_of(params: dict) -> Scene:
               help="Format of the still pictures (pattern.pdf, ...; the animation stays a GIF). [default: png]")
 @click.option("--dpi", type=click.IntRange(30, 1200), default=None, help="Resolution of the pictures, dots per inch. [default: 150]")
 @click.pass_context
-def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, resin_name, analyzer_name, r0, G, sets, out, overwrite,
+def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, resin_name, analyzer_name, r0, G, fmax_spread,
+             fmax_weibull_shape, sets, out, overwrite,
              resume, checkpoint_every, quiet, progress_every, as_json, picture_format, dpi, **kwargs):
     """Grow the trunk and let the bark crack; write what the scene's effects ask for (by default
     pattern.png, patches.csv, breaks.csv, summary.json, state.npz, checkpoint.npz) to --out.

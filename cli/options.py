@@ -30,7 +30,8 @@ from bark.model.lattice import Lattice
 from bark.engine.scene import RUN_FIELDS, STRATEGY_SECTIONS, RunSettings
 
 SECTIONS = {"lattice": Lattice, "mechanics": Mechanics, "run": RunSettings}
-SHORTCUTS = {("growth", "r0"): "--r0", ("growth", "G"): "-G", (None, "out"): "--out", (None, "resume"): "--resume",
+SHORTCUTS = {("growth", "r0"): "--r0", ("growth", "G"): "-G", ("breaker", "spread"): "--fmax-spread",
+             ("breaker", "weibull_shape"): "--fmax-weibull-shape", (None, "out"): "--out", (None, "resume"): "--resume",
              (None, "overwrite"): "--overwrite", (None, "checkpoint_every"): "--checkpoint-every"}
 """Options for settings that are not a parameter class's field: the default growth law's
 parameters (beside ``--set growth.KEY=VALUE``) and the run's own (output folder, checkpoints)."""

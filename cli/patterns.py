@@ -158,9 +158,11 @@ def _scene_analyses(path: Path, scene_file) -> dict:
     that reads springs gets the pattern's, or ``None`` where it has none (a photograph)."""
     from bark.analysis.pattern import load, springs_of
     from bark.contract.registry import name_of
+    from bark.contract.strategies import Springs
 
     analyzers = _scene_analyzers_of(scene_file)
-    pattern, springs = load(path), springs_of(path)
+    pattern, given = load(path), springs_of(path)
+    springs = None if given is None else Springs(pairs=given[0], intact=given[1], offsets=given[2])
     return {name_of(a): a.analyze(pattern.points, pattern.patches, springs) if a.reads_springs
             else a.analyze(pattern.points, pattern.patches) for a in analyzers}
 

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import math
+
 import attrs
 import numpy as np
 
+from bark.errors import BarkError, Ref
 from bark.model import physics
 from bark.contract.parts import BreakerPart
-from bark.contract.strategies import Breaker
-from bark.validators import non_negative, positive
+from bark.contract.strategies import Breaker, Made
+from bark.validators import in_range, non_negative, optional, positive, table_of
 
-__all__ = ["ThresholdBreaker", "ProbabilisticBreaker", "stretched"]
+__all__ = ["Thresholds", "ThresholdBreaker", "ProbabilisticBreaker", "stretched"]
 
 
 def stretched(tension, params):
@@ -19,7 +22,53 @@ def stretched(tension, params):
 
 
 @attrs.frozen(kw_only=True)
-class ThresholdBreaker(Breaker):
+class Thresholds(Breaker):
+    """A breaker whose springs each have their own threshold (``state.fmax``), set when the spring is
+    made: the material's ``f_max`` (``[mechanics]``), spread log-normally (``spread``) or drawn from a
+    Weibull law (``weibull_shape``, ``weibull_scale``), then moved towards each region's own value by
+    the region's weight (``regions``; the growth law says where its regions are: a bulge is a
+    ``bulge``).  Quenched disorder: drawn once per spring, never again."""
+
+    spread: float = attrs.field(default=0.0, validator=in_range(0.0, 10.0))
+    """Relative spread of the thresholds: each is ``f_max · exp(s·n − s²/2)`` with ``n`` the spring's
+    standard normal number (``Made.noise``), log-normal with mean ``f_max`` and coefficient of
+    variation ≈ ``s``.  0: all equal.  At most 10: beyond that some thresholds underflow to zero."""
+    weibull_shape: float | None = attrs.field(default=None, validator=optional(in_range(0.01, 1e12)))
+    """Instead, draw each threshold from a Weibull law of this shape (modulus) m: the weakest-link law
+    of brittle strength (small m: very unequal springs; m ≈ 10: a few percent).  At least 0.01: below
+    that its mean's Γ(1 + 1/m) overflows."""
+    weibull_scale: float | None = attrs.field(default=None, validator=optional(positive))
+    """The Weibull law's scale (force units); ``None``: the scale whose mean is the threshold before
+    (``f_max``)."""
+    regions: dict[str, float] = attrs.field(factory=dict, validator=table_of(positive), hash=False)
+    """Thresholds by region of the trunk (force units), e.g. ``{ bulge = 0.006 }`` (the paper's
+    Table 1): a spring made in a region moves from its threshold to the region's by the region's
+    weight there (1 inside, 0 outside, smooth between); regions not named keep the material's."""
+
+    def __attrs_post_init__(self) -> None:
+        if self.weibull_shape is not None and self.spread > 0:
+            raise BarkError("{0} and {1} are two ways to spread the thresholds: give one",
+                            Ref(None, "spread", self.spread), Ref(None, "weibull_shape", self.weibull_shape))
+        if self.weibull_scale is not None and self.weibull_shape is None:
+            raise BarkError("{0} is the scale of a Weibull law: give its shape too ({1})",
+                            Ref(None, "weibull_scale", self.weibull_scale), Ref(None, "weibull_shape", None))
+
+    def thresholds(self, made: Made, fmax: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        if self.weibull_shape is not None:
+            m = self.weibull_shape
+            w = rng.weibull(m, len(made))
+            fmax = self.weibull_scale * w if self.weibull_scale is not None else fmax * w / math.gamma(1.0 + 1.0 / m)
+        else:
+            s = self.spread
+            fmax = fmax * np.exp(s * made.noise - 0.5 * s * s)
+        for name, weight in made.regions:
+            if name in self.regions:
+                fmax = fmax + weight * (self.regions[name] - fmax)
+        return fmax
+
+
+@attrs.frozen(kw_only=True)
+class ThresholdBreaker(Thresholds):
     """The paper's rule: an intact spring breaks when its tension ``k(|d| − l)`` exceeds its own
     threshold ``state.fmax`` (per spring, never collapsed to per base).  Deterministic.  Its part is
     the rule itself (``bark.model.physics.over_threshold``), so springs break inside the stepping kernel
@@ -32,7 +81,7 @@ class ThresholdBreaker(Breaker):
 
 
 @attrs.frozen(kw_only=True)
-class ProbabilisticBreaker(Breaker):
+class ProbabilisticBreaker(Thresholds):
     """Stochastic breaking, in the spirit of Skjeltorp & Meakin (1988): a stretched spring breaks
     at a rate that rises steeply with its load ``L = tension / fmax``::
 

@@ -219,7 +219,8 @@ def bulge_weights(z, p):
 
 @attrs.frozen(kw_only=True)
 class Bulge:
-    """One bulge: where it is, how far it reaches, how high it rises, and its own material."""
+    """One bulge: where it is, how far it reaches and how high it rises (a region of the trunk, ``bulge``,
+    whose material the breaker sets: ``[breaker] regions``)."""
 
     z: float = attrs.field(validator=non_negative)
     """Height of the bulge's peak (length units)."""
@@ -232,9 +233,6 @@ class Bulge:
     G: float | None = attrs.field(default=None, validator=optional(non_negative))
     """Growth constant at the peak from the bulge's start on (paper, Table 1: 0.02 at the peak, 0.04 at
     the ends; below the base law's, it makes the bulge fade); ``None`` keeps the base law's."""
-    f_max: float | None = attrs.field(default=None, validator=optional(positive))
-    """Breaking threshold at the peak of springs made once the bulge is there (paper, Table 1: 0.006
-    in bulges); ``None`` keeps the scene's."""
     start: float = attrs.field(default=0.0, validator=non_negative)
     """Time the bulge appears (time units; 0: there from the start).  Before it the trunk has no bulge
     there; bases that join inside it once it is there take their rest lengths at its larger radius."""
@@ -270,15 +268,13 @@ class BulgeSeries:
     """Each magnitude falls as ``exp(−decay·(t − its start))``."""
     G: float | None = attrs.field(default=None, validator=optional(non_negative))
     """Growth constant at each peak once it is there; None keeps the base law's."""
-    f_max: float | None = attrs.field(default=None, validator=optional(positive))
-    """Breaking threshold at each peak of springs made once it is there; None keeps the scene's."""
 
     def on(self, lattice) -> tuple[Bulge, ...]:
         """The series' bulges on a trunk whose bases follow ``lattice``: at fixed heights and times."""
         offset = self.half_width if self.offset is None else self.offset
         starts = self.first + self.every * np.arange(self.count)
         return tuple(Bulge(z=max(0.0, float(lattice.top(t)) + offset), half_width=self.half_width,
-                           magnitude=self.magnitude, decay=self.decay, G=self.G, f_max=self.f_max, start=float(t))
+                           magnitude=self.magnitude, decay=self.decay, G=self.G, start=float(t))
                      for t in starts)
 
 
@@ -290,9 +286,9 @@ class BulgeGrowth(Growth):
         e_b(t) = A_b · exp(−λ_b (t − t_b)) + [r_base,G_b − r_base](t, z) − [r_base,G_b − r_base](t_b, z)
 
     with ``s_b`` each bulge's ``sin²`` profile, ``r_base,G_b`` the base law with the bulge's own
-    growth constant, ``A_b`` its magnitude and ``λ_b`` its decay.  Inside a bulge the breaking
-    threshold of springs made once it is there moves towards the bulge's ``f_max`` by the same
-    profile (``adjust_thresholds``).  Bulges are given where they are (``bulges``) or as series made
+    growth constant, ``A_b`` its magnitude and ``λ_b`` its decay.  Each bulge is a region of the
+    trunk, ``bulge``, weighted by its profile once it is there (``regions_at``): the breaker sets the
+    thresholds of springs made in it (``[breaker] regions = { bulge = 0.006 }``).  Bulges are given where they are (``bulges``) or as series made
     below the apical dome as the trunk grows (``series``), placed when the law is put on a lattice
     (``on``).
     """
@@ -380,11 +376,7 @@ class BulgeGrowth(Growth):
             inside |= np.abs(z - b.z) < b.half_width
         return np.where(inside, "bulge", "straight").astype(object)
 
-    def adjust_thresholds(self, t: float, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+    def regions_at(self, t: float, z: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """A ``bulge`` for each bulge there at time ``t``, weighted by its profile at heights ``z``."""
         self._placed()
-        out = np.asarray(fmax, dtype=float).copy()
-        for b in self.bulges:
-            if b.f_max is not None and t >= b.start:
-                s = b.profile(z)
-                out += s * (b.f_max - out)
-        return out
+        return [("bulge", b.profile(z)) for b in self.bulges if t >= b.start]

@@ -16,6 +16,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import attrs
 import pytest
 from hypothesis import HealthCheck, settings
 
@@ -53,14 +54,18 @@ def build_sim(
 ) -> Simulation:
     """A small simulation: sqrt growth, Euler–Cromer, threshold breaker (Table 2 k, c, b, m); the
     numerics (``dt``, ``stepping`` — fixed unless given —, ``overshoot_tol``, ``max_halvings``,
-    ``backend``) may be given as keywords."""
+    ``backend``) may be given as keywords.  ``fmax_spread`` is the first breaker's ``spread`` (it
+    must be a :class:`~bark_plugins.breakers.Thresholds`)."""
     numerics = {"dt": dt, "stepping": "fixed", **{k: kwargs.pop(k) for k in NUMERICS if k in kwargs}}
+    breakers = list(kwargs.pop("breakers", None) or [ThresholdBreaker()])
+    if fmax_spread:
+        breakers[0] = attrs.evolve(breakers[0], spread=fmax_spread)
     return Simulation(
         lattice=kwargs.pop("lattice", None) or Lattice(n_bases=n_bases, jitter=jitter),
-        mechanics=Mechanics(f_max=f_max, fmax_spread=fmax_spread),
+        mechanics=Mechanics(f_max=f_max),
         growth=kwargs.pop("growth", None) or SqrtGrowth(G=G),
         integrator=kwargs.pop("integrator", None) or EulerCromer(),
-        breakers=kwargs.pop("breakers", None) or [ThresholdBreaker()],
+        breakers=breakers,
         numerics=Numerics(**numerics),
         seed=seed,
         **kwargs,

@@ -120,10 +120,10 @@ def _photograph(run, path):
 
 
 def test_the_network_statistics_are_an_analyzer_with_the_run_s_numbers_and_its_table(tmp_path):
-    out, summary = _run(tmp_path, [{"name": "patches"}, {"name": "network"}])
-    mine, core = summary["analyses"]["network"], summary["network"]
+    out, summary = _run(tmp_path, [{"name": "patches"}, {"name": "crack-network"}])
+    mine, core = summary["analyses"]["crack-network"], summary["network"]
     assert mine == {k: v for k, v in core.items() if k != "lattice_bias"} and mine["n_junctions"] > 0
-    with (out / analysis_file("network", "lattice_bias")).open(newline="") as fh:
+    with (out / analysis_file("crack-network", "lattice_bias")).open(newline="") as fh:
         rows = {r["offset"]: r for r in csv.DictReader(fh)}
     assert set(rows) == set(core["lattice_bias"]) == {"21", "34"}
     for offset, row in rows.items():
@@ -131,22 +131,22 @@ def test_the_network_statistics_are_an_analyzer_with_the_run_s_numbers_and_its_t
 
 
 def test_bark_analyze_runs_a_scene_s_analyzers_on_a_run_and_on_a_photograph(tmp_path):
-    out, summary = _run(tmp_path, [{"name": "patches"}, {"name": "network"}, {"name": CRACKS}])
+    out, summary = _run(tmp_path, [{"name": "patches"}, {"name": "crack-network"}, {"name": CRACKS}])
     scene = tmp_path / "analyzers.toml"
-    scene.write_text(f'[[analyzer]]\nname = "patches"\n\n[[analyzer]]\nname = "network"\n\n[[analyzer]]\nname = "{CRACKS}"\n')
+    scene.write_text(f'[[analyzer]]\nname = "patches"\n\n[[analyzer]]\nname = "crack-network"\n\n[[analyzer]]\nname = "{CRACKS}"\n')
     result = _invoke("analyze", out, "--scene", scene, "--out", tmp_path / "a")
     assert result.exit_code == 0, result.output
     again = json.loads((tmp_path / "a" / "statistics.json").read_text())["analyses"]
-    assert again["network"] == summary["analyses"]["network"]  # from its files, the run's own numbers
+    assert again["crack-network"] == summary["analyses"]["crack-network"]  # from its files, the run's own numbers
     assert again[_recorded()] == summary["analyses"][_recorded()]
-    for name in (analysis_file("network", "lattice_bias"), analysis_file(_recorded(), "by_parastichy")):
+    for name in (analysis_file("crack-network", "lattice_bias"), analysis_file(_recorded(), "by_parastichy")):
         assert (tmp_path / "a" / name).read_bytes() == (out / name).read_bytes()
     photo = _photograph(out, tmp_path / "photo.csv")
     result = _invoke("analyze", photo, "--scene", scene, "--out", tmp_path / "a")  # the same folder: its tables go
     assert result.exit_code == 0, result.output
     seen = json.loads((tmp_path / "a" / "statistics.json").read_text())["analyses"]
-    assert seen[_recorded()] == {} and "n_junctions" not in seen["network"]  # no springs: the sizes alone
-    assert seen["network"]["size_mean"] == pytest.approx(summary["analyses"]["network"]["size_mean"])
+    assert seen[_recorded()] == {} and "n_junctions" not in seen["crack-network"]  # no springs: the sizes alone
+    assert seen["crack-network"]["size_mean"] == pytest.approx(summary["analyses"]["crack-network"]["size_mean"])
     assert not list((tmp_path / "a").glob("analysis-*.csv"))
 
 
@@ -158,7 +158,7 @@ def test_bark_analyze_runs_a_scene_s_analyzers_on_a_run_and_on_a_photograph(tmp_
 def test_bark_analyze_with_a_bad_scene_or_pattern_says_one_line_and_writes_nothing(tmp_path, pattern, scene, message):
     (tmp_path / "summary.toml").write_text("[pattern]\nn_patches = 10\nmean_orientation_deg = 80.0\nsd_orientation_deg = 10.0\n")
     (tmp_path / "photo.csv").write_text("x,y,patch\n" + "".join(f"{i % 10},{i // 10},{i // 20}\n" for i in range(100)))
-    (tmp_path / "analyzers.toml").write_text('[[analyzer]]\nname = "network"\n')
+    (tmp_path / "analyzers.toml").write_text('[[analyzer]]\nname = "crack-network"\n')
     (tmp_path / "bad.toml").write_text('[[analyzer]]\nname = "nosuch"\n')
     result = _invoke("analyze", tmp_path / pattern, "--scene", tmp_path / scene if scene != "nosuch.toml" else scene,
                      "--out", tmp_path / "out")

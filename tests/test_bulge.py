@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from bark import Stop
 from bark.errors import BarkError
 from bark.engine.scene import Scene
+from bark_plugins.breakers import ThresholdBreaker
 from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 from conftest import build_sim
 
@@ -61,12 +62,20 @@ def test_several_bulges_add_and_decay():
     np.testing.assert_allclose(g.radius(10.0, z), [r0 + 0.02 * np.exp(-1.0), r0 + 0.01, r0])
 
 
-def test_own_growth_constant_and_threshold_inside():
-    b = Bulge(z=0.75, half_width=0.3, G=0.007, f_max=0.005)
+def test_own_growth_constant_inside_and_a_region_whose_threshold_the_breaker_sets():
+    from bark.contract.strategies import Made
+
+    b = Bulge(z=0.75, half_width=0.3, G=0.007)
     g = BulgeGrowth(base=SqrtGrowth(G=0.014), bulges=[b])
     assert g.radius(4.0, np.array([0.75]))[0] == pytest.approx(0.2 + 0.007 * 2.0)
-    f = g.adjust_thresholds(4.0, np.array([0.75, 0.0, 0.75 + 0.15]), np.full(3, 0.0028))
+    z = np.array([0.75, 0.0, 0.75 + 0.15])
+    assert BulgeGrowth(bulges=[attrs.evolve(b, start=2.0)]).regions_at(1.0, z) == []  # before the bulge is there
+    ((name, weight),) = g.regions_at(4.0, z)
+    assert name == "bulge" and weight[0] == 1.0 and weight[1] == 0.0 and 0.0 < weight[2] < 1.0
+    made = Made(per="spring", t=4.0, ids=np.arange(3), z=z, noise=np.zeros(3), regions=tuple(g.regions_at(4.0, z)))
+    f = ThresholdBreaker(regions={"bulge": 0.005}).thresholds(made, np.full(3, 0.0028), np.random.default_rng(0))
     assert f[0] == pytest.approx(0.005) and f[1] == 0.0028 and 0.0028 < f[2] < 0.005
+    assert ThresholdBreaker(regions={"knot": 0.005}).thresholds(made, np.full(3, 0.0028), None).tolist() == [0.0028] * 3
 
 
 def test_scene_builds_bulges_and_the_simulation_uses_their_thresholds():
@@ -74,7 +83,8 @@ def test_scene_builds_bulges_and_the_simulation_uses_their_thresholds():
         "lattice": {"n_bases": 600},
         "run": {"until_time": 10.0},
         "growth": {"name": "bulge", "base": {"name": "linear", "G": 0.001},
-                   "bulges": [{"z": 0.15, "half_width": 0.05, "magnitude": 0.01, "f_max": 0.01}]},
+                   "bulges": [{"z": 0.15, "half_width": 0.05, "magnitude": 0.01}]},
+        "breaker": {"name": "threshold", "regions": {"bulge": 0.01}},
     })
     assert isinstance(sc.strategies["growth"].base, type(Scene.from_dict({"growth": {"name": "linear"}}).strategies["growth"]))
     sim = sc.simulation()
@@ -272,7 +282,7 @@ def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, height
     from bark_plugins.growth import bulge_radii, bulge_radius
 
     g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
-                    bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
+                    bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02),
                             Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1, G=0.03, start=100.0)])
     assert g.part_.radii is bulge_radii
     q = g.part_.at(t)
@@ -361,7 +371,7 @@ def test_a_bulge_laws_radius_of_heights_is_its_compiled_form_to_the_bit(t, heigh
     from bark_plugins.growth import bulge_radius
 
     g = BulgeGrowth(base={"name": "sqrt", "G": 0.04},
-                    bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02, f_max=0.006),
+                    bulges=[Bulge(z=2.0, half_width=0.45, magnitude=0.3, G=0.02),
                             Bulge(z=4.0, half_width=0.45, magnitude=0.3, decay=0.1, G=0.03, start=100.0)])
     z = np.array(heights)
     compiled = bulge_radius(t, z, g.part_.at(t))
@@ -376,7 +386,7 @@ def _series_law(**series):
 
     return BulgeGrowth(base={"name": "sqrt", "G": 0.05},
                        series=[BulgeSeries(**{"every": 2.0, "count": 3, "half_width": 0.05, "magnitude": 0.01,
-                                              "G": 0.02, "f_max": 0.006, **series})])
+                                              "G": 0.02, **series})])
 
 
 def test_a_series_places_its_bulges_above_the_top_of_the_trunk_as_it_grows():
@@ -388,7 +398,7 @@ def test_a_series_places_its_bulges_above_the_top_of_the_trunk_as_it_grows():
     assert [b.start for b in placed.bulges] == [1.0, 3.0, 5.0]
     for b in placed.bulges:  # its peak one half width above the top then: the lower edge at the top
         assert b.z == pytest.approx(lattice.top(b.start) + 0.05, abs=1e-15)
-        assert (b.G, b.f_max, b.magnitude, b.half_width) == (0.02, 0.006, 0.01, 0.05)
+        assert (b.G, b.magnitude, b.half_width) == (0.02, 0.01, 0.05)
     below = _series_law(offset=-0.02).on(lattice).bulges[0]
     assert below.z == pytest.approx(lattice.top(0.0) - 0.02)
 
@@ -445,7 +455,8 @@ def test_a_run_with_a_series_numpy_and_numba_to_the_bit_and_the_bulges_own_thres
     growth = _series_law(every=3.0, count=3, first=1.0, offset=-0.01, magnitude=0.02)
     runs = {}
     for backend in ["numpy"] + (["numba"] if available("numba") else []):
-        sim = build_sim(growth=growth, backend=backend, lattice=lattice, stepping="adaptive")
+        sim = build_sim(growth=growth, backend=backend, lattice=lattice, stepping="adaptive",
+                        breakers=[ThresholdBreaker(regions={"bulge": 0.006})])
         sim.run(Stop(until_time=9.0))
         runs[backend] = sim
     sims = list(runs.values())
@@ -484,3 +495,25 @@ def test_a_missing_key_in_a_set_table_is_named_without_a_value(item, named):
     result = CliRunner().invoke(cli, ["simulate", "--set", "growth.name=bulge", "--set", item, "--quiet"])
     assert result.exit_code == 2 and named in result.stderr and "is missing" in result.stderr
     assert "NOTHING" not in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+@pytest.mark.parametrize("old, new", [
+    ({"growth": {"name": "bulge", "bulges": [{"z": 0.15, "half_width": 0.05, "f_max": 0.006}]}},
+     "[growth] bulges[0].f_max = 0.006: a bulge's threshold is the breaker's setting now: give [breaker] regions = { bulge = 0.006 }"),
+    ({"growth": {"name": "bulge", "series": [{"every": 2.0, "half_width": 0.05, "f_max": 0.007}]}},
+     "[growth] series[0].f_max = 0.007: a bulge's threshold is the breaker's setting now: give [breaker] regions = { bulge = 0.007 }"),
+    ({"mechanics": {"fmax_spread": 0.05}}, "[mechanics] fmax_spread = 0.05: the thresholds' spread is the breaker's "
+                                           "setting now: give [breaker] spread = 0.05"),
+    ({"mechanics": {"fmax_weibull_shape": 4.0}}, "give [breaker] weibull_shape = 4.0"),
+])
+def test_a_threshold_setting_of_an_earlier_version_is_refused_naming_its_new_key(old, new):
+    with pytest.raises(BarkError) as err:
+        Scene.from_dict(old)
+    assert new in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_earlier_run_s_scene_file_with_its_unused_threshold_keys_still_reads():
+    """Earlier versions wrote every [mechanics] key, the unused spread included: such a scene.toml
+    (a run's, a checkpoint's) is read as it meant."""
+    now = Scene.from_dict({"mechanics": {"f_max": 0.005}})
+    assert Scene.from_dict({"mechanics": {"f_max": 0.005, "fmax_spread": 0.0}}).to_dict() == now.to_dict()

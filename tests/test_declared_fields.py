@@ -185,7 +185,8 @@ def test_a_strategy_whose_parameters_cannot_be_recorded_is_refused_before_the_ru
 
 
 def test_params_are_the_constructors_keywords_only():
-    assert _Hidden().params() == {}
+    assert _Hidden().params() == ThresholdBreaker().params() == {"spread": 0.0, "weibull_shape": None,
+                                                                  "weibull_scale": None, "regions": {}}
     assert ParastichyWeibull().params() == {"m": 6.0, "scale_steep": 0.0028, "scale_shallow": 0.0028, "steep": 34}
 
 

@@ -96,7 +96,7 @@ def test_bulges_configured_but_not_asked_never_run(monkeypatch):
         raise AssertionError("bulge code ran")
 
     monkeypatch.setattr(BulgeGrowth, "radius", boom)
-    monkeypatch.setattr(BulgeGrowth, "adjust_thresholds", boom)
+    monkeypatch.setattr(BulgeGrowth, "regions_at", boom)
     bulge = {"name": "bulge", "bulges": [{"z": 0.1, "half_width": 0.05, "magnitude": 0.01}]}
     sim = _scene(["anchors", "damping", "fracture"], growth=bulge).simulation()
     sim.run(Stop(until_time=2.0))

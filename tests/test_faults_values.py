@@ -111,11 +111,12 @@ TOML_VALUES = st.sampled_from(["nan", "-nan", "inf", "-inf", "1e308", "-1e308", 
                                "9223372036854775807", "-9223372036854775808", "true", "'x'", "[]", "[1, 2]", "{}",
                                "{z = 1}", "1979-05-27", "2147483648", "0.5", "3"])
 SCENE_KEYS = [("lattice", k) for k in ("n_bases", "divergence_deg", "rise", "offsets", "jitter")] + \
-    [("mechanics", k) for k in ("k", "c", "b", "m", "f_max", "fmax_spread", "fmax_weibull_shape")] + \
+    [("mechanics", k) for k in ("k", "c", "b", "m", "f_max")] + \
+    [("breaker", k) for k in ("spread", "weibull_shape", "weibull_scale")] + \
     [("run", k) for k in ("dt", "seed", "until_time", "until_radius", "until_patches", "min_patch_size",
                           "degenerate_fraction", "on_degenerate", "stepping", "overshoot_tol", "max_halvings", "backend", "threads")] + \
     [("effects", k) for k in ("want", "frame_every", "series_every", "history_every", "window")] + [("scene", "name"), ("growth", "G")]
-BULGE_KEYS = ("z", "half_width", "magnitude", "decay", "G", "f_max")
+BULGE_KEYS = ("z", "half_width", "magnitude", "decay", "G")
 
 
 @pytest.mark.parametrize("section, key", SCENE_KEYS)

@@ -268,9 +268,19 @@ def test_backends_give_the_same_forces_to_round_off(x, k):
     np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * k * (1 + np.abs(x).max()))
 
 
+def _thresholds(n: int, f_max: float, seed: int, **breaker) -> np.ndarray:
+    """The thresholds a threshold breaker with ``breaker``'s keywords gives ``n`` springs made."""
+    from bark.contract.strategies import Made
+    from bark_plugins.breakers import ThresholdBreaker
+
+    rng = np.random.default_rng(seed)
+    made = Made(per="spring", t=0.0, ids=np.arange(n), z=np.zeros(n), noise=rng.standard_normal(n))
+    return ThresholdBreaker(**breaker).thresholds(made, np.full(n, f_max), rng)
+
+
 @given(st.integers(1, 500), st.floats(0.001, 0.01), st.floats(0.0, 0.3), st.integers(0, 2**32 - 1))
 def test_thresholds_per_spring(n, f_max, spread, seed):
-    th = Mechanics(f_max=f_max, fmax_spread=spread).thresholds(n, np.random.default_rng(seed))
+    th = _thresholds(n, f_max, seed, spread=spread)
     assert th.shape == (n,)
     assert np.all(th > 0)
     if spread == 0:
@@ -278,7 +288,7 @@ def test_thresholds_per_spring(n, f_max, spread, seed):
 
 
 def test_threshold_spread_gives_distinct_thresholds_with_mean_fmax():
-    th = Mechanics(f_max=0.005, fmax_spread=0.05).thresholds(20000, np.random.default_rng(0))
+    th = _thresholds(20000, 0.005, 0, spread=0.05)
     assert len(np.unique(th)) == th.size
     assert th.mean() == pytest.approx(0.005, rel=0.01)
     assert th.std() / th.mean() == pytest.approx(0.05, rel=0.1)
@@ -286,7 +296,7 @@ def test_threshold_spread_gives_distinct_thresholds_with_mean_fmax():
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{"k": 0}, {"k": -1.0}, {"m": 0}, {"c": -0.1}, {"b": -1}, {"f_max": 0}, {"fmax_spread": -0.1}, {"k": float("nan")}],
+    [{"k": 0}, {"k": -1.0}, {"m": 0}, {"c": -0.1}, {"b": -1}, {"f_max": 0}, {"k": float("nan")}],
 )
 def test_mechanics_rejects_bad_values_naming_the_field(kwargs):
     (name,) = kwargs

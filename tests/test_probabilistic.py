@@ -76,18 +76,52 @@ def test_weibull_thresholds_have_their_law(shape):
     """Mean f_max, and the Weibull shape recovered by scipy's fit of 100 000 drawn thresholds."""
     from scipy import stats
 
-    from bark.model.forces import Mechanics
+    from bark.contract.strategies import Made
+    from bark_plugins.breakers import ThresholdBreaker
 
-    f = Mechanics(f_max=0.005, fmax_weibull_shape=shape).thresholds(100_000, np.random.default_rng(1))
+    n, rng = 100_000, np.random.default_rng(1)
+    made = Made(per="spring", t=0.0, ids=np.arange(n), z=np.zeros(n), noise=rng.standard_normal(n))
+    f = ThresholdBreaker(weibull_shape=shape).thresholds(made, np.full(n, 0.005), rng)
     assert f.mean() == pytest.approx(0.005, rel=0.01)
     k, _, _ = stats.weibull_min.fit(f, floc=0)
     assert k == pytest.approx(shape, rel=0.03)
+    f = ThresholdBreaker(weibull_shape=shape, weibull_scale=0.004).thresholds(made, np.full(n, 0.005), rng)
+    k, _, scale = stats.weibull_min.fit(f, floc=0)
+    assert k == pytest.approx(shape, rel=0.03) and scale == pytest.approx(0.004, rel=0.01)  # by its scale
 
 
-def test_weibull_and_lognormal_spreads_exclude_each_other():
+@pytest.mark.parametrize("breaker, message", [
+    ({"spread": 0.05, "weibull_shape": 5.0}, "are two ways to spread the thresholds: give one"),
+    ({"weibull_scale": 0.005}, "is the scale of a Weibull law: give its shape too"),
+    ({"regions": {"bulge": -1.0}}, "regions.bulge = -1.0: must be > 0"),
+    ({"regions": [0.006]}, "must be a table of names and values"),
+])
+def test_threshold_settings_that_cannot_hold_together_are_one_line(breaker, message):
     from bark.errors import BarkError
     from bark.engine.scene import Scene
 
     with pytest.raises(BarkError) as err:
-        Scene.from_dict({"mechanics": {"fmax_spread": 0.05, "fmax_weibull_shape": 5.0}})
-    assert "give one" in str(err.value)
+        Scene.from_dict({"breaker": {"name": "threshold", **breaker}})
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_spread_options_set_the_breaker_s_and_say_so_where_it_has_none(tmp_path, monkeypatch):
+    import json
+
+    from click.testing import CliRunner
+
+    from bark_cli.main import cli
+    from conftest import REPO_ROOT
+
+    monkeypatch.syspath_prepend(str(REPO_ROOT / "examples" / "plugin"))  # a breaker with no spread of thresholds
+
+    args = ["simulate", "--n-bases", "300", "--until-time", "2", "--backend", "numpy", "--quiet"]
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, [*args, "--fmax-spread", "0.05", "--breaker", "probabilistic", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    ran = json.loads((out / "summary.json").read_text())["settings"]["breaker"]
+    assert (ran["name"], ran["spread"]) == ("probabilistic", 0.05)
+    result = CliRunner().invoke(cli, [*args, "--fmax-weibull-shape", "4", "--breaker",
+                                      "bark_example_plugin:StrainBreaker", "--out", str(tmp_path / "other")])
+    assert result.exit_code == 2 and result.output.startswith("bark: error: --fmax-weibull-shape 4.0")
+    assert result.output.count("\n") == 1 and not (tmp_path / "other").exists()

@@ -567,12 +567,11 @@ def load(path: str | Path) -> Pattern:
     raise BarkError(f"{path}: not a pattern (a run folder, a state .npz, a .csv of leaf-base centres or a .toml summary)")
 
 
-def springs_of(path: str | Path):
-    """The springs of the pattern at ``path`` (``bark.contract.strategies.Springs``: a run folder's or
-    state file's pairs and intact flags, its offsets those of its springs, commonest first); ``None``
-    for a pattern without them (a photograph's CSV, a state file that kept none)."""
-    from bark.contract.strategies import Springs
-
+def springs_of(path: str | Path) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]] | None:
+    """The springs of the pattern at ``path``: a run folder's or state file's ``(pairs, intact,
+    offsets)``, its offsets those of its springs, commonest first (what an analyzer that reads springs
+    is given, ``bark.contract.strategies.Springs``); ``None`` for a pattern without them (a
+    photograph's CSV, a state file that kept none)."""
     path = Path(path)
     state = path / "state.npz" if path.is_dir() else path if path.suffix.lower() == ".npz" else None
     if state is None:
@@ -586,7 +585,7 @@ def springs_of(path: str | Path):
         raise BarkError(f"{state}: its springs are damaged (pairs {pairs.shape}, intact {intact.shape}, {n} bases)")
     pairs, intact = pairs.astype(np.int64), intact.astype(bool)
     family, counts = np.unique(pairs[:, 1] - pairs[:, 0], return_counts=True)
-    return Springs(pairs=pairs, intact=intact, offsets=tuple(int(o) for o in family[np.argsort(-counts, kind="stable")]))
+    return pairs, intact, tuple(int(o) for o in family[np.argsort(-counts, kind="stable")])
 
 
 def run_min_size(folder: Path) -> int:

@@ -155,6 +155,13 @@ class Made:
     """Springs: each one's lattice index offset ``j − i`` (its parastichy); ``None`` for bases."""
     rest: np.ndarray | None = None
     """Springs: each one's rest length."""
+    noise: np.ndarray | None = None
+    """Springs: one standard normal number each, drawn for every spring made whatever the strategies
+    (the built-in breakers' log-normal spread of thresholds uses it), so that which strategy draws
+    what leaves the rest of the run's random stream alone.  ``None`` for bases."""
+    regions: tuple[tuple[str, np.ndarray], ...] = ()
+    """Springs: the trunk's regions of their own material at their midpoints, from the growth law
+    (``Growth.regions_at``): a name and one weight in [0, 1] per spring each, in the order they blend."""
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -237,11 +244,12 @@ class Growth(Strategy):
         itself."""
         return self
 
-    def adjust_thresholds(self, t: float, z: np.ndarray, fmax: np.ndarray) -> np.ndarray:
-        """Breaking thresholds of springs made at time ``t`` whose midpoints are at heights ``z``
-        (called when springs are made).  The default leaves them as they are; a law with regions of
-        their own material (bulges) overrides it."""
-        return fmax
+    def regions_at(self, t: float, z: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """The trunk's regions of their own material at time ``t`` at heights ``z``: one ``(name,
+        weight)`` per feature, the weight 1 inside it, 0 outside, smooth between, in the order they
+        blend (asked when springs are made, whose thresholds the breaker sets by region:
+        ``Breaker.thresholds``).  None on a plain trunk (the default); a bulge is a ``bulge``."""
+        return []
 
     def region(self, z: np.ndarray) -> np.ndarray:
         """The name of the region of the trunk at each height ``z``, for pattern statistics per region
@@ -305,6 +313,14 @@ class Breaker(Strategy):
 
     kind: ClassVar[str] = "breaker"
     verb: ClassVar[str] = "select"
+
+    def thresholds(self, made: Made, fmax: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The breaking thresholds (``state.fmax``, force units) of the springs ``made``, given them as
+        the breakers before this one left them (the first is given the material's ``f_max``): what
+        every breaker's load ``tension / fmax`` and adaptive stepping measure against.  Asked once per
+        batch of springs made, never per step.  The default leaves them as they are; a breaker with a
+        spread of thresholds or thresholds of its own by region gives them here."""
+        return fmax
 
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Ids of intact springs to break, given every spring's current ``tension`` (from the part:

@@ -5,7 +5,7 @@ vertical regime of Table 2)::
 
     [scene]       name, description                      (free text, recorded in summary.json)
     [lattice]     bark.model.lattice.Lattice fields            (n_bases, divergence_deg, rise, offsets, jitter)
-    [mechanics]   bark.model.forces.Mechanics fields           (k, c, b, m, f_max, fmax_spread)
+    [mechanics]   bark.model.forces.Mechanics fields           (k, c, b, m, f_max)
     [growth]      name = "sqrt" + that strategy's fields (r0, G)
     [integrator]  name = "euler-cromer" + its fields
     [breaker]     name = "threshold" + its fields
@@ -193,18 +193,48 @@ def _check_effects_act(lattice: Lattice, growth, resolved: dict) -> None:
     (``without``) give the same radius and thresholds at every height of the trunk, now and later.
     The run goes on (it is the run without the effect)."""
     z = np.linspace(0.0, (lattice.n_bases - 1) * lattice.rise, min(lattice.n_bases, 1000))
-    fmax = np.ones_like(z)
     for effect in growth.provides:
         if effect.name not in resolved:
             continue
         plain = growth.without(effect.name)
-        same = all(np.array_equal(growth.adjust_thresholds(t, z, fmax), plain.adjust_thresholds(t, z, fmax)) and
+        same = all(_same_regions(growth.regions_at(t, z), plain.regions_at(t, z)) and
                    np.array_equal(np.broadcast_to(growth.radius(t, z), z.shape), np.broadcast_to(plain.radius(t, z), z.shape))
                    for t in (0.0, 1.0, 100.0, 10_000.0))
         if same:
             warnings.warn(f"the effect {effect.name!r} of the growth law {registry.name_of(growth)!r} changes nothing on "
                           f"this trunk (its heights run from 0 to {z[-1]:.6g}): the run is the run without it",
                           BarkWarning, stacklevel=4)
+
+
+def _same_regions(a: list, b: list) -> bool:
+    """Whether two growth laws' regions (``regions_at``) set the same thresholds: the same names, each
+    weighing the same everywhere it weighs anything."""
+    a, b = ([(n, w) for n, w in r if np.any(np.asarray(w) != 0.0)] for r in (a, b))
+    return len(a) == len(b) and all(n == m and np.array_equal(v, w) for (n, v), (m, w) in zip(a, b))
+
+
+MOVED = {("mechanics", "fmax_spread"): ("breaker", "spread", 0.0),
+         ("mechanics", "fmax_weibull_shape"): ("breaker", "weibull_shape", None)}
+"""Settings of earlier versions that live elsewhere now, with the value that meant "not used"."""
+
+
+def _moved(data: dict) -> None:
+    """Refuse, in one line naming the new key, a setting of an earlier version that moved (a value
+    that meant "not used", as an earlier run's scene.toml records it, is dropped in silence)."""
+    for (section, key), (new_section, new_key, unused) in MOVED.items():
+        table = data.get(section)
+        if isinstance(table, dict) and key in table:
+            if table[key] != unused:
+                raise BarkError("{0}: the thresholds' spread is the breaker's setting now: give {1}",
+                                Ref(section, key, table[key]), Ref(new_section, new_key, table[key]))
+            data[section] = {k: v for k, v in table.items() if k != key}
+    growth = data.get("growth")
+    for key in ("bulges", "series"):
+        items = growth.get(key) if isinstance(growth, dict) else None
+        for i, item in enumerate(items if isinstance(items, list) else []):
+            if isinstance(item, dict) and item.get("f_max") is not None:
+                raise BarkError("{0}: a bulge's threshold is the breaker's setting now: give [breaker] regions = "
+                                f"{{{{ bulge = {item['f_max']!r} }}}}", Ref("growth", f"{key}[{i}].f_max", item["f_max"]))
 
 
 def _analyzer_tables(section: str, value) -> bool:
@@ -313,6 +343,8 @@ class Scene:
                 continue  # [[analyzer]]: several
             if not isinstance(table, dict):
                 raise BarkError("{0}: must be a table like [" + str(section) + "], not a value", Ref(None, str(section), table))
+        data = dict(data)
+        _moved(data)
         unknown = sorted(set(data) - set(SECTIONS), key=str)
         if unknown:
             raise BarkError(f"unknown table [{unknown[0]}] in scene: allowed are {', '.join(f'[{s}]' for s in SECTIONS)}")

@@ -431,8 +431,8 @@ class Simulation:
         """New bases join the mechanics now, at angles ``theta`` and heights ``z`` on the trunk surface,
         each anchored at its site.  Their ids continue the lattice's order; each is joined to the
         lattice neighbours (index offsets) already present — asked of the graph — by springs whose
-        rest lengths are the distances now (a new spring is at rest) and whose thresholds come from the
-        material and the growth law's regions.  Returns the ids."""
+        rest lengths are the distances now (a new spring is at rest) and whose thresholds the breakers
+        set about the material's (``Breaker.thresholds``, told the growth law's regions).  Returns the ids."""
         s, t = self.state, self.state.t
         bases = self._new_bases(theta, z, t)
         made = Made(per="base", t=t, ids=np.arange(s.n_bases, s.n_bases + len(bases["born"])), z=bases["x"][:, 2])
@@ -442,12 +442,29 @@ class Simulation:
             ends = s.x[pairs.ravel()]
             _, rest = spring_geometry(ends, np.arange(ends.shape[0]).reshape(-1, 2))
             mid = 0.5 * (ends[0::2, 2] + ends[1::2, 2])
-            fmax = self.growth.adjust_thresholds(t, mid, self.mechanics.thresholds(len(pairs), self.rng))
             made = Made(per="spring", t=t, ids=np.arange(s.n_springs, s.n_springs + len(pairs)), z=mid,
-                        offset=pairs[:, 1].astype(np.int64) - pairs[:, 0], rest=rest)
-            s.add_springs(pairs=pairs, rest=rest, fmax=fmax, intact=np.ones(len(pairs), bool), **self._initial(made))
+                        offset=pairs[:, 1].astype(np.int64) - pairs[:, 0], rest=rest,
+                        noise=self.rng.standard_normal(len(pairs)), regions=tuple(self.growth.regions_at(t, mid)))
+            s.add_springs(pairs=pairs, rest=rest, fmax=self._thresholds(made), intact=np.ones(len(pairs), bool),
+                          **self._initial(made))
         self._tension = _rows(self._tension, s.n_springs)
         return ids
+
+    def _thresholds(self, made: Made) -> np.ndarray:
+        """The thresholds of the springs ``made``: the material's ``f_max``, then each breaker's in turn
+        (``Breaker.thresholds``), checked: one finite positive number per spring."""
+        fmax = np.full(len(made), self.mechanics.f_max)
+        for b in self.breakers:
+            fmax = b.thresholds(made, fmax, self.rng)
+            what = f"{type(b).__name__}.thresholds"
+            try:
+                fmax = np.array(np.broadcast_to(np.asarray(fmax, dtype=np.float64), (len(made),)))
+            except (TypeError, ValueError) as err:
+                raise BarkError(f"{what} did not give one number per spring ({err})") from None
+            if not (np.isfinite(fmax).all() and (fmax > 0.0).all()):
+                raise BarkError(f"{what} gave a threshold that is not a positive finite number "
+                                f"({fmax[~(np.isfinite(fmax) & (fmax > 0.0))][0]!r}): a spring would break at rest or never")
+        return fmax
 
     def _initial(self, made: Made) -> dict[str, np.ndarray]:
         """The first values of the declared fields of the springs or bases ``made``, each from the

@@ -14,15 +14,13 @@ evaluate it, and :class:`ForceField` gives integrators the forces.
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import attrs
 import numpy as np
 
 from bark.model import physics
-from bark.validators import in_range, non_negative, optional, positive
-from bark.errors import BarkError, Ref
+from bark.validators import non_negative, positive
 
 if TYPE_CHECKING:
     import scipy.sparse as sp
@@ -43,33 +41,9 @@ class Mechanics:
     m: float = attrs.field(default=1.0, validator=positive)
     """Mass of one leaf base (mass units; Table 2: 1)."""
     f_max: float = attrs.field(default=0.0028, validator=positive)
-    """Mean breaking threshold of a neighbour spring, force units (Table 2: 0.0028 vertical,
-    0.005 reticulate, 0.008 diamond)."""
-    fmax_spread: float = attrs.field(default=0.0, validator=in_range(0.0, 10.0))
-    """Relative spread of the per-spring thresholds: each spring's f_max is drawn log-normally
-    with mean ``f_max`` and coefficient of variation ≈ ``fmax_spread``.  0 = all equal.  At most
-    10: beyond that some thresholds underflow to zero."""
-    fmax_weibull_shape: float | None = attrs.field(default=None, validator=optional(in_range(0.01, 1e12)))
-    """Instead: draw each spring's threshold from a Weibull distribution of this shape (modulus) k,
-    scaled to mean ``f_max`` — the weakest-link law of brittle strength (small k: very unequal
-    springs; k ≈ 10: a few percent).  ``None``: log-normal with ``fmax_spread``.  At least 0.01:
-    below that the Weibull scale Γ(1 + 1/k) overflows."""
-
-    def __attrs_post_init__(self) -> None:
-        if self.fmax_weibull_shape is not None and self.fmax_spread > 0:
-            raise BarkError("{0} and {1} are two ways to spread the thresholds: give one",
-                            Ref("mechanics", "fmax_spread", self.fmax_spread),
-                            Ref("mechanics", "fmax_weibull_shape", self.fmax_weibull_shape))
-
-    def thresholds(self, n_springs: int, rng: np.random.Generator) -> np.ndarray:
-        """Per-spring breaking thresholds, drawn from ``rng`` (the normal draw is always made, for a
-        stable stream whatever the spread)."""
-        s = self.fmax_spread
-        noise = rng.standard_normal(n_springs)
-        if self.fmax_weibull_shape is not None:
-            k = self.fmax_weibull_shape
-            return self.f_max * rng.weibull(k, n_springs) / math.gamma(1.0 + 1.0 / k)
-        return self.f_max * np.exp(s * noise - 0.5 * s * s)
+    """Breaking threshold of a neighbour spring, force units (Table 2: 0.0028 vertical, 0.005
+    reticulate, 0.008 diamond): the material's, about which the breaker spreads each spring's own
+    (``[breaker] spread``, ``weibull_shape``) and by region sets it (``[breaker] regions``)."""
 
 
 def spring_geometry(x: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

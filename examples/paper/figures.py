@@ -272,7 +272,7 @@ RESIN_FAMILIES = {  # family: (settings of every point, the swept setting, its v
     "maxwell": (["resin.name=maxwell"], "resin.tau", (300.0, 1000.0, 3000.0, 10000.0), "relaxation time τ (time units)"),
     "plastic": (["resin.name=plastic", "resin.hardening=1.0"], "resin.yield_strain", (0.2, 0.3, 0.5, 1.0),
                 "yield strain (hardening 1)"),
-    "weibull": ([], "mechanics.fmax_weibull_shape", (2.0, 4.0, 8.0), "Weibull modulus m of the thresholds"),
+    "weibull": ([], "breaker.weibull_shape", (2.0, 4.0, 8.0), "Weibull modulus m of the thresholds"),
 }
 RESIN_STATISTICS = (("mean_orientation_deg", "mean orientation (°)"), ("circular_sd_deg", "circular SD (°)"),
                     ("mean_anisotropy", "anisotropy 2A − 1"), ("n_patches", "patches"),
