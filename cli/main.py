@@ -405,10 +405,11 @@ def _report(outcome, quiet: bool, signum: int | None = None, as_json: bool = Fal
         click.echo(f"bark: error: {problem}; every other output is in {out}", err=True)
         code = code or (128 + signum if outcome.drawing_stopped and signum is not None else 1)
     unwritten = [p for p in outcome.failed if "could not be written" in p]
-    if unwritten and (out / "checkpoint.npz").exists():
+    if (unwritten or outcome.drawing_stopped) and (out / "checkpoint.npz").exists():
         how = "goes on from the last checkpoint written" if any(p.startswith("checkpoint.npz") for p in unwritten) \
             else "writes what is missing"
-        click.echo(f"bark: once there is room, bark simulate --resume {shlex.quote(str(out))} {how}", err=True)
+        when = "once there is room, " if unwritten else ""
+        click.echo(f"bark: {when}bark simulate --resume {shlex.quote(str(out))} {how}", err=True)
     if as_json or not quiet:
         from bark_cli.progress import print_summary
 

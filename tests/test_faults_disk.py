@@ -65,11 +65,17 @@ def test_a_file_size_limit_costs_only_the_files_it_refuses(limit, tmp_path):
     out = tmp_path / "run"
     proc = _bark("simulate", *SMALL, "--quiet", "--out", str(out), limit=limit)
     lines = _lines(proc.stderr)
+    if "the run's start record could not be written" in proc.stderr:  # below a few kB: refused before it began
+        assert proc.returncode == 2 and len(lines) == 1 and "nothing was run" in lines[0], proc.stderr
+        assert not run_files(out)
+        return
     refused = sorted({line.split(": ")[2] for line in lines if "could not be written" in line})
     assert proc.returncode == (1 if refused else 0), proc.stderr
     present = {p.name for p in out.iterdir()}
-    assert not set(refused) & present  # a refused file is not there half-written ...
+    assert not (set(refused) - {"checkpoint.npz"}) & present  # a refused file is not there half-written ...
     assert present <= set(RUN_FILES)   # ... and what is there is the run's
+    if "checkpoint.npz" in refused:    # the last good checkpoint stays: here the start record
+        assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "start"
     assert all((out / name).stat().st_size <= limit for name in present)
     if refused:
         assert "summary.json" not in present  # the folder does not claim a complete run
@@ -139,7 +145,13 @@ def test_a_refused_end_checkpoint_keeps_the_last_good_one(tmp_path, monkeypatch)
     assert_clean_outcome(result)
     assert "checkpoint.npz: could not be written (File too large)" in result.stderr
     assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "periodic"
-    assert {"state.npz", "breaks.csv", "summary.json"} <= {p.name for p in out.iterdir()}
+    assert {"state.npz", "breaks.csv"} <= {p.name for p in out.iterdir()}
+    assert not (out / "summary.json").exists()  # it would describe a state no checkpoint holds
+    monkeypatch.undo()
+    again = CliRunner().invoke(cli, ["simulate", "--resume", str(out), "--quiet"])
+    assert again.exit_code == 0, again.output
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "end"
+    assert (out / "summary.json").exists()
 
 
 @pytest.mark.parametrize("command", ["simulate", "analyze", "compare", "strategies", *slow_cases("sweep")])
@@ -278,15 +290,47 @@ def small_disk(tmp_path):
         subprocess.run(["umount", str(where)], check=True)
 
 
-def test_a_full_disk_costs_only_the_files_it_refuses(small_disk):
-    out = small_disk / "run"
-    proc = _bark("simulate", "--quiet", "--out", str(out))  # the default scene: its checkpoint alone is 300 kB
+def test_a_full_disk_costs_only_the_files_it_refuses_and_resume_writes_them(small_disk, tmp_path):
+    """The default scene on 400 kB: its end checkpoint alone is over 500 kB, so only the start
+    record is there; with room made, ``--resume`` runs it again to the bits of a run with room."""
+    out, whole = small_disk / "run", tmp_path / "whole"
+    proc = _bark("simulate", "--quiet", "--out", str(out))
     lines = _lines(proc.stderr)
     refused = {line.split(": ")[2] for line in lines if "could not be written (No space left on device)" in line}
-    assert proc.returncode == 1 and refused, proc.stderr
+    assert proc.returncode == 1 and "checkpoint.npz" in refused, proc.stderr
     present = {p.name for p in out.iterdir()}
-    assert not refused & present and present <= set(RUN_FILES) and "summary.json" not in present
+    assert not refused - {"checkpoint.npz"} & present and present <= set(RUN_FILES) and "summary.json" not in present
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "start"
+    assert f"bark simulate --resume {out}" in proc.stderr
     _no_temporaries(out)
+    subprocess.run(["mount", "-o", "remount,size=64m", str(small_disk)], check=True)  # room made
+    again = _bark("simulate", "--resume", str(out), "--quiet")
+    assert again.returncode == 0, again.stderr
+    assert _bark("simulate", "--quiet", "--out", str(whole)).returncode == 0
+    assert {p.name for p in whole.iterdir()} <= {p.name for p in out.iterdir()}
+    for name in ("breaks.csv", "state.npz", "patches.csv", "scene.toml"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("limit", [15_000, *slow_cases(9_000)])
+def test_a_run_whose_state_never_fits_is_resumed_from_its_start(limit, tmp_path):
+    """Under ``ulimit -f`` below every checkpoint of the state, the start record (the scene: a few
+    kB) is written before the first step, so once the limit is gone ``--resume`` runs again from
+    t = 0 and ends as a run never refused; a fresh run into the folder is refused meanwhile."""
+    out, whole = tmp_path / "out", tmp_path / "whole"
+    proc = _bark("simulate", *SMALL, "--quiet", "--out", str(out), limit=limit)
+    _lines(proc.stderr)
+    assert proc.returncode == 1 and "checkpoint.npz: could not be written (File too large)" in proc.stderr, proc.stderr
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "start"
+    fresh = _bark("simulate", *SMALL, "--quiet", "--out", str(out))
+    assert fresh.returncode == 2 and "holds an unfinished run (stopped at its start" in fresh.stderr, fresh.stderr
+    again = _bark("simulate", "--resume", str(out), "--quiet")
+    assert again.returncode == 0, again.stderr
+    assert "runs again from its start" in again.stderr
+    assert _bark("simulate", *SMALL, "--quiet", "--out", str(whole)).returncode == 0
+    for name in ("breaks.csv", "state.npz", "patches.csv", "scene.toml"):
+        assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+    assert json.loads((out / "summary.json").read_text())["steps"] == json.loads((whole / "summary.json").read_text())["steps"]
 
 
 @pytest.mark.slow  # a run, stopped and resumed: seconds: the quick subset (-m "not slow") leaves it out

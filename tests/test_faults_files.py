@@ -372,6 +372,36 @@ def test_a_run_killed_during_its_final_writes_is_finished_by_resume(interrupted_
     assert _resume(out).exit_code == 2  # now complete: nothing to resume
 
 
+def test_summary_json_is_written_last_and_resume_draws_what_a_kill_left_undrawn(tmp_path):
+    """Killed while a picture is drawn (after the checkpoint and the data): no summary.json, so the
+    folder does not claim a whole run, and ``--resume`` draws the picture and then writes it."""
+    scene = Scene.from_dict({"lattice": {"n_bases": 300}, "growth": {"G": 0.05}, "run": {"until_time": 6.0}})
+    out = tmp_path / "out"
+
+    class Killed(BaseException):
+        pass
+
+    def killed_while_drawing(sim, scene, recorded, path):
+        def wait():
+            raise Killed
+        return wait
+
+    def draw(sim, scene, recorded, path):
+        path.write_text(f"drawn at t = {sim.state.t}")
+
+    with pytest.raises(Killed):
+        runner.run(scene, out, pictures={"pattern-image": ("pattern.png", killed_while_drawing)})
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "end"
+    assert {"breaks.csv", "state.npz"} <= {p.name for p in out.iterdir()}
+    assert not (out / "summary.json").exists() and not (out / "pattern.png").exists()
+    outcome = runner.resume(out, pictures={"pattern-image": ("pattern.png", draw)})
+    assert not outcome.failed
+    assert (out / "pattern.png").read_text() == "drawn at t = 6.0"
+    assert json.loads((out / "summary.json").read_text())["t"] == 6.0
+    with pytest.raises(BarkError, match="has ended"):
+        runner.resume(out, pictures={"pattern-image": ("pattern.png", draw)})
+
+
 def test_a_picture_that_fails_costs_no_data(tmp_path, monkeypatch):
     import bark_cli.plot
 

@@ -144,14 +144,19 @@ def test_a_signal_during_the_final_writes_waits_for_them(tmp_path, monkeypatch):
     out = tmp_path / "out"
     result = CliRunner().invoke(cli, ["simulate", *SMALL, "--out", str(out)])
     assert_clean_outcome(result)
+    assert (out / "breaks.csv").exists() and (out / "state.npz").exists()
+    if not (out / "pattern.png").exists():  # stopped while drawing: the folder does not claim a whole run
+        assert result.exit_code == 143 and "pattern.png: not drawn (stopped by a signal while drawing)" in result.stderr
+        assert f"bark simulate --resume {out} writes what is missing" in result.stderr
+        assert not (out / "summary.json").exists()
+        monkeypatch.undo()
+        assert CliRunner().invoke(cli, ["simulate", "--resume", str(out), "--quiet"]).exit_code == 0
+    else:  # drawn before the command waited for it
+        assert result.exit_code == 0
+    assert (out / "pattern.png").exists()
     summary = json.loads((out / "summary.json").read_text())
     meta = checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)
     assert (summary["stop_reason"], summary["steps"], summary["t"]) == (meta["stop_reason"], meta["step_count"], meta["t"])
-    assert (out / "breaks.csv").exists() and (out / "state.npz").exists()
-    if (out / "pattern.png").exists():  # drawn before the command waited for it
-        assert result.exit_code == 0
-    else:
-        assert result.exit_code == 143 and "pattern.png: not drawn (stopped by a signal while drawing)" in result.stderr
 
 
 def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, monkeypatch):
@@ -172,7 +177,8 @@ def test_a_signal_while_drawing_stops_the_drawing_and_keeps_the_data(tmp_path, m
     assert_clean_outcome(result)
     assert result.exit_code == 130
     assert "pattern.png: not drawn" in result.stderr
-    assert {"summary.json", "breaks.csv", "state.npz", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
+    assert {"breaks.csv", "state.npz", "checkpoint.npz"} <= {p.name for p in out.iterdir()}
+    assert not (out / "summary.json").exists()  # written last, once every picture is there
     assert not (out / "pattern.png").exists()
 
 

@@ -17,6 +17,14 @@ fast; ``np.load(..., allow_pickle=False)`` reads it) holding:
   level), the step count, the random generator's state, the events so far, why it was written
   (``periodic``, ``interrupted`` or ``end``), and a checksum of every array.
 
+**A run's first checkpoint is its start record** (``start``): ``meta`` alone — format, version, the
+whole scene and the stop conditions — written before the first step.  It is small (a few kB: it
+fits where the state does not, on a nearly full disk or under a file-size limit) and it is enough,
+because a run is determined by its scene: resuming from it runs again from t = 0, to the same bits.
+So a run that could write no checkpoint of its state (a disk too full, a ``kill -9`` before the
+first periodic one) is still resumable, and a fresh run never replaces it unasked.  The first
+checkpoint of the state replaces it (it is not kept as the previous one).
+
 **Trust.**  Nothing in a checkpoint is used before all of it is verified: every array against its
 checksum, the types and shapes of the parts against one another (the break log's columns, the
 springs against the bases), positions finite, the random generator's state valid, and the format
@@ -49,18 +57,21 @@ from bark.paths import is_zip, open_regular
 from bark.model.state import BASE_FIELDS, SPRING_FIELDS
 from bark.model.tree import Packing
 
-__all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "load", "read", "read_meta", "Damaged"]
+__all__ = ["FORMAT", "CHECKPOINT_NAME", "PREVIOUS_NAME", "REASONS", "save", "save_start", "load", "read", "read_meta",
+           "Damaged"]
 
 FORMAT = 3
 CHECKPOINT_NAME = "checkpoint.npz"
 PREVIOUS_NAME = "checkpoint.prev.npz"
-REASONS = ("periodic", "interrupted", "end")
-"""Why a checkpoint was written: along the way, on a signal, or at the run's end."""
+REASONS = ("start", "periodic", "interrupted", "end")
+"""Why a checkpoint was written: the start record, along the way, on a signal, or at the run's end."""
 
 STATE = {name: (dtype, 1 + len(shape)) for name, (shape, dtype) in {**BASE_FIELDS, **SPRING_FIELDS}.items()}
 BREAKS = {"spring": "int64", "i": "int64", "j": "int64", "step": "int64", "t": "float64", "tension": "float64"}
 META_KEYS = ("format", "bark_version", "reason", "scene", "stop", "t", "h_last", "clock", "step_count", "events", "rng",
              "checksums")
+START_KEYS = ("format", "bark_version", "reason", "scene", "stop", "checksums")
+"""What a start record holds (a run's scene and stop conditions: no state)."""
 
 
 class Damaged(BarkError):
@@ -93,8 +104,25 @@ def save(folder: str | Path, sim, scene, stop, reason: str, extra: dict[str, Any
         "checksums": {name: digest(a) for name, a in arrays.items()},
     }
     folder = Path(folder)
-    return write_npz(folder / CHECKPOINT_NAME, compress=False, verify=read, keep=folder / PREVIOUS_NAME,
-                     meta=np.array(json.dumps(meta)), **arrays)
+    keep = None if _is_start(folder / CHECKPOINT_NAME) else folder / PREVIOUS_NAME  # a start record is replaced
+    return write_npz(folder / CHECKPOINT_NAME, compress=False, verify=read, keep=keep, meta=np.array(json.dumps(meta)),
+                     **arrays)
+
+
+def _is_start(path: Path) -> bool:
+    try:
+        return read_meta(path).get("reason") == "start"
+    except (OSError, Damaged):
+        return False
+
+
+def save_start(folder: str | Path, scene, stop, extra: dict[str, Any] | None = None) -> Path:
+    """Write the start record of a run into ``folder`` (see the module's docstring), verified."""
+    from bark.version import __version__
+
+    meta = {"format": FORMAT, "bark_version": __version__, "reason": "start", "scene": scene.to_dict(),
+            "stop": attrs.asdict(stop), "t": 0.0, **(extra or {}), "checksums": {}}
+    return write_npz(Path(folder) / CHECKPOINT_NAME, compress=False, verify=read, meta=np.array(json.dumps(meta)))
 
 
 def read_meta(path: str | Path) -> dict:
@@ -146,7 +174,7 @@ def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
         raise bad(f"its meta record is not JSON ({_why(err)})") from None
     if not isinstance(meta, dict):
         raise bad("its meta record is not a table")
-    missing = [k for k in META_KEYS if k not in meta]
+    missing = [k for k in (START_KEYS if meta.get("reason") == "start" else META_KEYS) if k not in meta]
     if missing:
         raise bad(f"its meta record lacks {missing[0]!r}")
     if meta["format"] != FORMAT:
@@ -163,7 +191,13 @@ def read(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
     for name, a in arrays.items():
         if digest(a) != sums[name]:
             raise bad(f"array {name!r} does not match its checksum")
-    _check_parts(arrays, meta, bad)
+    if meta["reason"] == "start":
+        if arrays:
+            raise bad("it is a start record, yet it holds arrays")
+        if not isinstance(meta["scene"], dict) or not isinstance(meta["stop"], dict):
+            raise bad("its scene or stop record has the wrong shape")
+    else:
+        _check_parts(arrays, meta, bad)
     return arrays, meta
 
 
@@ -286,6 +320,8 @@ def restore(arrays: dict[str, np.ndarray], meta: dict, path: Path):
     except (BarkError, TypeError) as err:
         raise Damaged(f"checkpoint {str(path)!r} is damaged: its scene is not valid ({err})") from None
     sim = scene.simulation()
+    if meta["reason"] == "start":  # the run is its scene: built as a fresh run builds it
+        return scene, sim.prepare(stop), stop, meta, {}
     lattice, pairs = scene.lattice, arrays["pairs"].astype(np.int64)
     n, due = arrays["x"].shape[0], Packing.of(lattice, sim.growth.on(lattice)).bases_at(float(meta["t"]))
     if n != due or not np.isin(pairs[:, 1] - pairs[:, 0], lattice.offsets).all():

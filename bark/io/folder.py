@@ -243,7 +243,8 @@ def _clear_for_fresh_run(path: Path, overwrite: bool, fail, notice) -> None:
                            Ref(None, "overwrite", True)) from None
             if meta.get("reason") != "end":
                 t = meta.get("t")
-                when = f"t = {t:.6g}" if isinstance(t, (int, float)) else "a run"
+                when = "its start: no checkpoint of its state yet" if meta.get("reason") == "start" else \
+                    f"t = {t:.6g}" if isinstance(t, (int, float)) else "a run"
                 raise fail(f"holds an unfinished run (stopped at {when}): go on with it ({{1}}), or discard it with {{2}}",
                            Ref(None, "resume", str(path)), Ref(None, "overwrite", True))
             break

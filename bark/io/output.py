@@ -216,13 +216,14 @@ def run_summary(sim, scene, analyses: dict, stop_reason: str | None, wall_time_s
 
 
 def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_time_s: float | None = None,
-              extra: dict | None = None, failed: list[str] | None = None) -> dict:
+              extra: dict | None = None, failed: list[str] | None = None, summary: bool = True) -> dict:
     """Write what the scene's effects ask for into ``out_dir``: summary.json and scene.toml always; patches.csv
     (patch-statistics), breaks.csv (break-log), state.npz (state-snapshot), graph.graphml (graphml),
     tree.vtu and tree.ply (mesh).  With ``failed`` given, a file the file system refuses is said
     there and the others are written (``attempt``); summary.json, written last, is then left out, so
     that the folder does not claim a complete run (``bark simulate --resume`` writes what is
-    missing).  Returns the summary."""
+    missing).  ``summary=False``: summary.json is the caller's to write, after what else it writes
+    (the runner: after the pictures).  Returns the summary."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     analyses = sim.analyze()
@@ -257,10 +258,10 @@ def write_run(sim, scene, out_dir: str | Path, stop_reason: str | None, wall_tim
                 (path,))
     attempt("scene.toml", lambda: atomic_write(out / "scene.toml", lambda fh: fh.write(scene.to_toml().encode())),
             failed, (out / "scene.toml",))
-    summary = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
-    if not failed:
-        attempt("summary.json", lambda: write_json(out / "summary.json", summary), failed)
-    return summary
+    result = run_summary(sim, scene, analyses, stop_reason, wall_time_s, extra)
+    if summary and not failed:
+        attempt("summary.json", lambda: write_json(out / "summary.json", result), failed)
+    return result
 
 
 def analysis_file(analyzer: str, table: str) -> str:

@@ -13,13 +13,16 @@ A run, in order:
 2. **The loop**, ``Simulation.run``, with the along-the-way recorders the scene's effects ask for
    (statistics series, animation frames), a checkpoint every ``checkpoint_every`` seconds of wall
    time, and a look at ``interrupted()`` between steps: a signal stops the run there.
+   A run that keeps checkpoints writes its start record first (``bark.io.checkpoint``: its scene,
+   a few kB), so it is resumable from its first step whatever the disk does later.
 3. **The end, in an order that loses nothing**: the stale summary is removed, the checkpoint is
-   written (``end``, or ``interrupted``: resumable), then the data files, then ``summary.json``
-   (whose presence says the outputs are complete and match the checkpoint), then the pictures.  A
-   picture that cannot be drawn, or a file the file system refuses, is reported, and every other
-   output stays (``summary.json`` is then not written: ``resume`` writes what is missing).  A run killed in the
-   middle of these writes is finished by ``resume``, which writes the missing outputs from the
-   checkpoint.
+   written (``end``, or ``interrupted``: resumable), then the data files and the pictures (drawn
+   meanwhile in other processes), and last ``summary.json``, whose presence says that every output
+   is there and matches the checkpoint.  A file the file system refuses, or a picture a signal
+   stopped, is reported, every other output stays, and ``summary.json`` is not written: ``resume``
+   writes what is missing from the checkpoint — also after a kill anywhere in these writes.  A
+   picture that fails for another reason (a bug: resuming would not draw it either) is reported
+   and does not hold the summary back.
 
 Drawing is not the core's: ``pictures`` maps an effect (``pattern-image``, ``animation``) to the
 file it writes and a function ``draw(sim, scene, recorded, path)``.  Left out, the writers are those
@@ -39,8 +42,8 @@ import attrs
 
 from bark.contract import registry
 from bark.io import checkpoint
-from bark.errors import BarkError, NonFiniteStateError, one_line
-from bark.io.files import attempt
+from bark.errors import BarkError, NonFiniteStateError, Ref, one_line
+from bark.io.files import attempt, write_json
 from bark.io.folder import OutputFolder
 from bark.io.history import History
 from bark.model.effects import in_format
@@ -91,6 +94,12 @@ def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkp
     if out is None:  # in memory: nothing written, nothing drawn, no checkpoints
         return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None, sessions=sessions)
     with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:
+        if scene.has("checkpoints"):  # the run is resumable from its first step on, whatever the disk does later
+            refused: list[str] = []
+            if not attempt(checkpoint.CHECKPOINT_NAME, lambda: checkpoint.save_start(folder.path, scene, stop, {
+                    "stop_reason": None, "wall_time_s": 0.0, "sessions": sessions}), refused):
+                raise BarkError("{0}: the run's start record " + refused[0].partition(": ")[2] + "; nothing was run",
+                                Ref(None, "out", str(out)))
         if stop.until_time is None and warn is not None:
             conds = [f"radius {stop.until_radius:g}" if stop.until_radius is not None else None,
                      f"{stop.until_patches} patches" if stop.until_patches is not None else None]
@@ -112,6 +121,9 @@ def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable
         scene, sim, stop, meta, recorded, _ = checkpoint.load(folder.path, warn=warn)
         wall = float(meta.get("wall_time_s") or 0.0)
         sessions = [*meta.get("sessions", []), session(command)]
+        if meta["reason"] == "start" and warn is not None:
+            warn("no checkpoint of the run's state was written (a full disk, or a stop before the first one): "
+                 "it runs again from its start, to the same result")
         if meta["reason"] == "end":
             if _outputs_complete(folder.path, meta):
                 raise BarkError(f"the run in {str(folder.path)!r} has ended ({meta.get('stop_reason')}): nothing to resume")
@@ -126,8 +138,6 @@ def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable
 
 def _check_every(seconds) -> None:
     if not (isinstance(seconds, (int, float)) and 0 <= seconds <= 1e9):
-        from bark.errors import Ref
-
         raise BarkError("{0}: must be a number of seconds in [0, 1e+09] (0: only at the end and on a signal)",
                         Ref(None, "checkpoint_every", seconds))
 
@@ -265,9 +275,19 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
         if rec.file is not None:
             attempt(rec.file, lambda: rec.write(out / rec.file), failed, (out / rec.file,))
     waits = _pictures_begun(pictures, sim, scene, by_name, out)  # drawn beside the data's writing
-    summary = write_run(sim, scene, out, reason, wall, {**_extra(by_name), **made}, failed)
+    summary = write_run(sim, scene, out, reason, wall, {**_extra(by_name), **made}, failed, summary=False)
     outcome = Outcome(out=out, scene=scene, sim=sim, stop_reason=reason, summary=summary, resumed=resumed, error=error,
                       failed=unsaved + failed)
+    missing = _wait_for_pictures(waits, outcome, out)
+    if not (unsaved or failed or missing):  # last: its presence says every output is there
+        attempt("summary.json", lambda: write_json(out / "summary.json", summary), outcome.failed)
+    return outcome
+
+
+def _wait_for_pictures(waits: list, outcome: Outcome, out: Path) -> bool:
+    """Wait for each picture begun, saying in ``outcome.failed`` what was not drawn; whether one is
+    missing that ``resume`` can draw (a full disk, a signal while drawing: not a picture that fails)."""
+    missing = False
     for name, wait in waits:
         if outcome.drawing_stopped:
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
@@ -278,12 +298,13 @@ def _finish(scene, sim, stop, out: Path | None, recorders: list, reason: str, wa
             wait()
         except KeyboardInterrupt:
             outcome.failed.append(f"{name}: not drawn (stopped by a signal while drawing)")
-            outcome.drawing_stopped = True
+            outcome.drawing_stopped = missing = True
         except OSError as err:  # a full disk, a file-size limit: as for the data files
             outcome.failed.append(f"{name}: could not be written ({err.strerror or err})")
             (out / name).unlink(missing_ok=True)  # an earlier state's picture is not left beside this one's
+            missing = True
         except BarkError as err:  # nothing to draw it with
             outcome.failed.append(f"{name}: not drawn ({err})")
         except Exception as err:  # a picture never costs the data: say what failed, keep the rest
             outcome.failed.append(f"{name}: could not be drawn ({one_line(err)})")
-    return outcome
+    return missing
