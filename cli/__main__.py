@@ -51,13 +51,16 @@ def _closed_streams_to_devnull() -> None:
         if getattr(sys, name) is None:
             setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))
     sys.stdout = _Guarded(sys.stdout)
+    sys.stderr = _Guarded(sys.stderr, said=False)
 
 
 class _Guarded:
-    """Standard output whose writes stop, said once on stderr, when the system refuses them."""
+    """A standard stream whose writes stop when the system refuses them: standard output says so
+    once on stderr; stderr (a terminal that went away: its session killed, its window closed, EIO)
+    says nothing, having nowhere to say it, and the command ends as it would have."""
 
-    def __init__(self, stream) -> None:
-        self._stream, self._failed = stream, False
+    def __init__(self, stream, said: bool = True) -> None:
+        self._stream, self._failed, self._said = stream, False, said
         self.refused = False
         """Whether the system refused a write (a full disk; not a reader that stopped reading):
         the command then ends with status 1, as for any output it could not write."""
@@ -79,7 +82,7 @@ class _Guarded:
 
     def _fail(self, err: OSError) -> None:
         self._failed = True
-        if not isinstance(err, BrokenPipeError):  # a reader that stopped reading (| head) wants no more
+        if self._said and not isinstance(err, BrokenPipeError):  # a reader that stopped reading (| head) wants no more
             self.refused = True
             sys.stderr.write(f"bark: warning: the command's output could not be written ({err.strerror or err}); "
                              "its files are written all the same\n")

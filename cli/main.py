@@ -370,10 +370,12 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, resin_
         except KeyboardInterrupt:  # only raised before the first step (Signals): nothing ran, nothing to save
             raise StoppedBeforeStart(signals.received or signal.SIGINT) from None
         finally:
-            if bar is not None:
-                bar.close()
-            if painter.made:
-                painter().close()
+            try:
+                if bar is not None:
+                    bar.close()
+            finally:  # whatever closing the bar met: no drawing process outlives the command
+                if painter.made:
+                    painter().close()
     return _report(outcome, quiet, signals.received, as_json)
 
 

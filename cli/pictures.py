@@ -12,6 +12,7 @@ available the pictures are drawn in the command's own process.
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import multiprocessing
 import os
@@ -373,7 +374,8 @@ class Painter:
                     for end in (*pair[0], *pair[1]):
                         end.close()
                 return
-            for theirs, ours in pipes:
+            atexit.register(self.close, kill=True)  # runs before multiprocessing's own exit handler, which
+            for theirs, ours in pipes:              # would wait for a painter that ignores its SIGTERM
                 for end in theirs:
                     end.close()
                 self._ends.extend(ours)
@@ -438,6 +440,7 @@ class Painter:
     def close(self, kill: bool = False) -> None:
         if self._proc is None:
             return
+        atexit.unregister(self.close)
         if kill:  # its siblings die with it
             os.kill(self._proc.pid, signal.SIGKILL)
         for _ in self._threads:

@@ -40,7 +40,7 @@ class ProgressBar:
 
     def __init__(self, every_s: float = 0.1) -> None:
         self.every_s = every_s
-        self._progress = self._task = None
+        self._progress = self._task = self._sim = self._stop = None
         self._last = 0.0
         self._r0 = 0.0
 
@@ -48,7 +48,13 @@ class ProgressBar:
         now = time.monotonic()
         if not force and now - self._last < self.every_s:
             return
-        self._last = now
+        self._last, self._sim, self._stop = now, sim, stop
+        try:
+            self._show(sim, stop)
+        except (OSError, ValueError):  # the terminal went away (EIO) or stderr closed: the run goes on unseen
+            self.every_s, self._progress = float("inf"), None
+
+    def _show(self, sim, stop) -> None:
         if self._progress is None:
             self._r0 = sim.radius
             columns = (
@@ -61,17 +67,20 @@ class ProgressBar:
                 TextColumn("left"),
                 TimeRemainingColumn(),
             )
-            self._progress = Progress(*columns, transient=False, console=Console(stderr=True))
-            self._progress.start()
-            self._task = self._progress.add_task("run", total=1.0, **_fields(sim, stop))
-            self._stop = stop
-        self._sim = sim
+            progress = Progress(*columns, transient=False, console=Console(stderr=True))
+            progress.start()
+            self._task = progress.add_task("run", total=1.0, **_fields(sim, stop))
+            self._progress = progress  # whole: a signal in the middle of this leaves none to close
         self._progress.update(self._task, completed=_fraction(sim, stop, self._r0), **_fields(sim, stop))
 
     def close(self) -> None:
         if self._progress is not None:
             self(self._sim, self._stop, force=True)
-            self._progress.stop()
+            try:
+                if self._progress is not None:
+                    self._progress.stop()
+            except (OSError, ValueError):  # as in __call__
+                pass
             self._progress = None
 
 

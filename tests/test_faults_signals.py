@@ -416,3 +416,65 @@ def test_a_plugin_run_with_declared_fields_stopped_by_sigint_resumes_to_the_same
     assert resumed.returncode == 0, resumed.stderr
     for name in ("breaks.csv", "state.npz"):
         assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+
+
+def _session_members(sid: int) -> list[int]:
+    """The processes of session ``sid`` still alive (``/proc``: field 6 of stat is the session)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rpartition(")")[2].split()
+            except OSError:  # gone meanwhile
+                continue
+            if int(fields[3]) == sid and fields[0] != "Z":
+                found.append(int(entry.name))
+    return found
+
+
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a pseudo-terminal and /proc")
+def test_a_run_whose_terminal_goes_away_stops_leaves_no_process_and_resumes(uninterrupted, tmp_path):
+    """The run's terminal hangs up mid-run (a tmux session killed, an ssh connection lost): the
+    kernel sends SIGHUP and every later write to the terminal fails (EIO).  The run stops between
+    two steps with a checkpoint, no process of it is left (its drawing processes included), and
+    ``--resume`` ends as the run never stopped."""
+    import fcntl
+    import pty
+    import termios
+
+    out = tmp_path / "out"
+    master, slave = pty.openpty()
+
+    def own_terminal():  # a session of its own, the pseudo-terminal its controlling terminal
+        fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+    argv = [a for a in LONG if a != "--quiet"]  # the progress bar on the terminal, as a user has it
+    proc = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", *argv, "--out", str(out)], cwd=REPO_ROOT,
+                            stdin=slave, stdout=slave, stderr=slave, start_new_session=True, preexec_fn=own_terminal,
+                            env={**os.environ, "TERM": "tmux-256color"})  # a terminal that shows the bar as it goes
+    os.close(slave)
+    shown = b""
+    while shown.count(b"t=") < 3:  # the bar's third showing: the run is well on its way
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:  # the command ended and closed the terminal
+            chunk = b""
+        assert chunk, f"the run ended before it showed its progress: {shown.decode(errors='replace')}"
+        shown += chunk
+    os.close(master)  # the terminal goes away
+    try:
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 128 + signal.SIGHUP or proc.returncode == 128 + signal.SIGTERM, proc.returncode
+    deadline = time.monotonic() + 30  # the drawing processes see the command's pipe close
+    while _session_members(proc.pid):
+        assert time.monotonic() < deadline, f"processes of the run left behind: {_session_members(proc.pid)}"
+        time.sleep(0.05)
+    assert checkpoint.read_meta(out / checkpoint.CHECKPOINT_NAME)["reason"] == "interrupted"
+    again = _resume(out)
+    assert again.returncode == 0, again.stderr
+    for name in COMPARED:
+        assert (out / name).read_bytes() == (uninterrupted / name).read_bytes(), name
