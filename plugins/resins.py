@@ -22,9 +22,10 @@ __all__ = ["Hookean", "Maxwell", "Plastic", "Nonlinear", "relaxed", "yielded", "
 
 def relaxed(length, rest, h, params):
     """A Maxwell resin's rest length after a step ``h``: relaxed toward the length with time
-    constant ``params[0]`` (backward Euler)."""
+    constant ``params[0]`` (backward Euler), written as a step from the rest length so that, in
+    floating point too, it never passes the length and a spring at rest stays exactly at rest."""
     tau = params[0]
-    return ((rest * tau + length * h) / (tau + h),)
+    return (rest + (length - rest) * (h / (tau + h)),)
 
 
 def yielded(length, rest, h, params):
