@@ -26,6 +26,10 @@ def main() -> None:
         signal.signal(sig, stop)
     _closed_streams_to_devnull()
     _few_threads_where_processes_are_few()
+    problem = _not_our_bark()
+    if problem is not None:
+        sys.stderr.write(f"bark: error: {problem}\n")
+        sys.exit(1)
     try:
         from bark_cli.main import main as command
     except KeyboardInterrupt as err:
@@ -38,6 +42,28 @@ def main() -> None:
     except SystemExit as done:  # how click ends every command
         code = done.code
     _leave(code)
+
+
+def _not_our_bark() -> str | None:
+    """What is wrong, in one line, when ``import bark`` would not give bark-grasstree's package:
+    another project on the package index is also called "bark" (text to audio), and installing it
+    (``pip install bark``, or a plugin that depends on "bark" instead of "bark-grasstree") puts its
+    package where bark's was.  Found without importing it (that project's import loads PyTorch)."""
+    import importlib.util
+    from pathlib import Path
+
+    try:
+        spec = importlib.util.find_spec("bark")
+    except (ImportError, ValueError):
+        spec = None
+    fix = "reinstall bark with `pip install --force-reinstall --no-deps bark-grasstree`"
+    if spec is None or not spec.submodule_search_locations:
+        return f"no Python package 'bark' is importable here: {fix}"
+    where = [Path(p) for p in spec.submodule_search_locations]
+    if not any((p / "engine" / "simulation.py").is_file() and (p / "contract" / "strategies.py").is_file() for p in where):
+        return (f"the Python package 'bark' in {str(where[0])!r} is another project's (the package index's "
+                f"\"bark\" is not this one, whose distribution is bark-grasstree): {fix}")
+    return None
 
 
 def _closed_streams_to_devnull() -> None:

@@ -265,3 +265,26 @@ def test_blas_threads_are_kept_to_one_where_processes_are_few(soft, threads, mon
     monkeypatch.setattr(resource, "getrlimit", lambda which: (soft, soft))
     entry._few_threads_where_processes_are_few()
     assert os.environ.get("OPENBLAS_NUM_THREADS") == threads
+
+
+_OTHER_BARKS = {
+    "a package whose import fails": {"bark/__init__.py": "import torch_that_is_not_here\n"},
+    "a package that imports": {"bark/__init__.py": "SAMPLE_RATE = 24_000\n", "bark/generation.py": ""},
+    "a module": {"bark.py": "def generate_audio(text): ...\n"},
+}
+
+
+@pytest.mark.parametrize("other", list(_OTHER_BARKS))
+def test_another_projects_bark_ahead_of_ours_is_one_line(other, tmp_path):
+    """The package index's "bark" (text to audio) installed over bark's package, as a plugin that
+    depended on "bark" did: every command says so in one line, and how to mend it."""
+    for name, text in _OTHER_BARKS[other].items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    for argv in (["strategies"], ["simulate", "--n-bases", "300", "--until-time", "1", "--out", str(tmp_path / "out")]):
+        proc = subprocess.run([sys.executable, "-m", "bark_cli", *argv], cwd=tmp_path, capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(tmp_path)}, timeout=600)
+        lines = proc.stderr.splitlines()
+        assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+        assert lines[0].startswith("bark: error: ") and "bark-grasstree" in lines[0], proc.stderr
+        assert not (tmp_path / "out").exists()
