@@ -61,6 +61,22 @@ def _wrote(folder, owned: tuple, writers: dict) -> int:
     return 0 if len(written) == len(writers) else 1
 
 
+def _held(out: str, run_files_kept: bool = False):
+    """``--out`` checked, created and locked for this command (``bark.io.folder.held_folder``: one
+    bark command writes there at a time, a second is told which holds it).  ``run_files_kept``:
+    refuse a folder that holds a run of ``bark simulate``, whose files of the same names (its
+    patches.csv) are that run's."""
+    from bark.errors import BarkError, Ref
+    from bark.io.folder import held_folder, holds_a_run
+
+    held = held_folder(out)
+    if run_files_kept and holds_a_run(held.path):
+        held.close()
+        raise BarkError("{0}: holds a run of bark simulate, whose patches.csv is that run's; write the analysis "
+                        "to another folder", Ref(None, "out", out))
+    return held
+
+
 def _namer() -> None:
     from bark_cli.options import NAMER, Provenance
 
@@ -110,15 +126,18 @@ def analyze(pattern, min_size, scene_file, out, picture_format, dpi):
     """Measure PATTERN (a run folder, a state .npz, a leaf-base .csv or a .toml summary): per-patch orientation and anisotropy (PCA), their
     means, SDs and standard errors; draws the radial plot and the orientation histogram (the
     paper's Fig. 6B, C / 7B, C)."""
-    from rich.console import Console
-
-    from bark.io.folder import writable_folder
-    from bark.io.files import write_csv, write_json
-
     _namer()
     (stats,) = _read_all([pattern], min_size)
     analyses = None if scene_file is None else _scene_analyses(Path(pattern), scene_file)
-    folder = writable_folder(out)
+    with _held(out, run_files_kept=True) as held:
+        return _analyze(pattern, stats, analyses, min_size, held.path, picture_format, dpi)
+
+
+def _analyze(pattern, stats, analyses, min_size, folder, picture_format, dpi) -> int:
+    from rich.console import Console
+
+    from bark.io.files import write_csv, write_json
+
     console = Console(width=150)
     console.print(_statistics_table([stats]))
     network = _network(Path(pattern), stats, min_size)
@@ -199,13 +218,9 @@ def compare(patterns, min_size, mirror, out, picture_format, dpi):
     d_P of orientation and of anisotropy (the paper's eqs. 12–15); for four, the quartet analyses
     and their diagram (Fig. 8)."""
     import attrs
-    from rich.console import Console
-    from rich.table import Table
 
-    from bark.analysis.compare import QUANTITIES, compare as compare_all
+    from bark.analysis.compare import compare as compare_all
     from bark.errors import BarkError
-    from bark.io.folder import writable_folder
-    from bark.io.files import write_json
 
     _namer()
     if len(patterns) < 2:
@@ -218,7 +233,17 @@ def compare(patterns, min_size, mirror, out, picture_format, dpi):
         stats = [attrs.evolve(s, name=f"{i + 1}:{s.name}") for i, s in enumerate(stats)]
         names = [s.name for s in stats]
     result = compare_all(stats)
-    folder = writable_folder(out)
+    with _held(out) as held:
+        return _compare(stats, names, result, held.path, picture_format, dpi)
+
+
+def _compare(stats, names, result, folder, picture_format, dpi) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from bark.analysis.compare import QUANTITIES
+    from bark.io.files import write_json
+
     console = Console(width=150)
     console.print(_statistics_table(stats))
     hands = {s.handedness for s in stats} - {None}

@@ -355,3 +355,41 @@ def test_a_resume_onto_a_size_limit_leaves_no_output_of_the_earlier_state(tmp_pa
     assert again.returncode == 0, again.stderr
     for name in ("breaks.csv", "state.npz", "patches.csv"):
         assert (out / name).read_bytes() == (whole / name).read_bytes(), name
+
+
+@pytest.fixture
+def held(tmp_path):
+    """A folder held by another process as a bark command holds its --out (the lock its writes take)."""
+    folder = tmp_path / "held"
+    code = ("import sys\nfrom bark.io.folder import held_folder\nh = held_folder(sys.argv[1])\n"
+            "print('held', flush=True)\nsys.stdin.read()\n")
+    proc = subprocess.Popen([sys.executable, "-c", code, str(folder)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True)
+    assert proc.stdout.readline().strip() == "held"
+    yield folder, proc.pid
+    proc.stdin.close()
+    proc.wait(timeout=60)
+    proc.stdout.close()
+
+
+@pytest.mark.parametrize("command", ["analyze", "compare"])
+def test_a_folder_another_command_writes_is_refused_naming_it(command, patterned, held):
+    """Two analyses into one --out both said they wrote; now the second is refused in one line
+    that names the process holding the folder, and writes nothing."""
+    folder, pid = held
+    patterns = [str(patterned[0])] if command == "analyze" else [str(p) for p in patterned[:2]]
+    result = CliRunner().invoke(cli, [command, *patterns, "--out", str(folder)])
+    assert result.exit_code == 2, result.output
+    assert_clean_outcome(result)
+    assert f"--out {folder}: python -c" in result.stderr and f"(process {pid}) is writing there" in result.stderr
+    assert list(folder.iterdir()) == []
+
+
+def test_an_analysis_into_a_runs_folder_is_refused_and_the_run_kept(patterned, tmp_path):
+    run = tmp_path / "run"
+    assert CliRunner().invoke(cli, ["simulate", *SMALL, "--quiet", "--out", str(run)]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in run.iterdir()}
+    result = CliRunner().invoke(cli, ["analyze", str(patterned[0]), "--out", str(run)])
+    assert result.exit_code == 2 and "holds a run of bark simulate" in result.stderr, result.output
+    assert_clean_outcome(result)
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == before

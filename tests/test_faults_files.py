@@ -299,9 +299,10 @@ def test_two_runs_into_one_folder_at_once(tmp_path):
     out = tmp_path / "out"
     with OutputFolder.open(out, fresh=True):  # another run holds it
         result = _simulate(*SMALL, "--out", str(out))
-        assert result.exit_code == 2 and "another bark run" in result.stderr
+        held = f"(process {os.getpid()}) is writing there"
+        assert result.exit_code == 2 and held in result.stderr, result.stderr
         result = _simulate("--resume", str(out))
-        assert result.exit_code == 2 and "another bark run" in result.stderr
+        assert result.exit_code == 2 and held in result.stderr, result.stderr
     assert _simulate(*SMALL, "--out", str(out)).exit_code == 0  # released
 
 

@@ -282,7 +282,7 @@ def test_a_sweep_folder_holds_one_sweep_at_a_time(tmp_path):
     out = tmp_path / "s"
     with held_folder(out):  # a sweep writing there
         r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--grid", "growth.G=0.02", "--out", str(out), "--quiet"])
-    assert r.exit_code == 2 and "another bark sweep is writing there" in r.stderr, r.output
+    assert r.exit_code == 2 and f"(process {os.getpid()}) is writing there" in r.stderr, r.output
     assert not (out / "sweep.sqlite").exists()
 
 

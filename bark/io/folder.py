@@ -35,7 +35,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX: no locking
     fcntl = None
 
-__all__ = ["RUN_FILES", "OutputFolder", "held_folder", "writable_folder"]
+__all__ = ["RUN_FILES", "OutputFolder", "held_folder", "holds_a_run", "writable_folder"]
 
 RUN_FILES = ("summary.json", "scene.toml", "report.html", "analysis-*.csv",
              *dict.fromkeys(in_format(f, fmt) for effect in EFFECTS.values() for f in effect.files
@@ -45,6 +45,12 @@ analyzers' tables (``analysis-<analyzer>-<table>.csv``) and
 each effect's files in every picture format (``Effect.files``; a
 name may be a pattern in a folder of the run's, such as the history's ``history/tree-*.vtu``).  A fresh
 run removes these (and only these) from its folder."""
+
+
+def holds_a_run(path: Path) -> bool:
+    """Whether the folder ``path`` holds a run of ``bark simulate`` (begun, ended or stopped)."""
+    return any((path / name).is_file() for name in ("summary.json", "scene.toml", CHECKPOINT_NAME, "state.npz",
+                                                    "breaks.csv"))
 
 
 def run_files(path: Path) -> list[Path]:
@@ -155,14 +161,13 @@ def writable_folder(path: str | Path, key: str = "out") -> Path:
     return path
 
 
-def held_folder(path: str | Path, key: str = "out", what: str = "sweep") -> OutputFolder:
+def held_folder(path: str | Path, key: str = "out") -> OutputFolder:
     """:func:`writable_folder`, locked as a run's folder is (an exclusive ``flock`` on the folder,
-    released when the returned :class:`OutputFolder` closes): one ``what`` at a time writes there —
-    a second sweep into a sweep's folder is refused in one line instead of running every point
-    again beside the first."""
+    released when the returned :class:`OutputFolder` closes): one bark command at a time writes
+    there — a second sweep into a sweep's folder, or two analyses into one, is refused in one line
+    that names the command holding it, instead of both writing."""
     folder = writable_folder(path, key)
-    return OutputFolder(folder, _lock(folder, lambda problem: BarkError("{0}: " + problem, Ref(None, key, str(path))),
-                                      what))
+    return OutputFolder(folder, _lock(folder, lambda problem: BarkError("{0}: " + problem, Ref(None, key, str(path)))))
 
 
 def _check_name(path: Path, fail) -> None:
@@ -186,7 +191,7 @@ def _check_name(path: Path, fail) -> None:
         raise fail(f"the path is {len(raw)} bytes long; this file system takes at most 4096")
 
 
-def _lock(path: Path, fail, what: str = "run") -> int | None:
+def _lock(path: Path, fail) -> int | None:
     if fcntl is None:  # pragma: no cover
         return None
     fd = os.open(path, os.O_RDONLY)
@@ -194,10 +199,36 @@ def _lock(path: Path, fail, what: str = "run") -> int | None:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         os.close(fd)
-        raise fail(f"another bark {what} is writing there; wait for it to end, or choose another folder") from None
+        holder = _holder(path)
+        raise fail(f"{holder or 'another bark command'} is writing there; wait for it to end, or choose another "
+                   f"folder") from None
     except OSError:  # a file system without flock: go on unlocked
         pass
     return fd
+
+
+def _holder(path: Path) -> str | None:
+    """The command holding the lock on the folder ``path``, as its user typed it (``bark sweep ...``,
+    process N), read from Linux's ``/proc/locks`` and the holder's command line; ``None`` where
+    that cannot be known (another system, a process of another user)."""
+    try:
+        st = os.stat(path)
+        key = f"{os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino}"
+        with open("/proc/locks") as fh:
+            pids = [int(f[4]) for f in (line.split() for line in fh) if len(f) > 5 and f[1] == "FLOCK" and f[5] == key]
+        if not pids:
+            return None
+        argv = Path(f"/proc/{pids[0]}/cmdline").read_bytes().decode(errors="replace").split("\0")[:-1]
+    except (OSError, ValueError, IndexError):
+        return None
+    words = [os.path.basename(argv[0]) if argv else "?"] + argv[1:]
+    if "bark_cli" in words:  # python -m bark_cli simulate ...: the command as typed, bark simulate ...
+        words = ["bark", *words[words.index("bark_cli") + 1:]]
+    elif len(words) > 1 and os.path.basename(words[1]) == "bark":  # python .../bin/bark simulate ...
+        words = words[1:]
+    words[0] = os.path.basename(words[0])
+    command = " ".join(" ".join(words).split())  # one line, whatever the arguments held
+    return f"{command if len(command) <= 80 else command[:79] + '…'} (process {pids[0]})"
 
 
 def _probe(path: Path, fail) -> None:
