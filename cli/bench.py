@@ -11,6 +11,7 @@ import click
 import numpy as np
 
 from bark.engine.simulation import Stop
+from bark_cli.options import SCENE_RULE
 
 
 @click.group()
@@ -210,8 +211,9 @@ def _accuracy_methods(quick: bool, integrators=()):
 
 
 @bench.command()
-@click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
-              help="Scene for the pattern error (default: the default scene, vertical regime).")
+@click.option("--scene", "scene_file", default=None, metavar="SCENE",
+              help=f"Scene for the pattern error: the name of one {SCENE_RULE} (default: the default scene, "
+                   "vertical regime).")
 @click.option("--seeds", type=click.IntRange(2, 100), default=3, show_default=True,
               help="Seeds per setting (0, 1, ...); at least 2, for the seed-to-seed spread.")
 @click.option("--until-time", type=click.FloatRange(0, 1e6, min_open=True), default=300.0, show_default=True,

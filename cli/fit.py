@@ -13,6 +13,7 @@ import time
 import click
 
 from bark.errors import BarkError
+from bark_cli.options import SCENE_RULE
 from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -52,7 +53,7 @@ def parse_marks(items: tuple[str, ...], keys: tuple[str, ...]) -> dict[str, dict
 @click.command(context_settings=CONTEXT)
 @click.argument("observed", type=click.Path(), metavar="OBSERVED")
 @click.option("--scene", "scene_file", default=None, metavar="SCENE",
-              help="Scene every run starts from (a TOML file or a shipped scene's name). [default: the default scene]")
+              help=f"Scene every run starts from: the name of one {SCENE_RULE}. [default: the default scene]")
 @click.option("--prior", "priors", multiple=True, metavar="SECTION.KEY=LOW:HIGH[:log]",
               help="A fitted setting and its uniform prior (:log: uniform in its logarithm); repeatable. "
                    "[default: --prior growth.G=0.005:0.016 --prior mechanics.f_max=0.002:0.01]")

@@ -27,8 +27,8 @@ from bark.errors import BarkError, BarkWarning
 from bark.engine.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.contract.strategies import KINDS
 from bark_cli import REASONS, Interrupted
-from bark_cli.options import (NAMER, LazyHelpOption, Provenance, name_ref, overrides_from, parameter_options,
-                              setting_value, split_setting)
+from bark_cli.options import (NAMER, SCENE_RULE, LazyHelpOption, Provenance, name_ref, overrides_from,
+                              parameter_options, setting_value, split_setting)
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 
@@ -293,8 +293,8 @@ def scene_of(params: dict) -> Scene:
 
 
 @cli.command(context_settings=CONTEXT)
-@click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
-              help="A scene: a TOML file, or the name of one bark ships (bark scenes lists them); options given here override it.")
+@click.option("--scene", "scene_file", default=None, metavar="SCENE",
+              help=f"A scene: the name of one {SCENE_RULE}. Options given here override it.")
 @_strategy_option("growth")
 @_strategy_option("integrator")
 @_strategy_option("breaker")
@@ -436,7 +436,7 @@ def _report(outcome, quiet: bool, signum: int | None = None, as_json: bool = Fal
 
 
 @cli.command(context_settings=CONTEXT)
-@click.argument("scene_file", type=click.Path(dir_okay=False), required=False)
+@click.argument("scene_file", metavar="[SCENE]", required=False)
 def plan(scene_file):
     """Show what SCENE (default: the default scene) will simulate and write, and why each effect is
     there: asked for by the scene, or needed by another effect.  Nothing is built or run."""

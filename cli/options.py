@@ -261,3 +261,7 @@ def value_text(value) -> str:
     """A setting's value as shown to the user (tables, progress, figure labels): a float in its
     shortest form (``%g``), anything else as it is."""
     return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+SCENE_RULE = "bark ships (bark scenes lists them), or a TOML file: a path with a folder in it or a name ending in .toml (./vertical is a file called vertical here; vertical is the shipped scene)"
+"""How a ``--scene`` value names a scene (``bark.engine.scene.find_scene``), said in every command's help."""

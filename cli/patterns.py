@@ -14,6 +14,8 @@ from pathlib import Path
 
 import click
 
+from bark_cli.options import SCENE_RULE
+
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 ANALYZE_FILES = ("statistics.json", "patches.csv", "radial.png", "histogram.png")
 """Every file ``bark analyze`` may write into its --out (the folder holds only this call's)."""
@@ -116,8 +118,8 @@ def _statistics_table(stats):
 @click.option("--min-size", type=click.IntRange(1, 10**9), default=None,
               help="Patches with fewer leaf bases are left out. [default: the run's own, else 7]")
 @click.option("--scene", "scene_file", default=None, metavar="SCENE",
-              help="Also run this scene's analyzers ([analyzer] or [[analyzer]]; a TOML file or a shipped scene's "
-                   "name) on PATTERN: their summaries in statistics.json under 'analyses', each table as "
+              help=f"Also run this scene's analyzers ([analyzer] or [[analyzer]]; the name of one {SCENE_RULE}) "
+                   "on PATTERN: their summaries in statistics.json under 'analyses', each table as "
                    "analysis-<analyzer>-<table>.csv. A pattern without springs (a photograph) gives them none.")
 @click.option("--out", default="bark-analysis", show_default=True, type=click.Path(file_okay=False),
               help="Folder for statistics.json, patches.csv, radial.png and histogram.png.")

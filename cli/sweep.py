@@ -12,7 +12,7 @@ import sys
 import click
 
 from bark.errors import BarkError
-from bark_cli.options import setting_value, split_setting, value_text
+from bark_cli.options import SCENE_RULE, setting_value, split_setting, value_text
 from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -115,8 +115,9 @@ def parse_ranges(items: tuple[str, ...], option: str = "--range") -> dict:
 
 
 @click.command(context_settings=CONTEXT)
-@click.option("--scene", "scene_file", type=click.Path(dir_okay=False), default=None,
-              help="Scene TOML file each point starts from [default: the default scene, Table 2's vertical regime].")
+@click.option("--scene", "scene_file", default=None, metavar="SCENE",
+              help=f"The scene each point starts from: the name of one {SCENE_RULE} [default: the default scene, "
+                   "Table 2's vertical regime].")
 @click.option("--grid", "grids", multiple=True, metavar="SECTION.KEY=V1,V2,...",
               help="A swept setting and its values (or START:STOP:N); repeat for more axes. "
                    "[default: the paper's Fig. 9: --grid growth.G=0.007,0.011,0.014 --grid mechanics.f_max=0.0028,0.005,0.008]")

@@ -272,7 +272,7 @@ def test_vertical_scene_equals_defaults():
     assert shipped == default
 
 
-def test_a_shipped_scene_runs_by_its_name_and_a_file_of_that_name_comes_first(tmp_path, monkeypatch):
+def test_a_shipped_scene_runs_by_its_name_and_a_path_names_a_file(tmp_path, monkeypatch):
     from bark.engine.scene import SHIPPED, find_scene, shipped_scenes
 
     names = shipped_scenes()
@@ -281,8 +281,21 @@ def test_a_shipped_scene_runs_by_its_name_and_a_file_of_that_name_comes_first(tm
     assert find_scene("whole-tree") == find_scene("whole-tree.toml") == SHIPPED / "whole-tree.toml"
     assert Scene.from_toml("reticulate").to_dict() == Scene.from_toml(SHIPPED / "reticulate.toml").to_dict()
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "reticulate").write_text('[lattice]\nn_bases = 400\n[run]\nuntil_time = 1.0\n')
-    assert Scene.from_toml("reticulate").lattice.n_bases == 400  # a file there is what was meant
+    small = '[lattice]\nn_bases = 400\n[run]\nuntil_time = 1.0\n'
+    (tmp_path / "reticulate").write_text(small)
+    with pytest.warns(BarkWarning, match=r"scene 'reticulate' is the scene bark ships; the file 'reticulate' here is "
+                                         r"not read \('\./reticulate' names it\)"):
+        assert Scene.from_toml("reticulate").lattice.n_bases == 3000  # a bare name is the shipped scene
+    assert Scene.from_toml("./reticulate").lattice.n_bases == 400     # a path is a file
+    (tmp_path / "reticulate").unlink()
+    (tmp_path / "reticulate").mkdir()  # an earlier --out reticulate
+    with pytest.warns(BarkWarning, match="the folder 'reticulate' here is not read"):
+        assert Scene.from_toml("reticulate").lattice.n_bases == 3000
+    (tmp_path / "diamond.toml").write_text(small)
+    with pytest.warns(BarkWarning, match=r"the file 'diamond.toml' here is read, not the scene bark ships"):
+        assert Scene.from_toml("diamond.toml").lattice.n_bases == 400
+    (tmp_path / "mine").write_text(small)
+    assert Scene.from_toml("mine").lattice.n_bases == 400  # no scene bark ships is called so: the file
     with pytest.raises(BarkError) as err:
         Scene.from_toml("no-such-scene")
     assert "'no-such-scene' does not exist" in str(err.value) and "whole-tree" in str(err.value)
@@ -314,3 +327,23 @@ def test_scene_toml_gives_the_scene_back_setting_for_setting():
         scene = Scene.from_toml(path)
         text = scene.to_toml()
         assert Scene.from_dict(tomllib.loads(text)).to_dict() == scene.to_dict(), name
+
+
+@pytest.mark.parametrize("command", [["plan"], ["simulate", "--until-time", "0.5", "--n-bases", "300", "--out", "o",
+                                                 "--quiet", "--scene"], ["sweep", "--grid", "growth.G=0.02", "--set",
+                                                                         "run.until_time=0.5", "--set",
+                                                                         "lattice.n_bases=300", "--out", "s",
+                                                                         "--quiet", "--scene"]])
+def test_a_folder_named_as_a_shipped_scene_does_not_shadow_it(command, tmp_path, monkeypatch):
+    """An earlier ``--out vertical`` made ``--scene vertical`` fail ("is a directory"): a bare name
+    is the shipped scene, and the command says that the folder here is not read."""
+    from click.testing import CliRunner
+
+    from bark_cli.main import cli
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "vertical").mkdir()
+    result = CliRunner().invoke(cli, [*command, "vertical"])
+    assert result.exit_code == 0, result.output
+    assert "the folder 'vertical' here is not read ('./vertical' names it)" in result.stderr
+    assert "Traceback" not in result.output

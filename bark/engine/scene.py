@@ -582,14 +582,28 @@ def shipped_scenes() -> dict[str, Path]:
 
 
 def find_scene(given: str | Path) -> Path:
-    """The scene file ``given`` names: a file that exists, or else, for a bare name (no folder, with
-    or without ``.toml``), the shipped scene of that name; else ``given`` itself (``read_toml`` then
-    says it does not exist)."""
+    """The scene file ``given`` names, by one rule: a path with a folder in it (``./vertical``,
+    ``runs/a/scene.toml``) is that file; a bare name ending in ``.toml`` is the file of that name
+    here, or else the shipped scene of that name; any other bare name (``vertical``) is the scene bark
+    ships under it, never a file that happens to be called so in the current folder — a warning
+    says when one is (``./vertical`` names it).  A bare name that is no shipped scene is the file of
+    that name (``read_toml`` says when there is none, and which scenes there are)."""
     path = Path(given)
-    if os.path.lexists(path) or len(path.parts) != 1:
+    if "/" in str(given) or os.sep in str(given) or len(path.parts) != 1:  # (Path drops a leading ./)
         return path
     shipped = SHIPPED / (path.name if path.suffix == ".toml" else f"{path.name}.toml")
-    return shipped if shipped.is_file() else path
+    here = os.path.lexists(path)
+    if path.suffix == ".toml" and here:
+        if shipped.is_file():
+            warnings.warn(f"scene {str(given)!r}: the file {str(given)!r} here is read, not the scene bark ships of "
+                          f"that name ({path.stem!r} names that one)", BarkWarning, stacklevel=3)
+        return path
+    if shipped.is_file():
+        if here:
+            warnings.warn(f"scene {str(given)!r} is the scene bark ships; the {'folder' if path.is_dir() else 'file'} "
+                          f"{str(given)!r} here is not read ({'./' + str(given)!r} names it)", BarkWarning, stacklevel=3)
+        return shipped
+    return path
 
 
 def read_toml(path: str | Path) -> dict[str, Any]:
