@@ -61,11 +61,14 @@ def report(folder):
     except ImportError:
         raise BarkError("bark report needs plotly, for its interactive views: pip install 'bark-grasstree[report]'") \
             from None
+    from bark.io.folder import held_folder
+
     path = Path(folder)
     if not path.is_dir():
         raise BarkError(f"{str(path)!r} is not a folder of a bark run or sweep")
-    page = _sweep_page(path) if (path / "sweep.sqlite").is_file() else _run_page(path)
-    target = atomic_write(path / "report.html", lambda fh: fh.write(page.encode()))
+    with held_folder(path):  # no run or sweep is writing there meanwhile, and no other report
+        page = _sweep_page(path) if (path / "sweep.sqlite").is_file() else _run_page(path)
+        target = atomic_write(path / "report.html", lambda fh: fh.write(page.encode()))
     click.echo(f"bark: report in {target}")
 
 
@@ -77,22 +80,27 @@ def _run_page(path: Path) -> str:
         summary = json.loads(summary_file.read_text())
     except (OSError, ValueError) as err:
         raise BarkError(f"{str(summary_file)!r} cannot be read ({err})") from None
-    name = summary.get("settings", {}).get("scene", {}).get("name") or path.name
-    what = summary.get("settings", {}).get("scene", {}).get("description", "")
+    if not isinstance(summary, dict) or not isinstance(summary.get("settings", {}), dict):
+        raise BarkError(f"{str(summary_file)!r} is not a run's summary (a JSON object with its settings)")
+    scene = summary.get("settings", {}).get("scene", {})
+    scene = scene if isinstance(scene, dict) else {}
+    name, what = str(scene.get("name") or path.name), str(scene.get("description", ""))
     parts = [f"<h1>bark run: {html.escape(name)}</h1>", f"<p>{html.escape(what)}</p>",
-             _provenance(summary), _statistics(summary), _trunk(path), _series(path), _pictures(path),
+             _provenance(summary), _statistics(summary), _trunk(path, summary), _series(path), _pictures(path),
              _settings(path, summary)]
     return _page(f"bark: {name}", parts)
 
 
 def _sweep_page(path: Path) -> str:
-    try:
-        con = sqlite3.connect(f"file:{path / 'sweep.sqlite'}?mode=ro", uri=True)
-        cursor = con.execute("SELECT * FROM runs ORDER BY point, seed LIMIT 1000")
-        columns = [d[0] for d in cursor.description]
-        rows = cursor.fetchall()
-        total = con.execute("SELECT count(*) FROM runs").fetchone()[0]
-        con.close()
+    try:  # read only, yet opened as the sweep opens it: closing it then leaves no -wal or -shm file behind
+        con = sqlite3.connect(path / "sweep.sqlite")
+        try:
+            cursor = con.execute("SELECT * FROM runs ORDER BY point, seed LIMIT 1000")
+            columns = [d[0] for d in cursor.description]
+            rows = cursor.fetchall()
+            total = con.execute("SELECT count(*) FROM runs").fetchone()[0]
+        finally:
+            con.close()
     except sqlite3.Error as err:
         raise BarkError(f"{str(path / 'sweep.sqlite')!r} cannot be read as a sweep ({err})") from None
     shown = [c for c in columns if c not in ("scene", "key", "regions")]
@@ -147,33 +155,60 @@ def _statistics(summary: dict) -> str:
     return out
 
 
+KINDS = {"png": "image/png", "gif": "image/gif", "svg": "image/svg+xml", "pdf": "application/pdf"}
+"""The media type of each picture format a run may draw in (``--format``) and of the animation."""
+
+
 def _pictures(path: Path) -> str:
+    """Every picture the run drew, in whichever format it drew it (PNG, SVG or PDF; a PDF as the
+    browser's own viewer shows it, with a link to save it)."""
+    from bark.model.effects import PICTURE_FORMATS, in_format
+
     shown = []
-    for name in PICTURES:
-        file = path / name
-        if not file.is_file():
-            continue
-        kind = "image/gif" if name.endswith(".gif") else "image/png"
-        data = base64.b64encode(file.read_bytes()).decode()
-        shown.append(f"<figure><img alt=\"{name}\" src=\"data:{kind};base64,{data}\"><figcaption>{name}</figcaption></figure>")
+    for base in PICTURES:
+        for name in dict.fromkeys(in_format(base, fmt) for fmt in PICTURE_FORMATS):
+            file = path / name
+            if not file.is_file():
+                continue
+            try:
+                data = base64.b64encode(file.read_bytes()).decode()
+            except OSError as err:
+                shown.append(f"<p>{html.escape(name)} cannot be read ({html.escape(err.strerror or str(err))}).</p>")
+                continue
+            uri = f"data:{KINDS[name.rpartition('.')[2]]};base64,{data}"
+            picture = (f"<object data=\"{uri}\" type=\"application/pdf\" class=\"plot\"><a download=\"{name}\" "
+                       f"href=\"{uri}\">{name}</a></object>" if name.endswith(".pdf") else f"<img alt=\"{name}\" src=\"{uri}\">")
+            shown.append(f"<figure>{picture}<figcaption>{name}</figcaption></figure>")
     return "<h2>Pictures</h2>" + "".join(shown) if shown else ""
 
 
-def _trunk(path: Path) -> str:
-    """The trunk's leaf bases in 3-D (metres), coloured by patch as every picture colours them."""
+def _trunk(path: Path, summary: dict) -> str:
+    """The trunk's leaf bases in 3-D (metres), coloured by patch as every picture colours them; a
+    state.npz that cannot be read, or that is not this run's (its bases, breaks or time are not
+    the summary's), is said instead."""
     import plotly.graph_objects as go
     import plotly.io as pio
 
-    from bark.analysis.pattern import patch_colours
+    from bark.analysis.pattern import Pattern, patch_colours, run_min_size, springs_of
 
-    state = path / "state.npz"
+    title, state = "<h2>The trunk in 3-D</h2>", path / "state.npz"
     if not state.is_file():
-        return "<h2>The trunk in 3-D</h2><p>No state.npz (the run did not ask for <code>state-snapshot</code>).</p>"
-    with np.load(state, allow_pickle=False) as d:
-        x, labels, pairs, intact = d["x"], d["labels"], d["pairs"], d["intact"]
-    summary = json.loads((path / "summary.json").read_text())
-    min_size = summary.get("stop", {}).get("min_patch_size", 7)
-    rgb = patch_colours(labels, min_size, pairs, intact)
+        return title + "<p>No state.npz (the run did not ask for <code>state-snapshot</code>).</p>"
+    try:
+        pattern, springs = Pattern.from_state(state), springs_of(state)
+        with np.load(state, allow_pickle=False) as d:
+            t = float(d["t"]) if "t" in d.files and d["t"].size == 1 else None
+    except (BarkError, OSError, ValueError) as err:
+        return title + f"<p>state.npz cannot be shown: {html.escape(str(err))}</p>"
+    x, labels = pattern.points, pattern.patches
+    pairs, intact = springs[:2] if springs is not None else (None, None)
+    held = {"n_bases": len(x), "n_broken": None if intact is None else int((~intact).sum()), "t": t}
+    differ = [k for k, v in held.items() if v is not None and summary.get(k) is not None and summary.get(k) != v]
+    if differ:
+        return title + ("<p>state.npz is not this run's: " + ", ".join(f"its {k} is {_cell(held[k])}, the summary's "
+                                                                     f"{_cell(summary[k])}" for k in differ)
+                        + " (not shown).</p>")
+    rgb = patch_colours(labels, run_min_size(path), pairs, intact)
     keep = np.arange(len(x)) if len(x) <= MAX_POINTS else np.linspace(0, len(x) - 1, MAX_POINTS).astype(int)
     p = x[keep] * METRES_PER_LENGTH_UNIT
     colours = [f"rgb({r},{g},{b})" for r, g, b in rgb[keep]]
@@ -196,20 +231,37 @@ def _series(path: Path) -> str:
     file = path / "statistics.csv"
     if not file.is_file():
         return ""
-    with open(file, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(file, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        return f"<h2>Along the run</h2><p>statistics.csv cannot be read ({html.escape(str(err))}).</p>"
     if not rows:
         return ""
 
     def column(name):
-        return [float(r[name]) if r.get(name) not in (None, "", "nan") else None for r in rows]
+        def value(k, r):
+            text = r.get(name)
+            if text in (None, "", "nan"):
+                return None
+            try:
+                return float(text)
+            except ValueError:
+                raise ValueError(f"row {k + 1} holds {text[:40]!r} in column {name}") from None
+        return [value(k, r) for k, r in enumerate(rows)]
 
-    t = [years(v) for v in column("t_tu")]
+    try:
+        if "t_tu" not in rows[0]:
+            raise ValueError("it has no column t_tu (time)")
+        t = [None if v is None else years(v) for v in column("t_tu")]
+        columns = {name: column(name) for name in ("n_patches", "n_broken", "mean_orientation_deg")}
+    except ValueError as err:
+        return f"<h2>Along the run</h2><p>statistics.csv cannot be shown: {html.escape(str(err))}.</p>"
     fig = make_subplots(rows=1, cols=3, subplot_titles=("patches", "broken springs", "mean orientation (°)"))
     import plotly.graph_objects as go
 
     for k, name in enumerate(("n_patches", "n_broken", "mean_orientation_deg")):
-        fig.add_trace(go.Scatter(x=t, y=column(name), mode="lines+markers", name=name), row=1, col=k + 1)
+        fig.add_trace(go.Scatter(x=t, y=columns[name], mode="lines+markers", name=name), row=1, col=k + 1)
         fig.update_xaxes(title_text="years", row=1, col=k + 1)
     fig.update_layout(showlegend=False, margin={"t": 40})
     return "<h2>Along the run</h2>" + pio.to_html(fig, include_plotlyjs=False, full_html=False, div_id="series",

@@ -393,3 +393,15 @@ def test_an_analysis_into_a_runs_folder_is_refused_and_the_run_kept(patterned, t
     assert result.exit_code == 2 and "holds a run of bark simulate" in result.stderr, result.output
     assert_clean_outcome(result)
     assert {p.name: p.read_bytes() for p in run.iterdir()} == before
+
+
+def test_a_refused_report_names_report_html_not_its_temporary(patterned, tmp_path):
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(patterned[0], run)
+    proc = _bark("report", str(run), limit=200_000)  # the page inlines plotly: megabytes
+    lines = _lines(proc.stderr)
+    assert proc.returncode == 1 and lines == [f"bark: error: {run / 'report.html'}: File too large"], proc.stderr
+    assert not (run / "report.html").exists()
+    _no_temporaries(run)

@@ -75,14 +75,83 @@ def test_a_folder_without_a_run_is_one_line(tmp_path, make, words):
     assert result.exit_code == 2 and words in result.stderr and len(result.stderr.splitlines()) == 1
 
 
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("small") / "run"
+    want = '["anchors", "damping", "patch-statistics", "statistics-series", "state-snapshot"]'
+    result = CliRunner().invoke(cli, ["simulate", "--n-bases", "600", "--until-time", "60", "--quiet", "--set",
+                                      f"effects.want={want}", "--set", "effects.series_every=10.0", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _state_without(key: str):
+    def damage(p):
+        with np.load(p / "state.npz") as d:
+            kept = {k: d[k] for k in d.files if k != key}
+        np.savez(p / "state.npz", **kept)
+    return damage
+
+
+def _state_of_another_run(p):
+    other = p.parent / "other"
+    assert CliRunner().invoke(cli, ["simulate", "--n-bases", "400", "--until-time", "5", "--quiet", "--out",
+                                    str(other)]).exit_code == 0
+    shutil.copy(other / "state.npz", p / "state.npz")
+
+
+@pytest.mark.parametrize("damage, words", [
+    (lambda p: (p / "state.npz").write_bytes(b"garbage, not an archive"), "state.npz cannot be shown"),
+    (lambda p: (p / "state.npz").write_bytes((p / "state.npz").read_bytes()[:5000]), "state.npz cannot be shown"),
+    (_state_without("labels"), "state.npz cannot be shown"),
+    (_state_of_another_run, "state.npz is not this run's: its n_bases is 400, the summary's 600"),
+    (lambda p: (p / "statistics.csv").write_text("t_tu,n_patches\n1.0,lots\n"),
+     "statistics.csv cannot be shown: row 1 holds &#x27;lots&#x27; in column n_patches"),
+    (lambda p: (p / "statistics.csv").write_text("time,n_patches\n1.0,3\n"), "it has no column t_tu"),
+    (lambda p: (p / "statistics.csv").write_bytes(b"t_tu\n\xff\xfe\n"), "statistics.csv cannot be read"),
+])
+def test_a_damaged_or_foreign_file_is_said_on_the_page_and_the_rest_shown(small_run, tmp_path, damage, words):
+    out = tmp_path / "run"
+    shutil.copytree(small_run, out)
+    damage(out)
+    result = CliRunner().invoke(cli, ["report", str(out)])
+    assert result.exit_code == 0, result.output
+    page = (out / "report.html").read_text()
+    assert words in page
+    assert "Statistics at the end" in page and "Settings" in page
+
+
+@pytest.mark.parametrize("text", ["[1, 2, 3]", '"a run"', "null", '{"settings": [1]}'])
+def test_a_summary_that_is_not_a_runs_is_one_line(small_run, tmp_path, text):
+    out = tmp_path / "run"
+    shutil.copytree(small_run, out)
+    (out / "summary.json").write_text(text)
+    result = CliRunner().invoke(cli, ["report", str(out)])
+    assert result.exit_code == 2 and "is not a run's summary" in result.stderr, result.output
+    assert len(result.stderr.splitlines()) == 1 and not (out / "report.html").exists()
+
+
+@pytest.mark.parametrize("fmt, kind", [("svg", "data:image/svg+xml;base64,"), ("pdf", "data:application/pdf;base64,")])
+def test_pictures_drawn_as_svg_or_pdf_are_on_the_page(tmp_path, fmt, kind):
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["simulate", "--n-bases", "600", "--until-time", "60", "--quiet", "--format", fmt,
+                                      "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert CliRunner().invoke(cli, ["report", str(out)]).exit_code == 0
+    page = (out / "report.html").read_text()
+    assert kind in page and f"pattern.{fmt}" in page
+
+
 def test_a_sweep_gets_a_page_with_its_runs(tmp_path):
     out = tmp_path / "sweep"
     result = CliRunner().invoke(cli, ["sweep", "--grid", "mechanics.f_max=0.004,0.005", "--set", "lattice.n_bases=300",
                                       "--set", "run.until_time=20", "--out", str(out), "--quiet"])
     assert result.exit_code == 0, result.output
+    before = {p.name for p in out.iterdir()}
     assert CliRunner().invoke(cli, ["report", str(out)]).exit_code == 0
     page = (out / "report.html").read_text()
     assert "bark sweep" in page and "2 runs" in page and "mechanics.f_max" in page
+    assert {p.name for p in out.iterdir()} == before | {"report.html"}  # no sweep.sqlite-wal or -shm left
 
 
 @pytest.mark.slow

@@ -50,7 +50,11 @@ def atomic_write(path: str | Path, write: Callable[[io.BufferedWriter], None], *
     the file being replaced goes (moved, not copied), so that the previous version survives until the
     new one is whole and verified."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=temp_name_prefix(path.name), suffix=TMP_SUFFIX, dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=temp_name_prefix(path.name), suffix=TMP_SUFFIX, dir=path.parent)
+    except OSError as err:
+        err.filename = str(path)  # the file the user knows, not the hidden temporary
+        raise
     try:
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         if by_name:
@@ -67,8 +71,10 @@ def atomic_write(path: str | Path, write: Callable[[io.BufferedWriter], None], *
         if keep is not None and path.exists():
             os.replace(path, keep)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(err, OSError) and err.filename in (None, tmp, Path(tmp)):
+            err.filename = str(path)  # the file the user knows, not the hidden temporary
         raise
     _sync_folder(path.parent)
     return path
