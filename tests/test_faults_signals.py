@@ -478,3 +478,53 @@ def test_a_run_whose_terminal_goes_away_stops_leaves_no_process_and_resumes(unin
     assert again.returncode == 0, again.stderr
     for name in COMPARED:
         assert (out / name).read_bytes() == (uninterrupted / name).read_bytes(), name
+
+
+# The final writes of whole-tree-small, in the order they become visible: the end checkpoint, the
+# data files, the pictures (drawn meanwhile in other processes, so their order may vary) and last
+# summary.json.  A SIGKILL to the whole process group as each appears lands spread over those writes.
+FINAL_WRITES = ("checkpoint.npz", "breaks.csv", "state.npz", "statistics.csv", "tree.vtu", "tree.ply", "pattern.png",
+                "development.gif", "tree-series.png", "regions.png", "summary.json")
+TREE = ["--scene", "whole-tree-small", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def whole_tree_small(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tree") / "out"
+    proc = subprocess.run([sys.executable, "-m", "bark_cli", "simulate", *TREE, "--out", str(out)], cwd=REPO_ROOT,
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+def _ended(out: Path, name: str) -> bool:
+    """Whether the run's final write of ``name`` is visible: the end checkpoint, or the file there."""
+    if name != checkpoint.CHECKPOINT_NAME:
+        return (out / name).exists()
+    try:
+        return checkpoint.read_meta(out / name).get("reason") == "end"
+    except (OSError, checkpoint.Damaged):
+        return False
+
+
+@pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
+@pytest.mark.parametrize("instant", FINAL_WRITES)
+def test_a_kill_anywhere_in_the_final_writes_is_finished_by_resume(instant, whole_tree_small, tmp_path):
+    """SIGKILL (the command and its drawing processes) as each of the final writes appears, then
+    ``--resume``: every file of the uninterrupted run is there, the data byte-identical."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "bark_cli", "simulate", *TREE, "--out", str(out)], cwd=REPO_ROOT,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 600
+    while not _ended(out, instant) and proc.poll() is None:
+        assert time.monotonic() < deadline, f"{instant} never appeared"
+        time.sleep(0.005)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    if (out / "summary.json").exists():  # it had finished: summary.json is written last
+        assert {p.name for p in whole_tree_small.iterdir()} <= {p.name for p in out.iterdir()}
+    again = _resume(out)
+    assert again.returncode in (0, 2), again.stderr  # 2: it had ended whole ("nothing to resume")
+    assert {p.name for p in whole_tree_small.iterdir()} <= {p.name for p in out.iterdir()}
+    for name in ("breaks.csv", "state.npz", "patches.csv", "statistics.csv", "tree.vtu", "tree.ply", "scene.toml"):
+        assert (out / name).read_bytes() == (whole_tree_small / name).read_bytes(), name
