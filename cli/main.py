@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import logging
+import os
 import shlex
 import signal
 import sys
@@ -47,6 +48,9 @@ class BarkGroup(click.Group):
             return self._main(args, prog_name, complete_var, **extra)
 
     def _main(self, args, prog_name, complete_var, **extra):
+        # bark's commands draw into files only: matplotlib's Agg, whatever MPLBACKEND a user set for
+        # their own sessions (a window backend, or a mistyped one, broke every picture)
+        os.environ["MPLBACKEND"] = "agg"
         token = NAMER.set(None)
         COMMAND_LINE.set(shlex.join(["bark", *(sys.argv[1:] if args is None else args)]))
         _listen_to_the_library()

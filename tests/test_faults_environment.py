@@ -288,3 +288,16 @@ def test_another_projects_bark_ahead_of_ours_is_one_line(other, tmp_path):
         assert proc.returncode == 1 and len(lines) == 1, proc.stderr
         assert lines[0].startswith("bark: error: ") and "bark-grasstree" in lines[0], proc.stderr
         assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("backend", ["nosuch", "qtagg", *slow_cases("tkagg", "")])
+def test_any_mplbackend_leaves_the_pictures_drawn(backend, tmp_path):
+    """A user's MPLBACKEND (a window backend for their own sessions, or a mistyped one) broke every
+    picture with a traceback from the drawing process; bark's commands draw into files with Agg."""
+    out = tmp_path / "run"
+    proc = _bark("simulate", "--n-bases", "300", "--until-time", "2", "--quiet", "--out", str(out),
+                 env={"MPLBACKEND": backend})
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+    assert (out / "pattern.png").stat().st_size > 0
+    proc = _bark("analyze", str(out), "--out", str(tmp_path / "analysis"), env={"MPLBACKEND": backend})
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
