@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from bark.analysis.circular import hellinger
 from bark.analysis.compare import compare, d_p, distances, pairing, quartet
-from bark.errors import BarkError
+from bark.errors import BarkError, BarkWarning
 from bark.io.output import patch_columns
 from bark.io.files import write_csv
 from bark.analysis.pattern import Pattern, PatternStatistics, axial_se, read, wrapped_normal_se
@@ -602,8 +602,9 @@ def test_the_patch_table_is_its_definitions_patch_by_patch(seed, patches, on_tru
         mine = points[labels == pid]
         assert table.size[k] == len(mine)
         np.testing.assert_allclose(table.centroid[k], mine.mean(axis=0), rtol=1e-12, atol=1e-12)
-        if len(mine) < 2:  # no extent: isotropic, at 90° (as eigh puts an isotropic patch)
-            assert (table.lambda1[k], table.lambda2[k], table.anisotropy[k], table.orientation_deg[k]) == (0, 0, 0, 90)
+        if len(mine) < 2:  # no extent: no orientation, no anisotropy
+            assert (table.lambda1[k], table.lambda2[k]) == (0, 0)
+            assert np.isnan(table.anisotropy[k]) and np.isnan(table.orientation_deg[k])
             continue
         o, a, l1, l2 = principal_axes(tangent_plane(mine) if on_trunk else mine)
         scale = max(l1, 1e-300)
@@ -623,3 +624,21 @@ def test_the_orientation_histogram_keeps_near_vertical_patches_in_one_bar():
     counts = orientation_counts([89.96, 90.04, 81.0, 98.99, 179.0, 1.0, 9.01, 45.0])
     assert counts.sum() == 8 and len(counts) == BINS == 10
     assert counts[5] == 4 and counts[0] == 2 and counts[1] == 1 and counts[2] + counts[3] == 1
+
+
+
+@pytest.mark.parametrize("on_trunk", [False, True])
+def test_a_patch_whose_points_are_all_at_one_place_has_no_orientation(on_trunk):
+    """Digitised so (every base of a patch at one point) a patch read as "at 90°, SD 0, anisotropy
+    0" and was fitted so; now it has none, is left out of the statistics, and a warning says so."""
+    rng = np.random.default_rng(3)
+    spread = rng.normal(0, 0.01, (20, 3 if on_trunk else 2)) + ([1.0, 0.0, 0.5] if on_trunk else [0.0, 0.0])
+    spread[:, 2 if on_trunk else 1] *= 4.0  # elongated up the trunk
+    stacked = np.tile([1.0, 0.0, 0.9] if on_trunk else [3.0, 3.0], (10, 1))
+    pattern = Pattern(points=np.vstack([spread, stacked]), patches=np.r_[np.zeros(20, int), np.ones(10, int)])
+    table = pattern.patch_table(7)
+    assert np.isnan(table.orientation_deg[1]) and np.isnan(table.anisotropy[1])
+    with pytest.warns(BarkWarning, match="1 of its 2 patches have no extent"):
+        stats = pattern.statistics(7)
+    assert stats.n_patches == 1 and stats.orientation.mean_deg == pytest.approx(table.orientation_deg[0])
+    assert math.isfinite(stats.anisotropy.mean)

@@ -31,13 +31,14 @@ import csv
 import io
 import math
 import tomllib
+import warnings
 from pathlib import Path
 
 import attrs
 import numpy as np
 
 from bark.analysis.circular import axial_difference, axial_mean, axial_sd, axial_se
-from bark.errors import BarkError
+from bark.errors import BarkError, BarkWarning
 from bark.paths import is_zip, open_regular
 from bark.units import headed
 
@@ -214,7 +215,8 @@ def _patch_axes(points: np.ndarray, row: np.ndarray, size: np.ndarray, on_trunk:
     ``tangent_plane`` and ``principal_axes``, patch by patch; here their sums go through ``bincount``
     and the 2 × 2 eigenproblem is solved in closed form (the same values to rounding; an exactly
     isotropic patch is at 90° as ``eigh`` puts it), so the statistics of a series of thousands of
-    patches cost a few array passes.  A patch of one point has no extent: λ = 0, isotropic, at 90°."""
+    patches cost a few array passes.  A patch without extent (one point, or all its points at one
+    place: λ1 = λ2 = 0) has no orientation and no anisotropy: NaN, left out of the statistics."""
     k = len(size)
 
     def mean(values):
@@ -235,7 +237,8 @@ def _patch_axes(points: np.ndarray, row: np.ndarray, size: np.ndarray, on_trunk:
     l1, l2 = np.maximum(mid + half, 0.0), np.maximum(mid - half, 0.0)
     orientation = np.where(half > 0.0, np.degrees(0.5 * np.arctan2(2.0 * b, a - c)) % 180.0, 90.0)
     total = l1 + l2
-    anisotropy = np.divide(l1 - l2, total, out=np.zeros(k), where=total > 0)
+    anisotropy = np.divide(l1 - l2, total, out=np.full(k, np.nan), where=total > 0)
+    orientation = np.where(total > 0, orientation, np.nan)
     return centroid, np.column_stack([orientation, anisotropy, l1, l2]).reshape(k, 4)
 
 
@@ -408,10 +411,18 @@ class PatternStatistics:
     @classmethod
     def of_values(cls, orientation_deg: np.ndarray, anisotropy: np.ndarray, name: str = "",
                   patches: PatchTable | None = None, source: str = "") -> "PatternStatistics":
-        """The statistics of patches with these orientations and anisotropies (one each)."""
-        deg = np.asarray(orientation_deg, dtype=float)
+        """The statistics of patches with these orientations and anisotropies (one each).  A patch
+        without extent (NaN: its points all at one place) has no orientation: it is left out, and a
+        warning says how many were (a photograph digitised so is not a pattern of such patches)."""
+        deg, ani = np.asarray(orientation_deg, dtype=float), np.asarray(anisotropy, dtype=float)
+        measured = np.isfinite(deg)
+        if not measured.all():
+            gone = int((~measured).sum())
+            warnings.warn(f"{name or 'pattern'}: {gone} of its {deg.size} patches have no extent (their points all at "
+                          f"one place), so no orientation: left out of its statistics", BarkWarning, stacklevel=2)
+            deg, ani = deg[measured], ani[measured]
         n = int(deg.size)
-        aniso = _linear(np.asarray(anisotropy, dtype=float))
+        aniso = _linear(ani)
         if n == 0:  # no patches: every statistic undefined (NaN), as summary.json writes it (null)
             nan = math.nan
             return cls(name=name, n_patches=0, orientation=Axial(0, nan, nan, nan), anisotropy=aniso,
