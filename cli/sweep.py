@@ -133,6 +133,9 @@ def parse_ranges(items: tuple[str, ...], option: str = "--range") -> dict:
               help="Seed of the --design's draws (the same seed, the same points).")
 @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE", help="Any other scene setting, for every point.")
 @click.option("--seeds", type=click.IntRange(1, 10_000), default=1, show_default=True, help="Runs per point, seeds 0, 1, ...")
+@click.option("--max-runs", type=click.IntRange(1, 1_000_000), default=100_000, show_default=True,
+              help="The most runs (points times seeds) a sweep may be; a larger one is refused before anything is "
+                   "built, since every point's scene is built and checked before the first run. Raise it to run more.")
 @click.option("--workers", type=click.IntRange(1, 4096), default=None,
               help="Local worker processes. [default: 1]")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
@@ -143,8 +146,8 @@ def parse_ranges(items: tuple[str, ...], option: str = "--range") -> dict:
               help="Each run also writes its outputs (as bark simulate does) into --out/runs/KEY, KEY its row's key.")
 @click.option("--quiet", is_flag=True, help="No progress bar and no table.")
 @picture_options
-def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, sets, seeds, workers, dask_address, out,
-          run_folders, quiet, picture_format, dpi):
+def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, sets, seeds, max_runs, workers,
+          dask_address, out, run_folders, quiet, picture_format, dpi):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
@@ -187,6 +190,12 @@ def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, 
         source = "--grid"
     prov.add(source, layer)
     plan = Sweep(base=base, axes=axes, seeds=range(seeds), listed=design is not None or points_file is not None)
+    if plan.runs > max_runs:
+        given = {"--range": f"--samples {samples}", "--points": f"--points {points_file}"}.get(source, source)
+        raise BarkError(f"{given} with --seeds {seeds} is a sweep of {plan.runs:,} runs, more than --max-runs {max_runs}: "
+                        "every point's scene is built and checked before the first run; raise --max-runs to run it")
+    if plan.runs > 10_000 and not quiet:
+        click.echo(f"bark: checking the {plan.runs:,} runs' scenes before the first run", err=True)
     plan.points()  # every point checked: a bad value is one line before anything is written
     if dask_address is None:  # and on this machine, that it fits in memory, so many at once
         check_fits(plan, workers or 1)

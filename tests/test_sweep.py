@@ -495,3 +495,19 @@ def test_bad_point_files_are_one_line(tmp_path, text, message):
     csv.write_text(text)
     r = CliRunner().invoke(cli, ["sweep", *TINY_SET, "--points", str(csv), "--out", str(tmp_path / "s"), "--quiet"])
     assert r.exit_code == 2 and message in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+@pytest.mark.parametrize("argv, runs", [(["--design", "random", "--samples", "150000", "--range", "growth.G=0.01:0.02"],
+                                         "150,000"),
+                                        (["--grid", "growth.G=0.01:0.02:400", "--grid", "mechanics.f_max=0.002:0.004:300"],
+                                         "120,000"),
+                                        (["--design", "lhs", "--samples", "60000", "--range", "growth.G=0.01:0.02",
+                                          "--seeds", "2"], "120,000")])
+def test_a_sweep_over_its_bound_is_refused_before_anything_is_built(argv, runs, tmp_path):
+    """--samples 1000000 built a million scenes for a quarter of an hour without a word; a sweep of
+    more runs than --max-runs is one line, at once, and raising the bound is the way on."""
+    out = tmp_path / "s"
+    result = CliRunner().invoke(cli, ["sweep", *argv, "--out", str(out), "--quiet"])
+    assert result.exit_code == 2, result.output
+    assert f"a sweep of {runs} runs, more than --max-runs 100000" in result.stderr and "raise --max-runs" in result.stderr
+    assert len(result.stderr.splitlines()) == 1 and not out.exists()

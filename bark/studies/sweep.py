@@ -144,7 +144,7 @@ class Sweep:
             raise BarkError("sweep: seeds are not an axis; give them as the sweep's seeds")
         if not self.seeds or len(set(self.seeds)) != len(self.seeds):
             raise BarkError("sweep: the seeds must be distinct, and at least one")
-        runs = math.prod(self.shape) * len(self.seeds)
+        runs = self.runs
         if runs > MAX_RUNS:
             raise BarkError(f"sweep: {runs:,} runs ({' × '.join(map(str, self.shape))} points × {len(self.seeds)} "
                             f"seed{'s' if len(self.seeds) > 1 else ''}); at most {MAX_RUNS:,} in one table: split "
@@ -154,6 +154,11 @@ class Sweep:
     def shape(self) -> tuple[int, ...]:
         """The grid's shape; a list of points has one dimension, its length."""
         return (len(self.axes[0].values) if self.axes else 1,) if self.listed else tuple(len(a.values) for a in self.axes)
+
+    @property
+    def runs(self) -> int:
+        """How many runs the sweep is: its points times its seeds (known before any is built)."""
+        return math.prod(self.shape) * len(self.seeds)
 
     def points(self) -> list[Point]:
         """Every run, grid point by grid point (the first axis slowest), seeds innermost; each scene
