@@ -37,8 +37,10 @@ def matplotlib_folder() -> None:
     from bark.engine.kernels.numba_env import writable
 
     home = os.environ.get("XDG_CONFIG_HOME") or os.path.join(os.path.expanduser("~"), ".config")
-    if writable(Path(home) / "matplotlib"):
+    cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    if writable(Path(home) / "matplotlib") and writable(Path(cache) / "matplotlib"):  # its settings, its font cache
         return
+    home = home if not writable(Path(home) / "matplotlib") else cache
     folder = Path(tempfile.gettempdir()) / f"bark-matplotlib-{os.getuid() if hasattr(os, 'getuid') else 0}"
     if writable(folder):
         os.environ["MPLCONFIGDIR"] = str(folder)
