@@ -56,6 +56,9 @@ class BarkGroup(click.Group):
         _listen_to_the_library()
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.NoArgsIsHelpError as err:  # `bark` alone: its help, as `bark --help` gives it
+            click.echo(err.ctx.get_help())
+            sys.exit(0)
         except click.ClickException as err:
             click.echo(f"bark: error: {err.format_message()}", err=True)
             sys.exit(err.exit_code)

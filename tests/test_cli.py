@@ -316,3 +316,11 @@ def test_a_run_whose_stderr_is_a_file_logs_its_progress_there_in_plain_lines(tmp
     assert len(lines) >= 3 and all(line.startswith("bark: t = ") and "elapsed" in line for line in lines), lines[:3]
     assert "left" in lines[1] and lines[-1].startswith("bark: t = 60 (") and "100.0 %" in lines[-1]
     assert json.loads(done.stdout) == json.loads((tmp_path / "out" / "summary.json").read_text())
+
+
+def test_bark_alone_prints_its_help_not_an_error():
+    """``bark`` (or ``python -m bark``) without a command printed its usage as "bark: error: Usage: ..."
+    with status 2: it is a request for help."""
+    result = CliRunner().invoke(cli, [])
+    assert result.exit_code == 0 and result.stderr == "", result.output
+    assert result.stdout.startswith("Usage: ") and "simulate" in result.stdout
