@@ -97,18 +97,24 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
     from bark.io.folder import held_folder
     from bark.studies.fit import DEFAULT_PRIORS, Fit, Observed, Prior, needs_pyabc
     from bark_cli.main import _parse_set
-    from bark_cli.options import NAMER, Provenance
+    from bark_cli.options import NAMER, Provenance, split_setting
     from bark_cli.sweep import _dask_client, parse_ranges
 
     prov = Provenance(aliases={(None, "out"): "--out", (None, "workers"): "--workers", (None, "seed"): "--seed"})
     NAMER.set(prov.name)
-    needs_pyabc()
+    needs_pyabc(load=False)  # installed; imported only once every setting is checked
     if dask_address is not None and workers is not None:
         raise BarkError("--workers and --dask: local processes or a Dask cluster, not both")
     ranges = parse_ranges(priors, "--prior") if priors else {p.key: (p.low, p.high, p.log) for p in DEFAULT_PRIORS}
+    prior_layer: dict = {}
+    for item in priors:  # a fitted setting is named in messages as its --prior was typed
+        section, key, _ = split_setting(item) or ("", item, "")
+        prior_layer.setdefault(section, {})[key] = item
+        prov.prior_items[(section, key)] = item.strip()
     set_layer, prov.set_items = _parse_set(sets)
     base = prov.add(f"file:{scene_file}", read_toml(scene_file)) if scene_file else {}
     base = merge(base, prov.add("--set", set_layer))
+    prov.add("--prior", prior_layer)
     clash = [k for k in ranges if k.partition(".")[2] in set_layer.get(k.partition(".")[0], {})]
     if clash:
         raise BarkError(f"--prior {clash[0]} and --set {clash[0]}: a setting is fitted or set, not both")

@@ -185,6 +185,8 @@ class Provenance:
     """``(source, tables)``: ``source`` is ``"file:PATH"``, ``"--set"``, ``"option"``."""
     set_items: dict[tuple[str, str], str] = attrs.field(factory=dict)
     """The text of each ``--set`` item, by (section, key)."""
+    prior_items: dict[tuple[str, str], str] = attrs.field(factory=dict)
+    """The text of each ``--prior`` item (``bark fit``), by (section, key)."""
     aliases: dict[tuple[str | None, str], str] = attrs.field(factory=dict)
     """Options of the command at hand that set a scene key under another name (``bark bench
     accuracy --reference-dt`` sets ``[run] dt``)."""
@@ -212,6 +214,9 @@ class Provenance:
             if not nested:
                 return item
             return f"{ref.key} in {item}" if not ref.given else f"{ref.key} = {show(ref.value)} in {item}"
+        if source == "--prior":  # a fitted setting: its range as typed, and the value in it that fails
+            item = f"--prior {self.prior_items.get((ref.section, ref.top_key), f'{ref.section}.{ref.key}')}"
+            return f"{item} (at {_cli_value(ref.value)})" if ref.given else item
         if source == "--grid":  # one value of a swept setting
             return f"--grid {ref.section}.{ref.key}={_cli_value(ref.value)}"
         if source in ("--points", "--range"):  # a listed point's value, given or drawn

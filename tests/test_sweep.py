@@ -405,7 +405,7 @@ def test_a_local_worker_takes_its_share_of_the_cores_unless_the_user_set_it(monk
 
 @pytest.mark.parametrize("args, says", [
     (["--grid", "lattice.n_bases=1000,50000000"], "a run this size needs about"),
-    (["--grid", "lattice.n_bases=1000,4000000", "--workers", "8"], "2 runs this size at once need about"),
+    (["--grid", "lattice.n_bases=1000,4000000", "--workers", "8"], "--workers: 2 runs of 4,000,000 bases at once need about"),
 ])
 def test_a_point_too_big_for_this_machine_is_refused_before_any_runs(args, says, tmp_path, monkeypatch):
     """Every point fits in memory, with as many at once as there are workers, before anything is
@@ -416,7 +416,8 @@ def test_a_point_too_big_for_this_machine_is_refused_before_any_runs(args, says,
     out = tmp_path / "s"
     r = CliRunner().invoke(cli, ["sweep", *args, "--set", "run.until_time=1", "--quiet", "--out", str(out)])
     assert r.exit_code == 2, r.output
-    assert says in r.stderr and "--grid lattice.n_bases=" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert says in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert ("--grid lattice.n_bases=" in r.stderr) == ("--workers" not in args), r.stderr  # what is too much, as typed
     assert not out.exists()
 
 

@@ -347,7 +347,13 @@ class Scene:
         _moved(data)
         unknown = sorted(set(data) - set(SECTIONS), key=str)
         if unknown:
-            raise BarkError(f"unknown table [{unknown[0]}] in scene: allowed are {', '.join(f'[{s}]' for s in SECTIONS)}")
+            allowed = ", ".join(f"[{s}]" for s in SECTIONS)
+            table = data[unknown[0]]
+            if table:  # named as the user gave it: the --set or --grid item, or the key in the scene file
+                key = next(iter(table))
+                raise BarkError(f"{{0}}: there is no table [{unknown[0]}] in a scene; allowed are {allowed}",
+                                Ref(str(unknown[0]), str(key), table[key]))
+            raise BarkError(f"unknown table [{unknown[0]}] in scene: allowed are {allowed}")
         meta = construct(SceneInfo, dict(data.get("scene", {})), "[scene]")
         tables = {s: dict(data.get(s, {})) for s in PARAM_SECTIONS}
         if any(k in tables["run"] for k in STOP_KEYS):  # stop conditions given replace the default ones
@@ -458,9 +464,13 @@ class Scene:
         have = available_memory() if have == -1 else have
         need = self.memory_estimate() * runs
         if have is not None and need > have:
-            at_once = f"{runs} runs this size at once need" if runs > 1 else "a run this size needs"
-            raise BarkError(f"{{0}}: {at_once} about {need / 2**30:.3g} GiB of memory, and this machine "
-                            f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", self.lattice.n_bases))
+            n = self.lattice.n_bases
+            if runs > 1:  # the runs side by side are what is too many (a sweep's or a fit's workers)
+                raise BarkError(f"{{0}}: {runs} runs of {n:,} bases at once need about {need / 2**30:.3g} GiB of memory, "
+                                f"and this machine has {have / 2**30:.3g} GiB available; fewer workers fit",
+                                Ref(None, "workers", MISSING))
+            raise BarkError(f"{{0}}: a run this size needs about {need / 2**30:.3g} GiB of memory, and this machine "
+                            f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", n))
 
     def stop(self) -> Stop:
         return self.run.stop()

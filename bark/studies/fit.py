@@ -116,12 +116,21 @@ DEFAULT_PRIORS = (Prior("growth.G", 0.005, 0.016), Prior("mechanics.f_max", 0.00
 range that holds Table 2's three regimes with a margin."""
 
 
-def needs_pyabc():
-    """pyabc, or one line saying how to install it (``bark fit`` needs it; bark does not otherwise)."""
+def needs_pyabc(load: bool = True):
+    """pyabc, or one line saying how to install it (``bark fit`` needs it; bark does not otherwise).
+    ``load=False``: only whether it is installed, found without importing it (seconds: SQLAlchemy,
+    pandas), so that a fit's settings are checked before that cost."""
+    import importlib.util
+
+    message = "bark fit needs pyabc: pip install 'bark-grasstree[fit]' (or pip install pyabc)"
+    if not load:
+        if importlib.util.find_spec("pyabc") is None:
+            raise BarkError(message)
+        return None
     try:
         import pyabc
     except ImportError:
-        raise BarkError("bark fit needs pyabc: pip install 'bark-grasstree[fit]' (or pip install pyabc)") from None
+        raise BarkError(message) from None
     return pyabc
 
 
