@@ -192,18 +192,47 @@ def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, mar
             sys.exit(1)
         except KeyboardInterrupt:
             progress.close()
-            from bark.studies.fit import load_fit
-
-            n = len(load_fit(plan, database).generations)
             signum = signals.received or signal.SIGINT
-            click.echo(f"bark: fit stopped by {signal.Signals(signum).name}: {n} generation{'s' if n != 1 else ''} "
-                       f"in {database}; the same command goes on", err=True)
+            try:  # counted for the message; a second signal meanwhile skips the count, nothing else
+                from bark.studies.fit import load_fit
+
+                n = len(load_fit(plan, database).generations)
+                held = f"{n} generation{'s' if n != 1 else ''} in {database}"
+            except KeyboardInterrupt:
+                held = f"the generations finished are in {database}"
+            click.echo(f"bark: fit stopped by {signal.Signals(signum).name}: {held}; the same command goes on", err=True)
             sys.exit(128 + int(signum))
+        except Exception as err:
+            why = _refused_by_the_disk(err)
+            if why is None:
+                raise
+            progress.close()
+            click.echo(f"bark: error: {database}: could not be written ({why}); the generations finished before are "
+                       "kept in it: once there is room, the same command goes on", err=True)
+            sys.exit(1)
         finally:
             progress.close()
             if client is not None:
                 client.close()
     _finish(result, folder, runs, marks, quiet, pictures)
+
+
+def _refused_by_the_disk(err: BaseException) -> str | None:
+    """Why the file system refused the fit's database (a full disk, a quota, a file-size limit),
+    found in ``err`` or what it wraps (SQLAlchemy's ``orig``, the exception's causes); ``None``
+    when that is not what happened."""
+    import errno
+    import sqlite3
+
+    seen = 0
+    while err is not None and seen < 8:
+        if isinstance(err, OSError) and err.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+            return err.strerror or str(err)
+        if isinstance(err, sqlite3.OperationalError) and any(
+                words in str(err) for words in ("disk is full", "disk I/O error", "too large")):
+            return str(err)
+        err, seen = getattr(err, "orig", None) or err.__cause__ or err.__context__, seen + 1
+    return None
 
 
 def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures) -> None:

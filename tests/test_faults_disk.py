@@ -381,7 +381,8 @@ def test_a_folder_another_command_writes_is_refused_naming_it(command, patterned
     result = CliRunner().invoke(cli, [command, *patterns, "--out", str(folder)])
     assert result.exit_code == 2, result.output
     assert_clean_outcome(result)
-    assert f"--out {folder}: python -c" in result.stderr and f"(process {pid}) is writing there" in result.stderr
+    assert f"--out {folder}: {Path(sys.executable).name} -c import sys" in result.stderr, result.stderr
+    assert f"(process {pid}) is writing there" in result.stderr
     assert list(folder.iterdir()) == []
 
 

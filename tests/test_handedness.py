@@ -77,7 +77,7 @@ def test_no_handedness_where_the_spiral_has_no_direction():
 def test_a_mirror_image_has_the_other_handedness_and_a_photograph_none():
     stats = PatternStatistics.of_values([30.0, 40.0, 50.0], [0.5, 0.6, 0.7])
     assert stats.handedness is None and stats.mirrored().handedness is None
-    right = Pattern(points=np.zeros((3, 3)) + [[1, 0, 0]], patches=[0, 0, 0], handedness="right")
+    right = Pattern(points=[[1.0, 0.0, 0.0], [1.0, 0.0, 0.1], [0.995, 0.1, 0.3]], patches=[0, 0, 0], handedness="right")
     assert right.mirrored().handedness == "left" and right.mirrored().mirrored().handedness == "right"
     assert right.statistics(1).handedness == "right" and right.statistics(1).mirrored().handedness == "left"
 

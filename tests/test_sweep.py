@@ -106,6 +106,20 @@ def test_the_same_sweep_on_dask_gives_the_same_table(tmp_path):
     assert len(_rows(tmp_path / "cli-dask" / "sweep.sqlite")) == 8
 
 
+@pytest.mark.slow  # a Dask cluster started: seconds
+def test_a_dask_sweep_with_no_worker_left_says_so_instead_of_waiting(tmp_path):
+    """Every worker gone, a sweep waited without a word until Ctrl-C; now it says so within a few
+    seconds (a warning: made an error here, by the suite's filter, so the wait ends)."""
+    from bark.errors import BarkWarning
+
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        with pytest.raises(BarkWarning, match=f"no Dask worker is left at {cluster.scheduler_address}: 2 runs wait"):
+            run_sweep(Sweep(base=TINY, axes=_grid(1)), tmp_path / "s.sqlite", client=client)
+    assert _rows(tmp_path / "s.sqlite") == []
+
+
 def test_a_damaged_database_is_one_line(tmp_path):
     db = tmp_path / "s.sqlite"
     db.write_bytes(b"this is not sqlite, but long enough to look like a file header" * 4)

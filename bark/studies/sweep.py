@@ -34,13 +34,14 @@ import json
 import math
 import sqlite3
 import time
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 import attrs
 import numpy as np
 
-from bark.errors import BarkError, Ref
+from bark.errors import BarkError, BarkWarning, Ref
 from bark.io.files import json_text
 from bark.io.output import PATTERN_KEYS
 from bark.studies.pool import LocalPool, WorkerDied
@@ -442,15 +443,35 @@ def _local(todo: list[Point], workers: int, folders: dict):
         pool.close()
 
 
+WORKERLESS_S = 3.0
+"""How long a Dask sweep waits with no worker at its scheduler before it says so (once; again when
+workers came back and went again)."""
+
+
 def _on_dask(client, todo: list[Point], folders: dict):
-    """Results as they finish, from the Dask cluster behind ``client`` (``distributed.as_completed``)."""
+    """Results as they finish, from the Dask cluster behind ``client``.  The scheduler is asked
+    while waiting: with no worker left for ``WORKERLESS_S`` a warning says so (the runs wait for
+    one; Ctrl-C stops, and what finished is in the table) instead of a silent wait."""
     if not todo:
         return
-    from distributed import as_completed
+    from distributed import wait
 
     futures = [client.submit(run_point, p.scene, p.key, folders[p.key], key=f"bark-run-{p.key}", pure=False) for p in todo]
+    pending, said = set(futures), False
     try:
-        for future in as_completed(futures):
-            yield future.result()
+        while pending:
+            try:
+                done, pending = wait(pending, timeout=WORKERLESS_S, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                if client.scheduler_info().get("workers"):
+                    said = False
+                elif not said:
+                    warnings.warn(f"no Dask worker is left at {client.scheduler.address}: {len(pending)} runs wait for "
+                                  "one (start workers, or Ctrl-C: the finished runs are in the table)", BarkWarning,
+                                  stacklevel=2)
+                    said = True
+                continue
+            for future in done:
+                yield future.result()
     finally:
         client.cancel([f for f in futures if not f.done()])
