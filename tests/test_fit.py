@@ -20,7 +20,7 @@ from bark.errors import BarkError
 from bark.studies import fit as F
 from bark.studies.fit import Fit, Observed, Prior, compared, load_fit, run_fit, weighted_quantiles
 from bark_cli.main import cli
-from conftest import assert_clean_outcome
+from conftest import REPO_ROOT, assert_clean_outcome
 
 pytest.importorskip("pyabc")
 
@@ -321,3 +321,26 @@ def test_a_killed_fit_worker_is_one_line_and_the_rerun_goes_on(tmp_path):
     r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *CLI_FIT, "--generations", "3", "--predictive", "0", "--out", str(out)])
     assert r.exit_code == 0, r.output
     assert [g["t"] for g in json.loads((out / "fit.json").read_text())["generations"]] == [0, 1, 2]
+
+
+@pytest.mark.slow  # whole processes: the quick subset (-m "not slow") leaves it out
+def test_a_fit_the_disk_refuses_is_one_line_and_goes_on_once_there_is_room(tmp_path):
+    """Under ``ulimit -f`` fit.db could not grow: SQLAlchemy's 117-line traceback. Now one line, the
+    folder holds no journal beside fit.db, and the same command with room ends the fit."""
+    import resource
+
+    out = tmp_path / "fit"
+    argv = [sys.executable, "-m", "bark_cli", "fit", str(SUMMARY), *TINY_SET, "--population", "20", "--generations", "3",
+            "--out", str(out), "--quiet"]
+
+    def cap():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40_000, 40_000))
+
+    refused = subprocess.run(argv, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600, preexec_fn=cap)
+    assert refused.returncode == 1, refused.stderr
+    assert refused.stderr.splitlines() == [line for line in refused.stderr.splitlines() if line.startswith("bark: ")]
+    assert f"bark: error: {out / 'fit.db'}: could not be written (" in refused.stderr, refused.stderr
+    assert "Traceback" not in refused.stderr and {p.name for p in out.iterdir()} == {"fit.db"}
+    again = subprocess.run(argv, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert (out / "fit.json").exists() and (out / "posterior.csv").exists()
