@@ -406,3 +406,33 @@ def test_a_refused_report_names_report_html_not_its_temporary(patterned, tmp_pat
     assert proc.returncode == 1 and lines == [f"bark: error: {run / 'report.html'}: File too large"], proc.stderr
     assert not (run / "report.html").exists()
     _no_temporaries(run)
+
+
+HISTORY = ["--n-bases", "3000", "--until-time", "300", "--set",
+           'effects.want=["anchors", "damping", "patch-statistics", "history"]', "--quiet"]
+
+
+@pytest.mark.parametrize("short", ["disk", "memory"])
+def test_a_history_that_would_not_fit_is_refused_before_the_run(short, tmp_path, monkeypatch):
+    """``frame_every = 0.001`` with the history: 22 GB were due and the run wrote until the disk was
+    full. The history's size is estimated first; over the disk's free space or the memory
+    available, one line names the setting as typed, and nothing is written."""
+    import collections
+    import shutil
+
+    from bark.engine import scene
+
+    if short == "disk":
+        usage = collections.namedtuple("usage", "total used free")
+        monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(2**40, 2**40 - 2**30, 2**30))
+        room = "1 GiB free on the disk of"
+    else:
+        monkeypatch.setattr(scene, "available_memory", lambda: 2**30)
+        room = "1 GiB of memory available"
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["simulate", *HISTORY, "--set", "effects.frame_every=0.01", "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert_clean_outcome(result)
+    assert result.stderr.startswith("bark: error: --set effects.frame_every=0.01: the history would be about ")
+    assert "(30,001 frames of up to 3,000 bases)" in result.stderr and room in result.stderr
+    assert not out.exists()

@@ -147,6 +147,13 @@ MEMORY = {"fixed": 300 * 2**20, "per_base": 800, "per_spring": 400, "per_base_im
 runtime; state, graph and work arrays; the image's points and spring segments)."""
 
 
+HISTORY = {"file_per_base": 212, "record_per_base": 17}
+"""Bytes per base and frame of the ``history`` effect (``Scene.history_estimate``): its files
+(``history.nc`` and a VTU mesh a frame), measured on runs of 1 000 and 4 000 bases (20 and 192 bytes),
+and its record in memory until the end, from the record's layout (positions as float32, labels as
+int32, the intact springs as bits)."""
+
+
 def available_memory() -> int | None:
     """Memory this machine can give a new process now (Linux's MemAvailable), or ``None`` if unknown."""
     try:
@@ -450,6 +457,16 @@ class Scene:
         if self.has("pattern-image") or self.has("animation"):
             per_base += MEMORY["per_base_image"]
         return int(MEMORY["fixed"] + per_base * n + per_spring * m)
+
+    def history_estimate(self, stop: Stop) -> tuple[int, int, int] | None:
+        """``(frames, bytes of its files, bytes of its record in memory)`` of the ``history``
+        effect of a run to ``stop`` (at most: every base there from the start), from ``HISTORY``;
+        ``None`` for a run without it or without a time bound."""
+        if not self.has("history") or stop.until_time is None:
+            return None
+        frames = int(stop.until_time // self.frame_every) + 2  # the start, each frame_every, the end
+        n = self.lattice.n_bases
+        return frames, frames * n * HISTORY["file_per_base"], frames * n * HISTORY["record_per_base"]
 
     def simulation(self) -> Simulation:
         """A fresh simulation composed of exactly this scene's effects (:meth:`components`).  A run

@@ -93,6 +93,7 @@ def run(scene, out: str | Path | None = None, *, overwrite: bool = False, checkp
     sessions = [session(command)]
     if out is None:  # in memory: nothing written, nothing drawn, no checkpoints
         return _drive(scene, sim, stop, None, {}, 0.0, False, 0.0, observe, interrupted, None, sessions=sessions)
+    _check_history(scene, stop, Path(out))
     with OutputFolder.open(out, fresh=True, overwrite=overwrite, notice=notice) as folder:
         if scene.has("checkpoints"):  # the run is resumable from its first step on, whatever the disk does later
             refused: list[str] = []
@@ -134,6 +135,32 @@ def resume(out: str | Path, *, checkpoint_every: float = 60.0, observe: Callable
                            None, pictures, sessions, save=False)
         return _drive(scene, sim, stop, folder.path, recorded, wall, True, checkpoint_every, observe, interrupted, pictures,
                       warn, sessions)
+
+
+def _check_history(scene, stop, out: Path) -> None:
+    """Refuse, in one line and before anything is written, a history whose files would not fit on
+    the disk of ``out`` or whose record would not fit in this machine's memory
+    (``Scene.history_estimate``): a tiny ``frame_every`` made one of 22 GB that ran until the disk
+    was full."""
+    import shutil
+
+    from bark.engine.scene import available_memory
+
+    estimate = scene.history_estimate(stop)
+    if estimate is None:
+        return
+    frames, on_disk, in_memory = estimate
+    where = next((p for p in (out, *out.parents) if p.exists()), Path("."))
+    try:
+        free = shutil.disk_usage(where).free
+    except OSError:
+        free = None
+    have = available_memory()
+    for need, room, what in ((on_disk, free, f"free on the disk of {str(out)!r}"), (in_memory, have, "of memory available")):
+        if room is not None and need > room:
+            raise BarkError(f"{{0}}: the history would be about {need / 2**30:.3g} GiB ({frames:,} frames of up to "
+                            f"{scene.lattice.n_bases:,} bases), more than the {room / 2**30:.3g} GiB {what}: raise "
+                            "it, or leave the history out", Ref("effects", "frame_every", scene.frame_every))
 
 
 def _check_every(seconds) -> None:
