@@ -177,10 +177,14 @@ def test_the_same_seed_gives_the_same_posterior_on_any_number_of_workers_and_aft
 def test_a_database_of_other_settings_or_of_another_program_is_refused(tmp_path):
     import sqlite3
 
-    with sqlite3.connect(tmp_path / "other.db") as con:
+    con = sqlite3.connect(tmp_path / "other.db")
+    con.execute("PRAGMA journal_mode=WAL")  # another program's, in WAL mode: reading it made -wal and -shm
+    with con:
         con.execute("CREATE TABLE runs (x INTEGER)")
+    con.close()
     with pytest.raises(BarkError, match="not a fit's database"):
         run_fit(_fit(), tmp_path / "other.db")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.db"]  # left as it was found
     (tmp_path / "junk.db").write_bytes(b"not sqlite at all, just some bytes" * 100)
     with pytest.raises(BarkError, match="not a fit's database"):
         run_fit(_fit(), tmp_path / "junk.db")

@@ -6,6 +6,8 @@ Every file is written to a temporary name in the same folder and moved into plac
 
 from __future__ import annotations
 
+import contextlib
+
 import csv
 import io
 import json
@@ -192,3 +194,25 @@ def write_npz(path: str | Path, *, compress: bool = True, verify=None, keep=None
 
     return atomic_write(path, write, verify=verify, keep=keep)
 
+
+@contextlib.contextmanager
+def sqlite_reader(path: str | Path):
+    """A read-only connection to the SQLite file ``path`` that leaves the folder as it found it:
+    reading a database in WAL mode makes SQLite create ``-wal`` and ``-shm`` files beside it, which
+    a read-only connection cannot remove; those this one made (the ``-wal`` empty: nothing was
+    written) are removed once it is closed."""
+    import sqlite3
+
+    path = Path(path)
+    sidecars = [path.with_name(path.name + suffix) for suffix in ("-wal", "-shm")]
+    there = {p for p in sidecars if p.exists()}
+    con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    try:
+        yield con
+    finally:
+        con.close()
+        wal = sidecars[0]
+        if wal not in there and (not wal.exists() or wal.stat().st_size == 0):
+            for p in sidecars:
+                if p not in there:
+                    p.unlink(missing_ok=True)

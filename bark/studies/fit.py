@@ -491,13 +491,12 @@ def _stored_settings(database: Path) -> dict | None:
     is not a fit's database."""
     if not database.exists():
         return None
+    from bark.io.files import sqlite_reader
+
     try:
-        con = sqlite3.connect(f"file:{database}?mode=ro", uri=True)
-        try:
+        with sqlite_reader(database) as con:  # another program's database is left as it was
             tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
             row = con.execute(f"SELECT settings FROM {SETTINGS_TABLE}").fetchone() if SETTINGS_TABLE in tables else None
-        finally:
-            con.close()
     except sqlite3.DatabaseError as err:
         raise BarkError(f"{database}: not a fit's database, or a damaged one ({err})") from None
     if SETTINGS_TABLE not in tables:
