@@ -348,3 +348,18 @@ def test_a_fit_the_disk_refuses_is_one_line_and_goes_on_once_there_is_room(tmp_p
     again = subprocess.run(argv, cwd=REPO_ROOT, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr
     assert (out / "fit.json").exists() and (out / "posterior.csv").exists()
+
+
+def test_a_second_signal_while_a_fit_stops_is_no_traceback(tmp_path, monkeypatch):
+    """Ctrl-C stops a fit; a second one while it counts the generations kept (for its message)
+    ended in a traceback. Now the count is left out and the stop is said as before."""
+    def first(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(F, "run_fit", first)
+    monkeypatch.setattr(F, "load_fit", first)  # the second signal, while counting
+    out = tmp_path / "fit"
+    r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *TINY_SET, "--out", str(out), "--quiet"])
+    assert r.exit_code == 130, r.output
+    assert r.stderr == f"bark: fit stopped by SIGINT: the generations finished are in {out / 'fit.db'}; " \
+                       "the same command goes on\n"
