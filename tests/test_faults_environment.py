@@ -301,3 +301,18 @@ def test_any_mplbackend_leaves_the_pictures_drawn(backend, tmp_path):
     assert (out / "pattern.png").stat().st_size > 0
     proc = _bark("analyze", str(out), "--out", str(tmp_path / "analysis"), env={"MPLBACKEND": backend})
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("value, kept", [("nosuch", False), ("", False), ("omp ", True), ("workqueue", True),
+                                         ("Safe", True), ("tbb,omp", False)])
+def test_a_threading_layer_numba_does_not_know_is_ignored_in_one_line(value, kept, monkeypatch):
+    """NUMBA_THREADING_LAYER=nosuch ended a threaded run with numba's ValueError at its first
+    threaded step; such a value is now removed before numba is imported, said in one line."""
+    monkeypatch.setenv("NUMBA_THREADING_LAYER", value)
+    if kept:
+        numba_env.threading_layer()
+        assert os.environ["NUMBA_THREADING_LAYER"] == value
+        return
+    with pytest.warns(BarkWarning, match="is not a threading layer numba knows .*: ignored"):
+        numba_env.threading_layer()
+    assert "NUMBA_THREADING_LAYER" not in os.environ

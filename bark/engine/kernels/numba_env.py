@@ -1,11 +1,12 @@
 """numba's settings, made safe before numba is imported.
 
-A shared node hands a job whatever its environment holds.  numba reads two things from it when it is
-first imported, and fails on ordinary values of both: ``NUMBA_NUM_THREADS`` of 0, a negative number
-or text (a ``ValueError``, or silently all cores), and a cache it cannot write (no writable
+A shared node hands a job whatever its environment holds.  numba reads three things from it when it
+is first imported, and fails on ordinary values of each: ``NUMBA_NUM_THREADS`` of 0, a negative
+number or text (a ``ValueError``, or silently all cores), ``NUMBA_THREADING_LAYER`` naming no layer
+(a ``ValueError`` at the first threaded step), and a cache it cannot write (no writable
 ``__pycache__`` beside bark's source and no writable home: a ``RuntimeError`` for the first cached
-function).  :func:`settle` runs before the numba backend imports numba and makes both usable: a
-thread count numba would fail on is ignored, and compiled code goes to the first place that can be
+function).  :func:`settle` runs before the numba backend imports numba and makes them usable: a
+thread count or layer numba would fail on is ignored, and compiled code goes to the first place that can be
 written — ``NUMBA_CACHE_DIR`` if set, beside the source, the user's cache, bark's cache folder, the
 temporary folder.  Each change is said once, in one line (:class:`~bark.errors.BarkWarning`).
 """
@@ -41,6 +42,22 @@ def thread_count() -> int | None:
     warnings.warn(f"NUMBA_NUM_THREADS={text!r} is not a whole number of threads of at least 1: ignored "
                   f"(numba takes the {os.cpu_count() or 1} cores it sees)", BarkWarning, stacklevel=2)
     return None
+
+
+THREADING_LAYERS = ("default", "safe", "forksafe", "threadsafe", "tbb", "omp", "workqueue")
+"""What numba takes as ``NUMBA_THREADING_LAYER``: a layer's name, or a kind of safety it finds one for."""
+
+
+def threading_layer() -> None:
+    """``NUMBA_THREADING_LAYER`` that numba would fail on at its first threaded step (a ``ValueError``
+    from deep in a run, after any compile) is removed from the environment, with one line: numba
+    then chooses a layer itself."""
+    text = os.environ.get("NUMBA_THREADING_LAYER")
+    if text is None or text.strip().lower() in THREADING_LAYERS:
+        return
+    del os.environ["NUMBA_THREADING_LAYER"]
+    warnings.warn(f"NUMBA_THREADING_LAYER={text!r} is not a threading layer numba knows ({', '.join(THREADING_LAYERS)}): "
+                  "ignored (numba chooses one)", BarkWarning, stacklevel=2)
 
 
 def writable(folder: Path) -> bool:
@@ -94,5 +111,6 @@ def settle() -> None:
     global _SETTLED
     if not _SETTLED:
         thread_count()
+        threading_layer()
         _numba_cache()
         _SETTLED = True
