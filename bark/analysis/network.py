@@ -53,9 +53,6 @@ NETWORK_KEYS = ("n_junctions", "n_bar", "v_bar", "t_fraction", "y_fraction", "ne
 
 def size_distribution(sizes, s_min: int) -> dict:
     """The patch-size statistics of ``sizes`` (bases per patch) of at least ``s_min`` (module docstring)."""
-    from scipy.optimize import minimize
-    from scipy.special import erfc, log_ndtr
-
     s = np.asarray(sizes, dtype=float)
     s = s[s >= s_min]
     n = s.size
@@ -65,6 +62,8 @@ def size_distribution(sizes, s_min: int) -> dict:
     out.update(size_mean=float(s.mean()), size_sd=float(s.std(ddof=1)) if n > 1 else None)
     if n < 3 or np.all(s == s[0]):
         return out
+    from scipy.optimize import minimize  # only where there is a law to fit: a run with one patch never pays it
+    from scipy.special import erfc, log_ndtr
     cut = s_min - 0.5
     logs, log_cut = np.log(s), math.log(cut)
     alpha = 1.0 + n / float(np.sum(logs - log_cut))
