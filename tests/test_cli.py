@@ -324,3 +324,20 @@ def test_bark_alone_prints_its_help_not_an_error():
     result = CliRunner().invoke(cli, [])
     assert result.exit_code == 0 and result.stderr == "", result.output
     assert result.stdout.startswith("Usage: ") and "simulate" in result.stdout
+
+
+def test_bark_compile_readies_a_scenes_kernels_and_writes_nothing_else(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(cli, ["compile", "vertical", "diamond"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[0].startswith("bark: vertical: ready (") and lines[1].startswith("bark: diamond: ready (")
+    assert "later runs load them" in lines[-1]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bark_compile_checks_every_scene_before_it_compiles_one(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(cli, ["compile", "vertical", "no-such-scene"])
+    assert result.exit_code == 2 and "ready" not in result.output
+    assert result.stderr.startswith("bark: error: scene file 'no-such-scene' does not exist")
