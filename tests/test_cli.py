@@ -341,3 +341,12 @@ def test_bark_compile_checks_every_scene_before_it_compiles_one(tmp_path, monkey
     result = CliRunner().invoke(cli, ["compile", "vertical", "no-such-scene"])
     assert result.exit_code == 2 and "ready" not in result.output
     assert result.stderr.startswith("bark: error: scene file 'no-such-scene' does not exist")
+
+
+def test_json_with_quiet_prints_the_json_alone(tmp_path):
+    """README: --quiet leaves out the progress, the table and the notices; --json --quiet is the JSON
+    alone, for a script that reads it."""
+    result = CliRunner().invoke(cli, ["simulate", "--n-bases", "300", "--until-time", "1", "--out", str(tmp_path / "o"),
+                                      "--json", "--quiet"])
+    assert result.exit_code == 0 and result.stderr == "", result.output
+    assert json.loads(result.stdout)["t"] == 1.0
