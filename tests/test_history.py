@@ -54,6 +54,11 @@ def test_history_nc_opens_in_xarray_with_every_frame(history):
         assert not ((intact[:-1] == 0) & (intact[1:] == 1)).any()  # a broken spring never comes back
         assert ((intact[:-1] == 1) & (intact[1:] == 0)).any()  # and some break between frames
         assert ds.x.attrs["units"] == "m" and float(ds.time[-1]) == pytest.approx(12.0)
+        assert "years" in ds.coords and float(ds.years[-1]) == pytest.approx(12.0 * 88.5 / 365.25)
+        units = {k: ds[k].attrs.get("units") for k in ("mean_orientation_deg", "circular_sd_deg", "mean_anisotropy",
+                                                          "fraction_within_45_deg", "largest_patch_share")}
+        assert units == {"mean_orientation_deg": "degrees", "circular_sd_deg": "degrees", "mean_anisotropy": "1",
+                         "fraction_within_45_deg": "1", "largest_patch_share": "1"}  # a fraction is not in degrees
 
 
 def test_a_resumed_history_is_the_uninterrupted_one_to_the_byte(history, tmp_path):

@@ -164,6 +164,8 @@ class History(Recorder):
                 v.units = units
             if long_name:
                 v.long_name = long_name
+            if dims[0] == "time" and name not in ("time", "years"):
+                v.coordinates = "years"  # each frame's age in years beside its time: a coordinate for xarray
 
         var("time", t, ("time",), "model time units (88.5 days)", "simulated time")
         var("years", np.asarray(years(t), float), ("time",), "years", "simulated time in years")
@@ -178,11 +180,11 @@ class History(Recorder):
         counts = [np.bincount(f["labels"]) for f in frames]
         var("n_patches", np.array([int((c >= self._min_size).sum()) for c in counts], np.int32), ("time",), None,
             f"patches of at least {self._min_size} bases")
-        var("largest_patch_share", np.array([c.max() / c.sum() for c in counts], float), ("time",), None,
+        var("largest_patch_share", np.array([c.max() / c.sum() for c in counts], float), ("time",), "1",
             "share of the bases the largest patch holds")
         stats = np.stack([f["stats"] for f in frames]) if frames else np.empty((0, len(STATISTICS)))
-        for j, key in enumerate(STATISTICS):
-            var(key, stats[:, j], ("time",), "degrees" if key.endswith("_deg") else None,
+        for j, key in enumerate(STATISTICS):  # angles in degrees; anisotropy and the fraction are pure numbers
+            var(key, stats[:, j], ("time",), "degrees" if key in ("mean_orientation_deg", "circular_sd_deg") else "1",
                 f"{key} of the patches, as in summary.json")
         nc.flush()
         data = buffer.getvalue()
