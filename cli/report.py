@@ -92,15 +92,14 @@ def _run_page(path: Path) -> str:
 
 
 def _sweep_page(path: Path) -> str:
-    try:  # read only, yet opened as the sweep opens it: closing it then leaves no -wal or -shm file behind
-        con = sqlite3.connect(path / "sweep.sqlite")
-        try:
+    from bark.io.files import sqlite_reader
+
+    try:
+        with sqlite_reader(path / "sweep.sqlite") as con:  # read only, and no -wal or -shm left beside it
             cursor = con.execute("SELECT * FROM runs ORDER BY point, seed LIMIT 1000")
             columns = [d[0] for d in cursor.description]
             rows = cursor.fetchall()
             total = con.execute("SELECT count(*) FROM runs").fetchone()[0]
-        finally:
-            con.close()
     except sqlite3.Error as err:
         raise BarkError(f"{str(path / 'sweep.sqlite')!r} cannot be read as a sweep ({err})") from None
     shown = [c for c in columns if c not in ("scene", "key", "regions")]

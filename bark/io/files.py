@@ -7,7 +7,6 @@ Every file is written to a temporary name in the same folder and moved into plac
 from __future__ import annotations
 
 import contextlib
-
 import csv
 import io
 import json
