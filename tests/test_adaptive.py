@@ -169,18 +169,24 @@ def test_every_backend_undoes_a_step_by_one_algorithm(load, ends_at, asked, done
     assert result.picked == (done == 2)
 
 
-@pytest.mark.parametrize("finite, load, candidate, broke, return_on_break, max_batch, relax, ends", [
-    (True, 0.9, False, 0, False, 10, False, False),
-    (False, 0.9, False, 0, False, 10, False, True),     # non-finite
-    (True, 1.01, False, 0, False, 10, False, True),     # over accept_load (1.002)
-    (True, 0.9, True, 0, False, 10, False, True),       # a candidate for Python
-    (True, 1.001, False, 3, False, 10, False, False),   # broke, nobody must see
-    (True, 1.001, False, 3, True, 10, False, True),     # broke, Python must see
-    (True, 1.001, False, 11, False, 10, False, True),   # a degenerate batch
-    (True, 1.0, False, 0, False, 10, True, True),       # quiet on the coarser grid
-    (True, 1.001, False, 1, False, 10, True, False),    # not quiet: the clock keeps the halved step
+INF = math.inf
+
+
+@pytest.mark.parametrize("finite, load, candidate, broke, broken, budget, max_batch, relax, ends", [
+    (True, 0.9, False, 0, 0, INF, 10, False, False),
+    (False, 0.9, False, 0, 0, INF, 10, False, True),     # non-finite
+    (True, 1.01, False, 0, 0, INF, 10, False, True),     # over accept_load (1.002)
+    (True, 0.9, True, 0, 0, INF, 10, False, True),       # a candidate for Python
+    (True, 1.001, False, 3, 3, INF, 10, False, False),   # broke, nobody must see
+    (True, 1.001, False, 3, 3, 1, 10, False, True),      # broke, Python must see every break
+    (True, 1.001, False, 2, 4, 5, 10, False, False),     # broke, the call's breaks short of the budget
+    (True, 1.001, False, 2, 6, 5, 10, False, True),      # broke, the call's breaks past the budget
+    (True, 1.001, False, 0, 6, 5, 10, False, False),     # past the budget, but broke nothing this step
+    (True, 1.001, False, 11, 11, INF, 10, False, True),  # a degenerate batch
+    (True, 1.0, False, 0, 0, INF, 10, True, True),       # quiet on the coarser grid
+    (True, 1.001, False, 1, 1, INF, 10, True, False),    # not quiet: the clock keeps the halved step
 ])
-def test_one_rule_ends_a_call(finite, load, candidate, broke, return_on_break, max_batch, relax, ends):
+def test_one_rule_ends_a_call(finite, load, candidate, broke, broken, budget, max_batch, relax, ends):
     from bark.engine.kernels import ends_call
 
-    assert ends_call(finite, load, 1.002, candidate, broke, return_on_break, max_batch, relax) == ends
+    assert ends_call(finite, load, 1.002, candidate, broke, broken, budget, max_batch, relax) == ends

@@ -61,13 +61,49 @@ def test_breaking_inside_the_kernel_equals_the_step_loop(make_sim, stepping):
     assert _graph_matches_arrays(fast)
 
 
-def test_patch_stop_sees_every_break_and_stops_at_the_same_step(make_sim):
+def test_patch_stop_stops_at_the_same_step_as_the_step_by_step_loop(make_sim):
     kw = dict(n_bases=400, G=0.05, dt=0.05, seed=5, backend="numba")
     fast, slow = make_sim(**kw), make_sim(**kw)
     stop = Stop(until_patches=6, until_time=40.0)
     assert fast.run(stop) == "patches"
     _stepped(slow, stop)
     _assert_same(fast, slow)
+
+
+@pytest.mark.parametrize("backend, stepping", [("numba", "adaptive"), ("numpy", "adaptive"), ("numba", "fixed")])
+def test_a_patch_stop_runs_through_breaks_and_stops_where_watching_every_break_stops(make_sim, backend, stepping):
+    """With a patch-count stop a call may break as many springs as patches may still be missing
+    (each break adds at most one patch) before Python counts them: fewer calls than steps with
+    breaks, and the same bits, stopping step and count as a run whose calls end at every break
+    (a trigger that watches breaks makes them)."""
+    kw = dict(n_bases=800, G=0.05, dt=0.05, seed=4, backend=backend, stepping=stepping)
+    stop = Stop(until_patches=40, until_time=80.0)
+    budget, every = make_sim(**kw), make_sim(**kw)
+    passes, watched = [], []
+    assert budget.run(stop, lambda s: passes.append(s.step_count)) == "patches"
+    every.add_action(OnEvent("break"), lambda s: None)
+    assert every.run(stop, lambda s: watched.append(s.step_count)) == "patches"
+    _assert_same(budget, every)
+    assert budget.patch_count(7) == every.patch_count(7) >= 40
+    steps_with_breaks = np.unique(budget.breaks.arrays()["step"]).size
+    assert len(passes) < steps_with_breaks <= len(watched) and steps_with_breaks > 20
+
+
+@given(n=st.integers(4, 40), order=st.randoms(use_true_random=False), min_size=st.integers(1, 6))
+def test_a_broken_spring_adds_at_most_one_patch_of_any_least_size(n, order, min_size):
+    """What the patch-count stop's budget rests on (``Simulation.patches_at_most``): removing one
+    edge splits at most one component in two, so the count of components of at least ``min_size``
+    grows by at most one a break — on any graph, in any order of breaks."""
+    from bark.model.graph import components, count_patches
+
+    pairs = np.array([(i, j) for i in range(n) for j in (i + 1, i + 3, i + 7) if j < n], dtype=np.int64)
+    intact = np.ones(len(pairs), bool)
+    before = count_patches(components(n, pairs, intact), min_size)
+    for spring in order.sample(range(len(pairs)), len(pairs)):
+        intact[spring] = False
+        now = count_patches(components(n, pairs, intact), min_size)
+        assert now <= before + 1
+        before = now
 
 
 def test_an_on_break_trigger_fires_at_every_breaking_step(make_sim):
@@ -199,8 +235,8 @@ def _small_sim():
     return copy.deepcopy(_small_sim_state())
 
 
-@pytest.mark.parametrize("return_on_break", [False, True])
-def test_a_calls_load_is_its_last_steps_largest_load(return_on_break):
+@pytest.mark.parametrize("budget", [math.inf, 1.0, 3.0])
+def test_a_calls_load_is_its_last_steps_largest_load(budget):
     """With no load bound the kernel takes the largest load once, after its last step, over the
     springs live before that step (those it broke included); with one, every step.  Both, and the
     numpy backend, report the same load to the bit, and the same steps and breaks."""
@@ -214,7 +250,7 @@ def test_a_calls_load_is_its_last_steps_largest_load(return_on_break):
     backends = {"numba": sim.backend, "numpy": kernels.load("numpy")}
     with_breaks = ended_on_a_break = 0
     while stop.reason(sim) is None:
-        plan = attrs.evolve(stepping.plan(sim, stop, most=5), return_on_break=return_on_break)
+        plan = attrs.evolve(stepping.plan(sim, stop, most=5), break_budget=budget)
         results = []
         for name, bound in (("numba", math.inf), ("numba", 1e300), ("numpy", math.inf)):
             state = copy.deepcopy(sim.state)
@@ -230,4 +266,4 @@ def test_a_calls_load_is_its_last_steps_largest_load(return_on_break):
         ended_on_a_break += bool(first.step.size and first.step[-1] == first.done)
         sim.advance(stop, most=5)
     assert sim.n_broken > 20 and with_breaks > 5
-    assert ended_on_a_break > 5 or not return_on_break
+    assert ended_on_a_break > 5 or budget == math.inf

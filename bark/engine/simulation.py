@@ -61,7 +61,8 @@ class Stop:
             return "time"
         if self.until_radius is not None and sim.radius >= self.until_radius:
             return "radius"
-        if self.until_patches is not None and sim.patch_count(self.min_patch_size) >= self.until_patches:
+        if (self.until_patches is not None and sim.patches_at_most(self.min_patch_size) >= self.until_patches
+                and sim.patch_count(self.min_patch_size) >= self.until_patches):
             return "patches"
         return None
 
@@ -177,6 +178,7 @@ class Simulation:
     stop_reason: str | None = attrs.field(init=False, default=None)
     _built: bool = attrs.field(init=False, default=False)
     _labels: tuple | None = attrs.field(init=False, default=None)
+    _counted: tuple | None = attrs.field(init=False, default=None)
     _tension: np.ndarray = attrs.field(init=False, factory=lambda: np.empty(0))
 
     # -- building ---------------------------------------------------------------------------------
@@ -582,7 +584,20 @@ class Simulation:
 
     def patch_count(self, min_size: int = 7) -> int:
         """Number of patches of at least ``min_size`` bases."""
-        return count_patches(self.patch_labels(), min_size)
+        count = count_patches(self.patch_labels(), min_size)
+        s = self.state
+        self._counted = ((id(s), s.n_bases, s.n_springs, min_size), self.n_broken, count)
+        return count
+
+    def patches_at_most(self, min_size: int = 7) -> int:
+        """At least :meth:`patch_count` (``min_size``), without labelling the lattice where it can:
+        the count when last taken plus the springs broken since — a broken spring splits at most one
+        patch in two, so each break adds at most one patch of any least size — while no base or
+        spring has joined; else the count itself."""
+        s, counted = self.state, self._counted
+        if counted is not None and counted[0] == (id(s), s.n_bases, s.n_springs, min_size):
+            return counted[2] + self.n_broken - counted[1]
+        return self.patch_count(min_size)
 
     def analyze(self) -> dict[str, Analysis]:
         """Run every analyzer on the current pattern; results by the analyzer's recorded name (its
@@ -600,7 +615,7 @@ class Simulation:
     def __getstate__(self) -> dict:
         """A simulation pickles as its parts, its state and its records; the backend (work buffers)
         and the graph (a view of the state) are not data."""
-        skip = {"graph", "backend", "forces", "packing", "_labels", *(() if self._built else _MADE_BY_BUILD)}
+        skip = {"graph", "backend", "forces", "packing", "_labels", "_counted", *(() if self._built else _MADE_BY_BUILD)}
         return {a.name: getattr(self, a.name) for a in attrs.fields(type(self)) if a.name not in skip}
 
     def __setstate__(self, data: dict) -> None:
@@ -608,6 +623,7 @@ class Simulation:
             if a.name in data:
                 object.__setattr__(self, a.name, data[a.name])
         object.__setattr__(self, "_labels", None)
+        object.__setattr__(self, "_counted", None)
         if data.get("_built"):
             object.__setattr__(self, "_built", False)
             self.build(data["state"], data["clock"])

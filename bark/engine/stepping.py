@@ -200,7 +200,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
 
     Many steps go in one call when the integrator and the growth law have compiled forms and the
     breakers share one part (``Breaker.part``); the call then ends where a stop condition can next
-    hold, a trigger is next due or bases next join, and — at a halved step — after a quiet step that
+    hold (a patch count: after as many breaks as patches are missing), a trigger is next due or
+    bases next join, and — at a halved step — after a quiet step that
     ends on the grid of the next larger step, where the clock doubles the step (``Plan.relax``).
     Springs the part's rule picks break inside the call when the part decides (a step that adaptive
     stepping undoes is replayed from the call's start, its breaks with it); when it names candidates,
@@ -222,14 +223,26 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     n = _bounded(sim, stop, times, n) if n > 1 else n
     ends = clock.ticks + (np.arange(n) + 1) * clock.size  # ticks at the end of each step
     relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
-    must_see = stop is not None and stop.until_patches is not None or any(t.watches_breaks() for t, _ in sim.actions)
     return Plan(
         h=clock.step, times=times[:n], integrator=integrator if compiled else None, growth=growth if compiled else None,
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
         accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
-        return_on_break=must_see, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
+        break_budget=_break_budget(sim, stop), max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         relax=relax, threads=sim.numerics.threads,
     )
+
+
+def _break_budget(sim, stop) -> float:
+    """The breaks a call may make before Python must look: 1 where a trigger watches breaks; with a
+    patch-count stop, as many as the patches that may still be missing
+    (``Simulation.patches_at_most``: each break adds at most one patch), for the stop cannot hold
+    before that many breaks (the call then ends at the same step as one ending at every break
+    would stop at: the result is the same to the bit); else none."""
+    if any(t.watches_breaks() for t, _ in sim.actions):
+        return 1.0
+    if stop is not None and stop.until_patches is not None:
+        return float(max(1, stop.until_patches - sim.patches_at_most(stop.min_patch_size)))
+    return math.inf
 
 
 def steers_step(sim) -> bool:

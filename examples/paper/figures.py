@@ -296,6 +296,7 @@ def resins(out: Path, workers: int) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.ticker import NullFormatter
 
     folder = out / "resins"
     stats = [k for k, _ in RESIN_STATISTICS]
@@ -328,6 +329,8 @@ def resins(out: Path, workers: int) -> None:
                 ax.errorbar(x, spread[:, 0], yerr=[spread[:, 0] - spread[:, 1], spread[:, 2] - spread[:, 0]],
                             color=colours[regime], marker="o", ms=3, lw=1, capsize=2, label=regime if row == 0 else None)
             ax.set_xscale("log")
+            ax.set_xticks(values, [f"{v:g}" for v in values])  # the values swept, as they are set
+            ax.xaxis.set_minor_formatter(NullFormatter())
             if col == 0:
                 ax.set_ylabel(name, fontsize=9)
             if row == 0:

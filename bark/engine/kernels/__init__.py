@@ -73,8 +73,10 @@ class Plan:
     part is ``NO_BREAKING``)."""
     accept_load: float = math.inf
     """A step whose load exceeds this is undone and the call ends (adaptive stepping halves it)."""
-    return_on_break: bool = False
-    """End the call after a step in which the rule broke springs (Python must see every break)."""
+    break_budget: float = math.inf
+    """End the call after the step at which the springs the rule broke in it reach this many: 1 when
+    Python must see every break (a trigger that watches breaks), the breaks that may first reach a
+    patch-count stop (``stepping.plan``), ``inf`` for none."""
     max_batch: float = math.inf
     """End the call after a step that breaks more springs than this (a degenerate event)."""
     compiled: bool = True
@@ -97,13 +99,14 @@ class Plan:
         return math.isnan(load) or load > self.accept_load
 
 
-def ends_call(finite, load, accept_load, candidate, broke, return_on_break, max_batch, relax_here):
+def ends_call(finite, load, accept_load, candidate, broke, broken, break_budget, max_batch, relax_here):
     """Whether a call ends after a step: the step went non-finite or its load passed ``accept_load``
     (it is undone), the rule named a ``candidate`` for the breakers to judge in Python, it ``broke``
-    springs that Python must see (``return_on_break``) or more than ``max_batch`` of them, or it ends
-    quiet (load at most 1) where the clock may double the step (``relax_here``).  Scalars only: the
-    numba backend compiles this into its kernel, the others call it."""
-    return (not finite or load > accept_load or candidate or broke > 0 and (return_on_break or broke > max_batch)
+    springs and the call's breaks so far (``broken``) reach ``break_budget``, or it broke more than
+    ``max_batch``, or it ends quiet (load at most 1) where the clock may double the step
+    (``relax_here``).  Scalars only: the numba backend compiles this into its kernel, the others
+    call it."""
+    return (not finite or load > accept_load or candidate or broke > 0 and (broken >= break_budget or broke > max_batch)
             or relax_here and load <= 1.0)
 
 

@@ -433,8 +433,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     with (for the next call's comparison)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
-    k, c, b, m, h, accept_load, max_batch = constants
-    uniform, breaking, return_on_break, fresh, block, kept, evolve = flags
+    k, c, b, m, h, accept_load, max_batch, break_budget = constants
+    uniform, breaking, fresh, block, kept, evolve = flags
     resin = (rp, h, evolve)
     log_id, log_step, log_t = log
     hm = h / m
@@ -473,7 +473,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                                                           log_step, log_t, n_log, step + 1, block, law, flow, resin)
         finite = finite and springs_finite
         done = step + 1
-        if _ends_call(finite, top, accept_load, picked, n_log - before, return_on_break, max_batch, relax[step]):
+        if _ends_call(finite, top, accept_load, picked, n_log - before, n_log, break_budget, max_batch,
+                      relax[step]):
             break
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
@@ -1428,7 +1429,7 @@ class _NumbaCall(Call):
         self.start = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.forces = None
         self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
-                          float(plan.accept_load), float(plan.max_batch))
+                          float(plan.accept_load), float(plan.max_batch), float(plan.break_budget))
         self.heights = backend._heights(state, plan, fr)
         self.resin = backend.resin
         # a resin that flows changes the frame's rest lengths or own fields: kept to replay from, written back after
@@ -1438,7 +1439,7 @@ class _NumbaCall(Call):
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         plan, fr = self.plan, self.frame
         rest, fmax, inv_fmax, own = fr.springs
-        flags = (bool(plan.growth.uniform), plan.breaks == "kernel", bool(plan.return_on_break), int(self.fresh),
+        flags = (bool(plan.growth.uniform), plan.breaks == "kernel", int(self.fresh),
                  self.backend.block, int(self.kept), self.resin.evolves)
         done, load, self.n_log, picked = self.kernel(
             fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, times, relax,

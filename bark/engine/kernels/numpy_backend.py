@@ -100,7 +100,7 @@ class ArrayCall(Call):
         update, ip, growth = (None, None, None) if verbs is not None else (plan.integrator.update, plan.integrator.params,
                                                                           plan.growth)
         z0 = state._rows("anchor")[:, 2]
-        done, load, candidate = 0, -math.inf, False
+        done, load, candidate, broken = 0, -math.inf, False, 0
         for step, t in enumerate(times.tolist()[:1] if verbs is not None else times.tolist(), start=1):
             x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")
             if verbs is not None:
@@ -129,10 +129,11 @@ class ArrayCall(Call):
                     self.tension[:] = resin_tension(resin, state, length, mech.k)
                 if broke:
                     live[picked] = False
+                    broken += broke
                     log.append((picked, step, t_all[picked]))
                 if verbs is None:
                     fs = self.backend._spring_forces(state, mech, x, live)
-            if ends_call(finite, load, plan.accept_load, candidate, broke, plan.return_on_break, plan.max_batch,
+            if ends_call(finite, load, plan.accept_load, candidate, broke, broken, plan.break_budget, plan.max_batch,
                          relax[step - 1]):
                 break
         return done, load, candidate

@@ -1,0 +1,116 @@
+"""What a warm run costs, as a fit's or a sweep's worker runs it: CPU per run, against another checkout.
+
+    python benchmarks/warm_run.py [--scene reticulate] [--seeds 3] [--rounds 3] [--against DIR]
+
+A worker process runs the scene in memory to its stop and measures its statistics, as ``bark fit``'s
+workers do (``bark.studies.fit.simulate_statistics``), once to warm up (imports, compiled kernels
+loaded) and then once per seed, timing each run's CPU (``time.process_time``) and counting its
+passes of the loop (``Simulation.advance``: one call of the kernel each). With ``--against DIR`` (a
+checkout of bark, e.g. ``git worktree add /tmp/base <commit>``) the same worker runs that code too,
+the two interleaved round by round so that a change in the machine's load falls on both, and the
+script prints both, the median of the pairwise ratios this / that, and whether the final states and
+break logs are the same to the bit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+WORKER = r"""
+import hashlib, json, sys, time
+import numpy as np
+from bark.engine.scene import read_toml
+from bark.engine.simulation import Simulation
+from bark.studies.fit import simulate_statistics
+
+scene, seeds = sys.argv[1], [int(s) for s in sys.argv[2].split(",")]
+counted = {"advances": 0, "sim": None}
+advance, run = Simulation.advance, Simulation.run
+
+def counting(self, *a, **k):
+    counted["advances"] += 1
+    return advance(self, *a, **k)
+
+def keeping(self, *a, **k):
+    counted["sim"] = self
+    return run(self, *a, **k)
+
+Simulation.advance, Simulation.run = counting, keeping
+data = read_toml(scene)
+names = ("orientation", "sd", "anisotropy")  # what a fit compares by default
+simulate_statistics({**data, "run": {**data.get("run", {}), "seed": 10_000}}, names)  # warm: imports, kernels
+for seed in seeds:
+    counted["advances"] = 0
+    t0 = time.process_time()
+    stats = simulate_statistics({**data, "run": {**data.get("run", {}), "seed": seed}}, names)
+    cpu = time.process_time() - t0
+    sim = counted["sim"]
+    digest = hashlib.sha256()
+    for a in (sim.state.x, sim.state.intact, *(sim.breaks.arrays()[k] for k in sorted(sim.breaks.arrays()))):
+        digest.update(np.ascontiguousarray(a).tobytes())
+    print(json.dumps({"seed": seed, "cpu": cpu, "advances": counted["advances"], "steps": sim.step_count,
+                      "t": sim.state.t, "stats": stats, "bits": digest.hexdigest()}), flush=True)
+"""
+
+
+def worker(code: Path | None, scene: str, seeds: list[int], links: Path) -> list[dict]:
+    """One worker process on ``code`` (``None``: this checkout as installed): its runs' records."""
+    env = dict(os.environ)
+    if code is not None:  # the other checkout's packages under the names the installed ones have
+        env["PYTHONPATH"] = str(links)
+    done = subprocess.run([sys.executable, "-c", WORKER, scene, ",".join(map(str, seeds))], capture_output=True,
+                          text=True, env=env, cwd=tempfile.gettempdir())
+    if done.returncode != 0:
+        raise SystemExit(f"worker on {code or 'this checkout'} failed: {done.stderr.strip()[-2000:]}")
+    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", default="reticulate")
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--against", type=Path, default=None, help="another checkout of bark to compare with")
+    args = parser.parse_args()
+    seeds = list(range(args.seeds))
+    with tempfile.TemporaryDirectory() as tmp:
+        links = Path(tmp)
+        if args.against is not None:
+            for name, folder in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
+                (links / name).symlink_to(args.against.resolve() / folder)
+        sides = {"this": None, **({"that": args.against} if args.against is not None else {})}
+        runs: dict[str, list[list[dict]]] = {side: [] for side in sides}
+        for _ in range(args.rounds):
+            for side, code in sides.items():
+                runs[side].append(worker(code, args.scene, seeds, links))
+    print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores; scene {args.scene}, seeds "
+          f"{seeds}, {args.rounds} rounds after a warm-up run in each worker")
+    for side, code in sides.items():
+        last = runs[side][-1]
+        cpu = [r["cpu"] for rnd in runs[side] for r in rnd]
+        print(f"{side} ({code or ROOT}): CPU per run {statistics.median(cpu):.3f} s (median), passes of the loop "
+              f"{[r['advances'] for r in last]}, steps {[r['steps'] for r in last]}, t {[round(r['t'], 3) for r in last]}")
+    if "that" in sides:
+        ratios = [a["cpu"] / b["cpu"] for ra, rb in zip(runs["this"], runs["that"]) for a, b in zip(ra, rb)]
+        same = all(a["bits"] == b["bits"] for a, b in zip(runs["this"][-1], runs["that"][-1]))
+        stats = all(a["stats"] == b["stats"] for a, b in zip(runs["this"][-1], runs["that"][-1]))
+        print(f"this / that, CPU per run: {statistics.median(ratios):.3f} (median of {len(ratios)} pairs; "
+              f"range {min(ratios):.3f}-{max(ratios):.3f})")
+        print(f"final states and break logs the same to the bit: {same}; statistics equal: {stats}")
+    digest = hashlib.sha256(json.dumps([r["bits"] for r in runs["this"][-1]]).encode()).hexdigest()[:12]
+    print(f"this checkout's runs: {digest}")
+
+
+if __name__ == "__main__":
+    main()
