@@ -1,0 +1,92 @@
+"""What a first run costs on empty caches (every kernel compiled), against another checkout.
+
+    python benchmarks/first_run.py [--scene default] [--scene whole-tree] [--against DIR] [--rounds 1]
+
+Runs ``bark simulate`` of each scene (``default``: no ``--scene``) as a whole process whose every
+cache is a new, empty folder (``NUMBA_CACHE_DIR``, ``BARK_CACHE_DIR``, ``XDG_CACHE_HOME``), so that
+it compiles whatever it uses as on a new machine, then once more on those caches (warm), and prints
+wall and CPU seconds of both. With ``--against DIR`` (a checkout of bark, e.g. ``git worktree add
+/tmp/base <commit>``) the same runs of that code are interleaved with these, and the ratios this /
+that are printed: of the first runs, and of the first runs less the warm ones (the compiling).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def timed(argv: list[str], env: dict, cwd: str) -> tuple[float, float]:
+    """(wall seconds, CPU seconds: user + sys of the process and its children) of one process."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=cwd)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise SystemExit(f"{' '.join(argv)} failed: {err.strip()[-2000:]}")
+    return wall, usage.ru_utime + usage.ru_stime
+
+
+def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path) -> dict:
+    """A first run on empty caches and a warm one after it, of ``code`` (``None``: as installed)."""
+    caches = Path(tempfile.mkdtemp(dir=tmp))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(caches / "numba"), "BARK_CACHE_DIR": str(caches / "bark"),
+           "XDG_CACHE_HOME": str(caches / "xdg")}
+    if code is not None:
+        env["PYTHONPATH"] = str(links)
+    out = caches / "out"
+    argv = [sys.executable, "-m", "bark_cli", "simulate", *(() if scene == "default" else ("--scene", scene)),
+            "--out", str(out), "--quiet", "--overwrite"]
+    first = timed(argv, env, str(tmp))
+    warm = timed(argv, env, str(tmp))
+    return {"first": first, "warm": warm}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", action="append", default=None, help="a shipped scene's name, or default")
+    parser.add_argument("--against", type=Path, default=None, help="another checkout of bark to compare with")
+    parser.add_argument("--rounds", type=int, default=1)
+    args = parser.parse_args()
+    scenes = args.scene or ["default"]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        links = tmp / "links"
+        links.mkdir()
+        if args.against is not None:
+            for name, folder in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
+                (links / name).symlink_to(args.against.resolve() / folder)
+        sides = {"this": None, **({"that": args.against} if args.against is not None else {})}
+        got = {(scene, side): [] for scene in scenes for side in sides}
+        for _ in range(args.rounds):
+            for scene in scenes:
+                for side, code in sides.items():  # interleaved: a change in the machine's load falls on both
+                    got[(scene, side)].append(first_and_warm(code, scene, links, tmp))
+    print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "
+          f"{args.rounds} round(s); seconds: wall / CPU")
+    for scene in scenes:
+        for side, code in sides.items():
+            for r in got[(scene, side)]:
+                (fw, fc), (ww, wc) = r["first"], r["warm"]
+                print(f"{scene:12s} {side} ({code or ROOT}): first {fw:7.1f} / {fc:7.1f}   warm {ww:7.1f} / {wc:7.1f}   "
+                      f"compiling {fw - ww:7.1f} / {fc - wc:7.1f}")
+        if "that" in sides:
+            for a, b in zip(got[(scene, "this")], got[(scene, "that")]):
+                (afw, afc), (aww, awc) = a["first"], a["warm"]
+                (bfw, bfc), (bww, bwc) = b["first"], b["warm"]
+                print(f"{scene:12s} this / that: first run wall {afw / bfw:.3f}, CPU {afc / bfc:.3f}; compiling wall "
+                      f"{(afw - aww) / (bfw - bww):.3f}, CPU {(afc - awc) / (bfc - bwc):.3f}")
+
+
+if __name__ == "__main__":
+    main()
