@@ -10,7 +10,7 @@ import math
 import attrs
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bark import Stop
@@ -87,6 +87,42 @@ def test_a_patch_stop_runs_through_breaks_and_stops_where_watching_every_break_s
     assert budget.patch_count(7) == every.patch_count(7) >= 40
     steps_with_breaks = np.unique(budget.breaks.arrays()["step"]).size
     assert len(passes) < steps_with_breaks <= len(watched) and steps_with_breaks > 20
+
+
+@settings(max_examples=40, deadline=None)
+@given(ops=st.lists(st.tuples(st.sampled_from(["break", "mend", "count"]), st.integers(0, 10**6)), max_size=40),
+       min_size=st.integers(1, 8))
+def test_the_patch_bound_holds_whatever_breaks_and_mends(ops, min_size):
+    """``Simulation.patches_at_most`` is never below the count, whatever springs break or are
+    mended (a mend can join two patches without the breaks since saying so: the bound is taken
+    again) and whenever the count was last taken."""
+    from bark.model.graph import components, count_patches
+
+    sim = build_sim(n_bases=120, seed=0)
+    s = sim.build().state
+    for op, k in ops:
+        if op == "count":
+            sim.patch_count(min_size)
+        else:
+            (sim.break_springs if op == "break" else sim.mend_springs)([k % s.n_springs])
+        exact = count_patches(components(s.n_bases, s.pairs, s.intact), min_size)
+        assert sim.patches_at_most(min_size) >= exact
+
+
+def test_the_patch_bound_is_taken_again_after_a_mend():
+    """A break that cuts a base off adds a patch; mending a spring that joined nothing takes a
+    break back from the count of broken springs without taking the patch back: the bound must not
+    fall below the count for it."""
+    sim = build_sim(n_bases=120, seed=0)
+    s = sim.build().state
+    base = 60
+    own = np.flatnonzero((s.pairs == base).any(axis=1))
+    elsewhere = int(np.flatnonzero(~(np.isin(s.pairs, [base]).any(axis=1)))[-1])
+    sim.break_springs([*own[:-1], elsewhere])  # all but one of the base's springs, and one far from it
+    before = sim.patch_count(1)
+    sim.break_springs(own[-1:])  # the base alone now: one patch more
+    sim.mend_springs([elsewhere])  # joins nothing: as many patches
+    assert sim.patches_at_most(1) >= before + 1 == sim.patch_count(1)
 
 
 @given(n=st.integers(4, 40), order=st.randoms(use_true_random=False), min_size=st.integers(1, 6))

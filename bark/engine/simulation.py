@@ -586,16 +586,16 @@ class Simulation:
         """Number of patches of at least ``min_size`` bases."""
         count = count_patches(self.patch_labels(), min_size)
         s = self.state
-        self._counted = ((id(s), s.n_bases, s.n_springs, min_size), self.n_broken, count)
+        self._counted = ((id(s), s.n_bases, s.n_springs, s.mends, min_size), self.n_broken, count)
         return count
 
     def patches_at_most(self, min_size: int = 7) -> int:
         """At least :meth:`patch_count` (``min_size``), without labelling the lattice where it can:
         the count when last taken plus the springs broken since — a broken spring splits at most one
         patch in two, so each break adds at most one patch of any least size — while no base or
-        spring has joined; else the count itself."""
+        spring has joined and none has been mended; else the count itself."""
         s, counted = self.state, self._counted
-        if counted is not None and counted[0] == (id(s), s.n_bases, s.n_springs, min_size):
+        if counted is not None and counted[0] == (id(s), s.n_bases, s.n_springs, s.mends, min_size):
             return counted[2] + self.n_broken - counted[1]
         return self.patch_count(min_size)
 

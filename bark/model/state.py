@@ -185,6 +185,10 @@ class State:
     """How many times the intact flags have been edited (``set_intact``): a backend's copy of them
     is in step while this is the count it saw.  Appended springs do not count (backends extend
     their copies with them)."""
+    mends: int = 0
+    """How many of those edits made springs intact again (``Simulation.mend_springs``: tools, and
+    models that heal); a count of patches can bound the next one by the breaks since only while
+    this stays the same (``Simulation.patches_at_most``)."""
     version: int = 0
     """The state's one edit counter: every edit made outside the hot loop (a declared write, a
     change of the intact flags) takes the next number, and each field keeps the number of its last
@@ -322,6 +326,7 @@ class State:
         are keyed).  ``Simulation.break_springs`` and ``mend_springs`` call it."""
         self._store["intact"][np.asarray(ids, dtype=np.int64)] = bool(value)
         self.intact_version += 1
+        self.mends += bool(value)
         self._stamp(("intact",))
 
     # -- growing --------------------------------------------------------------------------------
