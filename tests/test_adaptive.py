@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bark import Stop
+from bark.engine.kernels import Call
 from bark.errors import BarkError
 from conftest import build_sim
 
@@ -96,6 +97,37 @@ def test_adaptive_numpy_and_numba_agree(make_sim):
     np.testing.assert_allclose(runs["numpy"].state.x, runs["numba"].state.x, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("bulged", [False, True])
+def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, monkeypatch, bulged):
+    """Under adaptive stepping the numba kernel takes a refused step back from its copy of the bases
+    before it (the anchors too, where the radius depends on height): the same bits, steps and breaks
+    as the numpy backend, which replays the call up to that step."""
+    from bark.engine import kernels
+    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
+
+    taken_back = []
+    take_steps = kernels.take_steps
+
+    def recording(call, plan):
+        result = take_steps(call, plan)
+        taken_back.append(call.undone)
+        return result
+
+    monkeypatch.setattr(kernels, "take_steps", recording)
+    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
+    kw = dict(n_bases=300, G=0.05, dt=0.3, seed=3, stepping="adaptive", **({"growth": growth} if bulged else {}))
+    runs = {}
+    for backend in ("numpy", "numba"):
+        runs[backend] = make_sim(backend=backend, **kw)
+        runs[backend].run(Stop(until_time=8.0))
+    assert any(taken_back)
+    a, b = runs["numpy"], runs["numba"]
+    for name in ("x", "v", "anchor", "intact"):
+        assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name
+    la, lb = a.breaks.arrays(), b.breaks.arrays()
+    assert all(np.array_equal(la[k], lb[k]) for k in la) and a.step_count == b.step_count and la["spring"].size > 20
+
+
 def test_adaptive_stepping_also_keeps_explicit_steps_stable(make_sim):
     """A largest step above the stability limit is split, as with stepping = auto."""
     sim = make_sim(n_bases=200, dt=2.0, stepping="adaptive")
@@ -130,16 +162,19 @@ def test_with_no_breakers_adaptive_steps_are_not_halved_for_tension(make_sim, ba
     assert not [e for e in sim.events if e["kind"] == "overshoot"]
 
 
-class _Recorded:
-    """A Call that ends after ``ends_at`` steps with ``load``, and records what it is asked."""
+class _Recorded(Call):
+    """A Call that ends after ``ends_at`` steps with ``load``, and records what it is asked; with
+    ``in_place`` it takes a refused last step back itself."""
 
-    def __init__(self, ends_at: int, load: float) -> None:
-        self.ends_at, self.load, self.asked = ends_at, load, []
+    def __init__(self, ends_at: int, load: float, in_place: bool = False) -> None:
+        self.ends_at, self.load, self.asked, self.in_place = ends_at, load, [], in_place
 
     def take(self, times, relax):
         self.asked.append(("take", len(times)))
         done = min(self.ends_at, len(times))
-        return done, (self.load if done == self.ends_at else 0.5), done == 2
+        load = self.load if done == self.ends_at else 0.5
+        self.undone = self.in_place and not load <= 1.002
+        return done, load, done == 2 and not self.undone
 
     def undo(self):
         self.asked.append(("undo",))
@@ -151,22 +186,25 @@ class _Recorded:
         return Steps(done=done, load=load, picked=picked, broken=empty, step=empty, tension=np.empty(0))
 
 
-@pytest.mark.parametrize("load, ends_at, asked, done", [
-    (math.nan, 3, [("take", 5), ("undo",), ("take", 2)], 2),   # non-finite: undone, replayed up to it
-    (1.5, 1, [("take", 5), ("undo",)], 0),                     # over at the first step: nothing to replay
-    (1.001, 3, [("take", 5)], 3),                              # within the tolerance: kept
+@pytest.mark.parametrize("load, ends_at, in_place, asked, done", [
+    (math.nan, 3, False, [("take", 5), ("undo",), ("take", 2)], 2),  # non-finite: undone, replayed up to it
+    (1.5, 1, False, [("take", 5), ("undo",)], 0),                    # over at the first step: nothing to replay
+    (1.001, 3, False, [("take", 5)], 3),                             # within the tolerance: kept
+    (math.nan, 3, True, [("take", 5)], 2),                           # taken back by the call itself
+    (1.5, 3, True, [("take", 5)], 2),
 ])
-def test_every_backend_undoes_a_step_by_one_algorithm(load, ends_at, asked, done):
+def test_every_backend_undoes_a_step_by_one_algorithm(load, ends_at, in_place, asked, done):
     """``take_steps`` — what every backend's ``steps`` and the Python path are — undoes a last step
-    that went non-finite or over ``accept_load`` by replaying the call up to it, and only then."""
+    that went non-finite or over ``accept_load``, and only then: by replaying the call up to it, or
+    by the call itself where it kept a copy of the state before that step (``Call.undone``)."""
     from bark.engine.kernels import Plan, take_steps
 
     plan = Plan(h=0.1, times=np.arange(1, 6) * 0.1, integrator=None, growth=None, accept_load=1.002)
-    call = _Recorded(ends_at, load)
+    call = _Recorded(ends_at, load, in_place)
     result = take_steps(call, plan)
     assert call.asked == asked and result.done == done
     assert math.isnan(result.load) if math.isnan(load) else result.load == load
-    assert result.picked == (done == 2)
+    assert result.picked == (done == 2 and not in_place)  # a step taken back named no candidate
 
 
 INF = math.inf

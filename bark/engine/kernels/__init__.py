@@ -132,6 +132,10 @@ class Steps:
 class Call:
     """One call of :meth:`Backend.steps` as a backend computes it; :func:`take_steps` drives it."""
 
+    undone = False
+    """Whether the last :meth:`take` took its last step back itself (from a copy of the state before
+    it), so that no replay is needed."""
+
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
         """Steps at ``times`` from the state the call began with, each followed by :func:`ends_call`;
         returns ``(steps taken, the last one's load, whether the rule named a candidate in it)``, the
@@ -150,13 +154,17 @@ class Call:
 
 def take_steps(call: Call, plan: Plan) -> Steps:
     """The one step algorithm: the call's steps; a last step that is undone (``Plan.undoes``) is
-    taken back by replaying the call up to it from its start, exact because a step's arithmetic does
+    taken back — by the call itself, from a copy of the state before it (``Call.undone``), or by
+    replaying the call up to it from its start — exact either way, because a step's arithmetic does
     not depend on where calls begin and end."""
     times, relax = np.ascontiguousarray(plan.times, dtype=float), plan.relax_flags()
     done, load, picked = call.take(times, relax)
     if plan.undoes(load):
-        call.undo()
-        picked = done > 1 and call.take(times[:done - 1], relax[:done - 1])[2]
+        if call.undone:
+            picked = False
+        else:
+            call.undo()
+            picked = done > 1 and call.take(times[:done - 1], relax[:done - 1])[2]
         done -= 1
     return call.result(done, load, picked)
 

@@ -274,7 +274,8 @@ def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip):
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now, r_before, from_radius, heights, block):
+def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now, r_before, from_radius, heights, block,
+               prev, save):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
@@ -284,12 +285,19 @@ def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now,
     whether every coordinate stayed finite.
 
     A block of bases at a time (shared among threads in a parallel kernel), each block on slices of
-    the vectors, one coordinate per vector, so its loops run in SIMD lanes."""
+    the vectors, one coordinate per vector, so its loops run in SIMD lanes.  With ``save`` each
+    block's positions and velocities (and anchors, where the radius depends on height) are first
+    copied into ``prev``, while the block is in cache, so that the step can be taken back."""
     n = bases[0].shape[0]
     weights, stride = heights
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     block_bad = np.zeros(_blocks(n, block), np.int64)
     for blk in prange(_blocks(n, block)):
         lo, hi = blk * block, min(n, (blk + 1) * block)
+        if save:
+            _copy_block((x0, x1, x2, v0, v1, v2), prev, lo, hi)
+            if not uniform:
+                _copy_block((ax, ay, az), prev[6:], lo, hi)
         part = _slices(bases, lo, hi)
         if uniform:
             block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
@@ -416,7 +424,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                   log, heights, start, update, rule, load, radius, prepare, radii, law, flow):
     """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
     load of the last step, length of the break log, whether the rule named a candidate in the last
-    step)``, the load NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
+    step, whether that step was refused and taken back here)``, the load NaN if that step went
+    non-finite.  ``rule`` and ``load`` are the breaker
     part's (its numbers ``bp``), ``update`` the integrator part's (its numbers ``ip``), ``radius``,
     ``prepare`` and ``radii`` the growth part's (its numbers ``params``).
 
@@ -430,7 +439,11 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
 
     ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
     step is replayed from them), and, when the last step is accepted, receives the positions it ends
-    with (for the next call's comparison)."""
+    with (for the next call's comparison); its last nine vectors, where adaptive stepping may refuse
+    a step (and the resin does not flow), the bases before each step, so that a refused step is
+    taken back here at the cost of a copy a step instead of a replay of the call (its breaks
+    undone, the call's steps those before it; the forces in ``f`` are then the refused step's, and
+    the next call makes them again)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
     k, c, b, m, h, accept_load, max_batch, break_budget = constants
@@ -438,6 +451,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     resin = (rp, h, evolve)
     log_id, log_step, log_t = log
     hm = h / m
+    # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
+    # that flows changes its springs too: that call is replayed from its start by the caller instead)
+    in_place = accept_load < np.inf and not evolve
+    prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
     if fresh == 0:
@@ -459,13 +476,16 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     n_log = 0
     before = 0
     r_before = 0.0
+    r_kept = 0.0
     picked = False
+    undone = False
     for step in range(times.shape[0]):
         t = times[step]
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
         finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
-                            uniform and step > 0, heights, block)
+                            uniform and step > 0, heights, block, prev, in_place)
+        r_kept = r_before
         r_before = r_now
         before = n_log
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f,
@@ -475,6 +495,16 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         done = step + 1
         if _ends_call(finite, top, accept_load, picked, n_log - before, n_log, break_budget, max_batch,
                       relax[step]):
+            if in_place and not (finite and top <= accept_load):  # refused: the step taken back
+                _copy_blocks(prev[:6], (x0, x1, x2, v0, v1, v2), 0, block)
+                if not uniform:
+                    _copy_blocks(prev[6:], (ax, ay, az), 0, block)
+                for e in range(before, n_log):
+                    live[log_id[e]] = True
+                n_log = before
+                r_before = r_kept
+                done = step
+                undone = True
             break
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
@@ -485,7 +515,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                          law, rp)
     if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
-    return done, (top if finite else np.nan), n_log, picked and finite
+    return done, (top if finite else np.nan), n_log, picked and finite and not undone, undone
 
 
 @inline
@@ -1309,7 +1339,7 @@ class NumbaBackend(Backend):
                     *(a[:, i] for i in range(3)), d[:, 0], d[:, 1])
         longest = int(fr.runs[1].max(initial=1))
         fr.work = (*(self._space(f"work{i}", (longest,)) for i in range(5)), self._space("picks", (longest,), np.bool_))
-        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(3))
+        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(6))  # the call's start, the last step's
         fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
 
     def _space(self, name: str, shape: tuple, dtype=float) -> np.ndarray:
@@ -1441,11 +1471,11 @@ class _NumbaCall(Call):
         rest, fmax, inv_fmax, own = fr.springs
         flags = (bool(plan.growth.uniform), plan.breaks == "kernel", int(self.fresh),
                  self.backend.block, int(self.kept), self.resin.evolves)
-        done, load, self.n_log, picked = self.kernel(
+        done, load, self.n_log, picked, self.undone = self.kernel(
             fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, times, relax,
             plan.growth.params, plan.breaker.params, plan.integrator.params, self.resin.params, flags, fr.log,
             self.heights, self.start)
-        return done, load, picked
+        return done + self.undone, load, picked
 
     def undo(self) -> None:
         fr = self.frame
@@ -1460,7 +1490,8 @@ class _NumbaCall(Call):
 
     def result(self, done: int, load: float, picked: bool) -> Steps:
         state, fr, n_log = self.state, self.frame, self.n_log
-        if self.valid or done > 0:  # for the next call (the kernel has put the positions it ended with in start)
+        if (self.valid or done > 0) and not self.undone:  # for the next call (the kernel has put the positions
+            # it ended with in start; a step it took back leaves forces of the positions it refused)
             fr.forces, fr.kept, fr.refresh_from = self.k, state.n_bases, state.n_bases
         if self.flowed is not None:  # the resin's flow, into the state (the frame's copies are its source)
             valid = np.flatnonzero(fr.ids >= 0)
