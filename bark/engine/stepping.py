@@ -204,7 +204,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     bases next join, and — at a halved step — after a quiet step that
     ends on the grid of the next larger step, where the clock doubles the step (``Plan.relax``).
     Springs the part's rule picks break inside the call when the part decides (a step that adaptive
-    stepping undoes is replayed from the call's start, its breaks with it); when it names candidates,
+    stepping undoes is taken back, its breaks with it: ``take_steps``); when it names candidates,
     the call ends after the first step in which it names one, and the breakers select in Python.
     Breakers with no part, or with different parts, are asked in Python after every step (one step
     a call), and the step is held to their loads in Python (``python_step``) if any of them has one.

@@ -19,7 +19,8 @@ method                                          does
 
 ``Backend.steps`` runs a call by the one step algorithm every backend shares (:func:`take_steps`):
 each step ends the call or not by :func:`ends_call`, and a last step that is undone is taken back by
-replaying the call up to it.  A backend supplies only how its steps are computed (the numba
+replaying the call up to it, or by the call itself where it kept a copy of the state before that
+step (``Call.undone``: the numba kernel under adaptive stepping).  A backend supplies only how its steps are computed (the numba
 backend compiles ``ends_call`` into its kernel; the Python path of ``bark.engine.stepping`` is the
 numpy backend's array step with the strategies' verbs, one step a call); the per-step and the
 many-step paths are this one algorithm.
