@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from bark.model.graph import count_patches
+from bark.model.components import count_patches
 from bark.io.recorders import Frames
 from bark.io.files import atomic_write
 from bark.analysis.pattern import rgb

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import functools
 import logging
 import os
 import shlex
@@ -231,10 +232,12 @@ def _pictures(signals: Signals, painter) -> dict:
     return {effect: (name, submitted(kind, data_of)) for effect, (name, kind, data_of) in PICTURES.items()}
 
 
-def _painter():
-    from bark_cli.pictures import Painter
+def _painter(scene=None):
+    """A painter that imports ahead what draws the pictures ``scene`` asks for (every kind: none given)."""
+    from bark_cli.pictures import PICTURES, Painter
 
-    return Painter()
+    drawn = None if scene is None else [PICTURES[name][1] for name in PICTURES if scene.has(name)]
+    return Painter(kinds=drawn)
 
 
 class _Lazy:
@@ -362,7 +365,7 @@ def simulate(ctx, scene_file, growth_name, integrator_name, breaker_name, resin_
         from bark_cli.progress import ProgressBar, ProgressLog
 
         bar = ProgressBar() if _is_terminal(sys.stderr) else ProgressLog(progress_every)
-    painter = _Lazy(_painter)
+    painter = _Lazy(functools.partial(_painter, None if resume is not None else scene))  # resuming: any picture
     if resume is None and any(e.drawn and scene.has(name) for name, e in scene.known_effects.items()):
         painter()  # start it now: matplotlib loads on the other core while the run goes on
     with Signals() as signals:

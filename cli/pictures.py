@@ -63,7 +63,7 @@ class PatternData:
     def of_state(cls, path, min_size: int) -> "PatternData":
         """The pattern of a run's ``state.npz`` (or a run's folder), without its simulation."""
         from bark.analysis.pattern import patch_colours
-        from bark.model.graph import count_patches
+        from bark.model.components import count_patches
 
         path = Path(path)
         with np.load(path / "state.npz" if path.is_dir() else path, allow_pickle=False) as d:
@@ -154,7 +154,7 @@ class SeriesData:
     @classmethod
     def of(cls, sim, scene, frames) -> "SeriesData":
         from bark.analysis.pattern import rgb
-        from bark.model.graph import count_patches
+        from bark.model.components import count_patches
 
         min_size = scene.run.min_patch_size
         leaves = scene.leaves if scene.has("leaves") else None
@@ -214,6 +214,9 @@ PICTURES = {
     "region-image": ("regions.png", "regions", lambda sim, scene, recorded: RegionsData.of(sim, scene.run.min_patch_size)),
 }
 """Per effect: its picture's file, the kind of drawing, and the data it is drawn from."""
+DRAWN_BY = {"pattern": "bark_cli.plot", "animation": "bark_cli.animation", "tree": "bark_cli.tree_picture",
+            "tree-series": "bark_cli.tree_picture", "fracture": "bark_cli.figures", "regions": "bark_cli.figures"}
+"""Per kind of drawing, the module that draws it (what a drawing process imports ahead)."""
 
 
 def writers() -> dict:
@@ -263,16 +266,17 @@ def _draw_kind(kind: str, data, path: str, min_size: int) -> None:
         write_gif(data, path, min_size)
 
 
-def _serve(jobs, replies, command_ends, siblings=()) -> None:
+def _serve(jobs, replies, command_ends, siblings=(), modules=tuple(DRAWN_BY.values())) -> None:
     """The painter: ready matplotlib, then draw what it is sent until told to stop — or until the
     command is gone (its end of the pipe closes: the painter holds no copy of it, so it sees that).
-    Once ready it forks a sibling for each pipe pair in ``siblings`` (they share the imports: the
-    pictures of one run are then drawn side by side), and waits for them when it ends."""
+    Once ready — ``modules`` imported: those of the pictures the run will draw — it forks a sibling
+    for each pipe pair in ``siblings`` (they share the imports: the pictures of one run are then
+    drawn side by side), and waits for them when it ends."""
     for end in command_ends:
         end.close()
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)  # the command decides; it kills the painter if it must
-    for module in ("bark_cli.plot", "bark_cli.animation", "bark_cli.tree_picture", "bark_cli.figures"):  # matplotlib, now: this is the point
+    for module in dict.fromkeys(modules):  # matplotlib, now: this is the point
         importlib.import_module(module)
     children, painter = [], os.getpid()
     for mine in siblings:
@@ -345,11 +349,12 @@ class Painter:
     ``workers`` processes draw (default: two where this process may use two cores or more, else one):
     the first imports matplotlib and forks the others, and the pictures a run hands over are shared
     among them as each becomes free (the whole tree's three pictures took 1.1 s one after another).
+    The first imports ahead the modules that draw ``kinds`` (default: every kind; ``PICTURES``).
     Each has a thread of the command that hands it pictures and takes its answers (a picture's data
     are megabytes, more than a pipe holds, and a drawing process reads them only when it has drawn
     the one before), so the command goes on with its own outputs meanwhile."""
 
-    def __init__(self, workers: int | None = None) -> None:
+    def __init__(self, workers: int | None = None, kinds=None) -> None:
         self._proc = None
         self._jobs: queue.SimpleQueue = queue.SimpleQueue()
         self._threads: list[threading.Thread] = []
@@ -364,8 +369,9 @@ class Painter:
                 ours_in, theirs_out = ctx.Pipe(duplex=False)  # replies: they send, we receive
                 pipes.append(((theirs_in, theirs_out), (ours_out, ours_in)))
             command_ends = tuple(end for _, ours in pipes for end in ours)
-            self._proc = ctx.Process(target=_serve, args=(*pipes[0][0], command_ends, tuple(p[0] for p in pipes[1:])),
-                                     daemon=True)
+            modules = tuple(DRAWN_BY[k] for k in (DRAWN_BY if kinds is None else kinds))  # what to import ahead
+            self._proc = ctx.Process(target=_serve, args=(*pipes[0][0], command_ends, tuple(p[0] for p in pipes[1:]),
+                                                          modules), daemon=True)
             try:
                 self._proc.start()
             except OSError:  # no process to spare (ulimit -u): the pictures are drawn here, after the data

@@ -23,7 +23,6 @@ matplotlib_folder()  # before matplotlib looks for its own
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from scipy.ndimage import distance_transform_edt  # noqa: E402 — here, not in raster(): the drawing process imports it while the run goes on
 
 from bark.io.files import atomic_write
 
@@ -166,6 +165,8 @@ def raster_values(uv: np.ndarray, values: np.ndarray, width: float, z_lo: float,
     empty = np.ones((ny, nx), bool)
     empty[iy, ix] = False
     if empty.any():
+        from scipy.ndimage import distance_transform_edt  # here: only a pattern too large for its springs pays
+
         _, (jy, jx) = distance_transform_edt(empty, return_indices=True)
         image = image[jy, jx]
     return image

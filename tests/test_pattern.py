@@ -653,3 +653,27 @@ def test_a_patch_whose_points_are_all_at_one_place_has_no_orientation(on_trunk):
         stats = pattern.statistics(7)
     assert stats.n_patches == 1 and stats.orientation.mean_deg == pytest.approx(table.orientation_deg[0])
     assert math.isfinite(stats.anisotropy.mean)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(0, 5), min_size=1, max_size=30), st.lists(st.tuples(st.integers(0, 29), st.integers(0, 29)),
+                                                                       max_size=20), st.integers(1, 3))
+def test_patch_colours_are_networkx_greedy_colouring_of_touching_patches(labels, pairs, min_size):
+    """Patches that touch (a broken spring between them) get different colours — networkx's greedy
+    colouring of the patches' graph — and, where none touch, every patch the first colour (what that
+    colouring gives an edgeless graph, without importing networkx)."""
+    import networkx as nx
+
+    from bark.analysis.pattern import PALETTE, _colour_of_label, _neighbouring
+
+    labels = np.unique(np.asarray(labels), return_inverse=True)[1]  # labels 0 .. k − 1, as components gives them
+    pairs = np.array([(i % labels.size, j % labels.size) for i, j in pairs], dtype=np.int64).reshape(-1, 2)
+    intact = np.zeros(len(pairs), bool)
+    got = _colour_of_label(labels, min_size, pairs, intact)
+    sizes = np.bincount(labels)
+    graph = nx.Graph()
+    graph.add_nodes_from(np.flatnonzero(sizes >= min_size).tolist())
+    graph.add_edges_from(_neighbouring(labels, sizes, pairs, min_size).tolist())
+    for label, colour in nx.greedy_color(graph, strategy="smallest_last").items():
+        assert got[label] == colour % len(PALETTE)
+    assert (got[sizes < min_size] == len(PALETTE)).all()

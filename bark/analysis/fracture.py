@@ -80,7 +80,7 @@ def crack_counts(broken: np.ndarray, pairs: np.ndarray, offsets: tuple[int, ...]
 
 def patch_count(n_bases: int, pairs: np.ndarray, intact: np.ndarray, min_size: int) -> int:
     """Patches of at least ``min_size`` of bases ``0 .. n_bases − 1`` over the ``intact`` springs."""
-    from bark.model.graph import components, count_patches
+    from bark.model.components import components, count_patches
 
     return count_patches(components(n_bases, pairs, intact), min_size)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from bark.analysis.pattern import Pattern, PatternStatistics
-from bark.model.graph import components
+from bark.model.components import components
 
 __all__ = ["patch_statistics", "window_labels", "pattern_summary"]
 

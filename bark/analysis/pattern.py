@@ -652,14 +652,19 @@ def _colour_of_label(labels: np.ndarray, min_size: int, pairs: np.ndarray | None
     sizes = np.bincount(labels) if labels.size else np.zeros(0, np.int64)
     index = (np.arange(sizes.size) % len(PALETTE)).astype(np.uint8)
     if pairs is not None and labels.size:
-        import networkx as nx
-
         pairs = np.asarray(pairs, dtype=np.int64)
-        graph = nx.Graph()
-        graph.add_nodes_from(np.flatnonzero(sizes >= min_size).tolist())
-        graph.add_edges_from(_neighbouring(labels, sizes, pairs[~np.asarray(intact, dtype=bool)], min_size).tolist())
-        for label, colour in nx.greedy_color(graph, strategy="smallest_last").items():  # planar: <= 6
-            index[label] = colour % len(PALETTE)
+        nodes = np.flatnonzero(sizes >= min_size)
+        edges = _neighbouring(labels, sizes, pairs[~np.asarray(intact, dtype=bool)], min_size)
+        if not len(edges):  # no two patches touch: greedy colouring gives each the first colour
+            index[nodes] = 0
+        else:
+            import networkx as nx
+
+            graph = nx.Graph()
+            graph.add_nodes_from(nodes.tolist())
+            graph.add_edges_from(edges.tolist())
+            for label, colour in nx.greedy_color(graph, strategy="smallest_last").items():  # planar: <= 6
+                index[label] = colour % len(PALETTE)
     index[sizes < min_size] = len(PALETTE)
     return index
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from bark.engine import kernels, stepping
 from bark.validators import MISSING, in_range, int_in, one_of, optional, positive, positive_int
-from bark.model.graph import count_patches
+from bark.model.components import count_patches
 from bark.errors import BarkError, NonFiniteStateError, Ref
 from bark.model.forces import ForceField, Mechanics, spring_geometry
 from bark.model.lattice import Lattice
@@ -184,10 +184,17 @@ class Simulation:
     # -- building ---------------------------------------------------------------------------------
 
     def __getattr__(self, name: str):
-        """The parts :meth:`build` makes (``state``, ``graph``, ``clock``, ``backend``, ``forces``), on first use."""
+        """The parts :meth:`build` makes (``state``, ``clock``, ``backend``, ``forces``), on first use;
+        the leaf-base graph, a view of the state, when first asked for (networkx is imported then:
+        a run that never asks does not pay for it)."""
         if name in _MADE_BY_BUILD and not object.__getattribute__(self, "_built"):
             self.build()
-            return object.__getattribute__(self, name)
+            return getattr(self, name)
+        if name == "graph" and object.__getattribute__(self, "_built"):
+            from bark.model.graph import LeafBaseGraph
+
+            self.graph = LeafBaseGraph(lambda: self.state)
+            return self.graph
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def build(self, state: State | None = None, clock: Clock | None = None) -> "Simulation":
@@ -205,9 +212,6 @@ class Simulation:
         self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
         self.backend.resin = self.resin_part
         self.forces = ForceField(self.mechanics, self.backend)
-        from bark.model.graph import LeafBaseGraph
-
-        self.graph = LeafBaseGraph(lambda: self.state)
         if state is None:
             self.state = State.empty(self.lattice.initial, self.lattice.n_springs * self.lattice.initial // self.lattice.n_bases,
                                      declared)
@@ -432,14 +436,14 @@ class Simulation:
     def join(self, theta: np.ndarray, z: np.ndarray) -> np.ndarray:
         """New bases join the mechanics now, at angles ``theta`` and heights ``z`` on the trunk surface,
         each anchored at its site.  Their ids continue the lattice's order; each is joined to the
-        lattice neighbours (index offsets) already present — asked of the graph — by springs whose
+        lattice neighbours (index offsets) already present — ids below the count of bases — by springs whose
         rest lengths are the distances now (a new spring is at rest) and whose thresholds the breakers
         set about the material's (``Breaker.thresholds``, told the growth law's regions).  Returns the ids."""
         s, t = self.state, self.state.t
         bases = self._new_bases(theta, z, t)
         made = Made(per="base", t=t, ids=np.arange(s.n_bases, s.n_bases + len(bases["born"])), z=bases["x"][:, 2])
         ids = s.add_bases(**bases, **self._initial(made))
-        pairs = self.lattice.new_pairs(ids, self.graph)
+        pairs = self.lattice.new_pairs(ids, range(s.n_bases))  # the bases present: ids 0 .. n − 1
         if len(pairs):  # their ends' positions gathered first (np.take of a few rows copies all of x)
             ends = s.x[pairs.ravel()]
             _, rest = spring_geometry(ends, np.arange(ends.shape[0]).reshape(-1, 2))

@@ -21,6 +21,8 @@ from typing import Callable
 import networkx as nx
 import numpy as np
 
+from bark.model.components import components, count_patches  # noqa: F401 — their home before
+
 __all__ = ["LeafBaseGraph", "components", "count_patches"]
 
 _NO_DATA = MappingProxyType({})
@@ -178,19 +180,3 @@ class LeafBaseGraph(nx.Graph):
 
     def __reduce__(self):
         raise TypeError("the leaf-base graph is a view of a simulation's state: pickle the simulation, or copy() it")
-
-
-def components(n: int, pairs: np.ndarray, kept: np.ndarray) -> np.ndarray:
-    """A label per base of ``0 .. n − 1``: the connected components of the springs ``pairs[kept]``
-    (``scipy.sparse.csgraph``'s numbering: by each component's smallest base), int32."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    p = np.asarray(pairs, dtype=np.int64)[np.asarray(kept, bool)]
-    adjacency = coo_matrix((np.ones(len(p)), (p[:, 0], p[:, 1])), shape=(n, n))
-    return connected_components(adjacency, directed=False)[1].astype(np.int32)
-
-
-def count_patches(labels: np.ndarray, min_size: int) -> int:
-    """How many patches (labels, as ``components`` gives them) have at least ``min_size`` bases."""
-    return int(np.count_nonzero(np.bincount(labels) >= min_size))

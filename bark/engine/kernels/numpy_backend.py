@@ -64,7 +64,7 @@ class NumpyBackend(Backend):
 
     def patch_labels(self, state) -> np.ndarray:
         """Connected components of the intact springs (scipy.sparse.csgraph)."""
-        from bark.model.graph import components
+        from bark.model.components import components
 
         return components(state.n_bases, state._rows("pairs"), state._rows("intact"))
 
