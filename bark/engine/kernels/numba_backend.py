@@ -1158,8 +1158,11 @@ class _Frame:
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
-    from them; after an accepted call, x is the positions it ended with."""
+    from them; after an accepted call, x is the positions it ended with.  Then those of the bases
+    before the last step (a refused step is taken back from them)."""
     log: tuple
+    start_columns: tuple = ()
+    """``start`` as the kernel takes it: one vector per coordinate (made with the views)."""
     forces: float | None = None
     """The stiffness ``k`` of the spring forces the last call left in f, of the positions it ended
     with (kept in ``start[0]``, ``kept`` bases of them); ``None`` when they are of nothing now."""
@@ -1340,6 +1343,7 @@ class NumbaBackend(Backend):
         longest = int(fr.runs[1].max(initial=1))
         fr.work = (*(self._space(f"work{i}", (longest,)) for i in range(5)), self._space("picks", (longest,), np.bool_))
         fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(6))  # the call's start, the last step's
+        fr.start_columns = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
 
     def _space(self, name: str, shape: tuple, dtype=float) -> np.ndarray:
@@ -1456,7 +1460,7 @@ class _NumbaCall(Call):
         self.k = float(mech.k)
         self.kept = fr.kept if fr.forces == self.k and fr.kept <= state.n_bases else -1  # the kernel compares them
         self.fresh = min(fr.refresh_from, state.n_bases)  # forces made again from this base on (all, if those moved)
-        self.start = tuple(a[:, i] for a in fr.start for i in range(3))
+        self.start = fr.start_columns
         fr.forces = None
         self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
                           float(plan.accept_load), float(plan.max_batch), float(plan.break_budget))
