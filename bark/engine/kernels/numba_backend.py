@@ -294,10 +294,10 @@ def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now,
     block_bad = np.zeros(_blocks(n, block), np.int64)
     for blk in prange(_blocks(n, block)):
         lo, hi = blk * block, min(n, (blk + 1) * block)
-        if save:
-            _copy_block((x0, x1, x2, v0, v1, v2), prev, lo, hi)
-            if not uniform:
-                _copy_block((ax, ay, az), prev[6:], lo, hi)
+        if save and uniform:  # a uniform radius leaves the anchors as they are until the call ends
+            _save((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
+        elif save:
+            _save((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
         part = _slices(bases, lo, hi)
         if uniform:
             block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
@@ -496,11 +496,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         if _ends_call(finite, top, accept_load, picked, n_log - before, n_log, break_budget, max_batch,
                       relax[step]):
             if in_place and not (finite and top <= accept_load):  # refused: the step taken back
-                _copy_blocks(prev[:6], (x0, x1, x2, v0, v1, v2), 0, block)
-                if not uniform:
-                    _copy_blocks(prev[6:], (ax, ay, az), 0, block)
-                for e in range(before, n_log):
-                    live[log_id[e]] = True
+                if uniform:
+                    _take_back(prev[:6], (x0, x1, x2, v0, v1, v2), live, log_id[before:n_log])
+                else:
+                    _take_back(prev, (x0, x1, x2, v0, v1, v2, ax, ay, az), live, log_id[before:n_log])
                 n_log = before
                 r_before = r_kept
                 done = step
@@ -541,6 +540,24 @@ def _kept_and_started(bases, start, kept, block):
         same = same & block_same[blk]
     _copy_blocks((x0, x1, x2), start[:3], kept if same else 0, block)
     return same
+
+
+@jit
+def _save(source, target, lo, hi):
+    """Entries ``lo .. hi`` of the vectors ``source`` into ``target``: the base pass's copy of a block
+    before its step.  Compiled once for every kernel (not inlined into each: their compile time)."""
+    for v in range(len(source)):
+        target[v][lo:hi] = source[v][lo:hi]
+
+
+@jit
+def _take_back(prev, bases, live, broke):
+    """A refused step taken back: the bases from ``prev`` (as the base pass saved them) and the
+    springs it broke (``broke``) intact again.  Compiled once for every kernel (not inlined)."""
+    for v in range(len(bases)):
+        bases[v][:] = prev[v]
+    for s in broke:
+        live[s] = True
 
 
 @inline
