@@ -56,12 +56,22 @@ def test_adaptive_time_stays_on_the_grid_and_stops_exactly(make_sim):
     assert abs(sim.state.t / h_min - round(sim.state.t / h_min)) < 1e-9
 
 
-def test_smallest_step_overshoot_is_recorded_not_silent(make_sim):
-    """With no room to halve, an overshoot is accepted and recorded as an event."""
-    sim = make_sim(n_bases=300, G=0.2, dt=0.3, seed=1, stepping="adaptive", overshoot_tol=1e-9, max_halvings=1)
-    sim.run(Stop(until_time=3.0))
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_smallest_step_overshoot_is_recorded_not_silent(make_sim, backend):
+    """With no room to halve, an overshoot is accepted and recorded as an event — every one: calls of
+    many steps record the same events, step for step, as the step-by-step loop (they recorded only
+    a call's last step: 3 of 6 here)."""
+    kw = dict(n_bases=300, G=0.2, dt=0.3, seed=1, stepping="adaptive", overshoot_tol=1e-9, max_halvings=1,
+              backend=backend)
+    sim, stepped = make_sim(**kw), make_sim(**kw)
+    stop = Stop(until_time=3.0)
+    sim.run(stop)
+    while stop.reason(stepped) is None:
+        stepped.step()
     events = [e for e in sim.events if e["kind"] == "overshoot"]
-    assert events and all(e["load"] > 1.0 for e in events)
+    assert len(events) > 3 and all(e["load"] > 1.0 for e in events)
+    assert events == [e for e in stepped.events if e["kind"] == "overshoot"]
+    assert np.array_equal(sim.state.x, stepped.state.x) and sim.step_count == stepped.step_count
 
 
 @pytest.mark.parametrize("seed", [0, 5])
@@ -227,4 +237,6 @@ INF = math.inf
 def test_one_rule_ends_a_call(finite, load, candidate, broke, broken, budget, max_batch, relax, ends):
     from bark.engine.kernels import ends_call
 
-    assert ends_call(finite, load, 1.002, candidate, broke, broken, budget, max_batch, relax) == ends
+    assert ends_call(finite, load, 1.002, INF, candidate, broke, broken, budget, max_batch, relax) == ends
+    assert ends_call(finite, load, INF, 1.002, candidate, broke, broken, budget, max_batch, relax) == (
+        ends or finite and load > 1.002)  # at the smallest step: kept, and the call ends to record it

@@ -227,6 +227,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         h=clock.step, times=times[:n], integrator=integrator if compiled else None, growth=growth if compiled else None,
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
         accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
+        report_load=1.0 + sim.numerics.overshoot_tol if steers and not clock.can_halve() else math.inf,
         break_budget=_break_budget(sim, stop), max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         relax=relax, threads=sim.numerics.threads,
     )

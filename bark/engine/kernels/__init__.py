@@ -74,6 +74,9 @@ class Plan:
     part is ``NO_BREAKING``)."""
     accept_load: float = math.inf
     """A step whose load exceeds this is undone and the call ends (adaptive stepping halves it)."""
+    report_load: float = math.inf
+    """The call ends after a step kept with a load over this: at the smallest step, where nothing is
+    undone, an overshoot the simulation records as an event, one per step."""
     break_budget: float = math.inf
     """End the call after the step at which the springs the rule broke in it reach this many: 1 when
     Python must see every break (a trigger that watches breaks), the breaks that may first reach a
@@ -100,14 +103,14 @@ class Plan:
         return math.isnan(load) or load > self.accept_load
 
 
-def ends_call(finite, load, accept_load, candidate, broke, broken, break_budget, max_batch, relax_here):
+def ends_call(finite, load, accept_load, report_load, candidate, broke, broken, break_budget, max_batch, relax_here):
     """Whether a call ends after a step: the step went non-finite or its load passed ``accept_load``
-    (it is undone), the rule named a ``candidate`` for the breakers to judge in Python, it ``broke``
+    (it is undone) or ``report_load`` (it is kept, and recorded), the rule named a ``candidate`` for the breakers to judge in Python, it ``broke``
     springs and the call's breaks so far (``broken``) reach ``break_budget``, or it broke more than
     ``max_batch``, or it ends quiet (load at most 1) where the clock may double the step
     (``relax_here``).  Scalars only: the numba backend compiles this into its kernel, the others
     call it."""
-    return (not finite or load > accept_load or candidate or broke > 0 and (broken >= break_budget or broke > max_batch)
+    return (not finite or load > accept_load or load > report_load or candidate or broke > 0 and (broken >= break_budget or broke > max_batch)
             or relax_here and load <= 1.0)
 
 

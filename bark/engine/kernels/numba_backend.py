@@ -446,7 +446,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     the next call makes them again)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
-    k, c, b, m, h, accept_load, max_batch, break_budget = constants
+    k, c, b, m, h, accept_load, report_load, max_batch, break_budget = constants
     uniform, breaking, fresh, block, kept, evolve = flags
     resin = (rp, h, evolve)
     log_id, log_step, log_t = log
@@ -468,7 +468,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     may_relax = False
     for step in range(relax.shape[0]):
         may_relax = may_relax or relax[step]
-    tops = accept_load < np.inf or may_relax or evolve  # every step's load is needed; else only the last one's
+    tops = accept_load < np.inf or report_load < np.inf or may_relax or evolve  # every step's load is needed; else
+    # only the last one's
     # (below: taken after the call, which a resin that flows has changed since)
     top = -np.inf
     finite = True
@@ -493,7 +494,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                                                           log_step, log_t, n_log, step + 1, block, law, flow, resin)
         finite = finite and springs_finite
         done = step + 1
-        if _ends_call(finite, top, accept_load, picked, n_log - before, n_log, break_budget, max_batch,
+        if _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget, max_batch,
                       relax[step]):
             if in_place and not (finite and top <= accept_load):  # refused: the step taken back
                 if uniform:
@@ -1480,7 +1481,8 @@ class _NumbaCall(Call):
         self.start = fr.start_columns
         fr.forces = None
         self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
-                          float(plan.accept_load), float(plan.max_batch), float(plan.break_budget))
+                          float(plan.accept_load), float(plan.report_load), float(plan.max_batch),
+                          float(plan.break_budget))
         self.heights = backend._heights(state, plan, fr)
         self.resin = backend.resin
         # a resin that flows changes the frame's rest lengths or own fields: kept to replay from, written back after

@@ -133,8 +133,8 @@ class ArrayCall(Call):
                     log.append((picked, step, t_all[picked]))
                 if verbs is None:
                     fs = self.backend._spring_forces(state, mech, x, live)
-            if ends_call(finite, load, plan.accept_load, candidate, broke, broken, plan.break_budget, plan.max_batch,
-                         relax[step - 1]):
+            if ends_call(finite, load, plan.accept_load, plan.report_load, candidate, broke, broken, plan.break_budget,
+                         plan.max_batch, relax[step - 1]):
                 break
         return done, load, candidate
 
