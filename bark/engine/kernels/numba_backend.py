@@ -295,9 +295,9 @@ def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now,
     for blk in prange(_blocks(n, block)):
         lo, hi = blk * block, min(n, (blk + 1) * block)
         if save and uniform:  # a uniform radius leaves the anchors as they are until the call ends
-            _save((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
+            _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
         elif save:
-            _save((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
+            _copy_block((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
         part = _slices(bases, lo, hi)
         if uniform:
             block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
@@ -544,14 +544,6 @@ def _kept_and_started(bases, start, kept, block):
 
 
 @jit
-def _save(source, target, lo, hi):
-    """Entries ``lo .. hi`` of the vectors ``source`` into ``target``: the base pass's copy of a block
-    before its step.  Compiled once for every kernel (not inlined into each: their compile time)."""
-    for v in range(len(source)):
-        target[v][lo:hi] = source[v][lo:hi]
-
-
-@jit
 def _take_back(prev, bases, live, broke):
     """A refused step taken back: the bases from ``prev`` (as the base pass saved them) and the
     springs it broke (``broke``) intact again.  Compiled once for every kernel (not inlined)."""
@@ -561,9 +553,10 @@ def _take_back(prev, bases, live, broke):
         live[s] = True
 
 
-@inline
+@jit
 def _copy_block(source, target, lo, hi):
-    """Entries ``lo .. hi`` of the vectors ``source`` into ``target``."""
+    """Entries ``lo .. hi`` of the vectors ``source`` into ``target``.  Compiled once for every kernel
+    (not inlined into each: their compile time)."""
     if hi > lo:
         for v in range(len(source)):
             target[v][lo:hi] = source[v][lo:hi]
