@@ -468,9 +468,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     may_relax = False
     for step in range(relax.shape[0]):
         may_relax = may_relax or relax[step]
-    tops = accept_load < np.inf or report_load < np.inf or may_relax or evolve  # every step's load is needed; else
-    # only the last one's
-    # (below: taken after the call, which a resin that flows has changed since)
+    # every step's load is needed; else only the last one's (below: taken after the call, which a resin
+    # that flows has changed since)
+    tops = accept_load < np.inf or report_load < np.inf or may_relax or evolve
     top = -np.inf
     finite = True
     done = 0
@@ -547,8 +547,7 @@ def _kept_and_started(bases, start, kept, block):
 def _take_back(prev, bases, live, broke):
     """A refused step taken back: the bases from ``prev`` (as the base pass saved them) and the
     springs it broke (``broke``) intact again.  Compiled once for every kernel (not inlined)."""
-    for v in range(len(bases)):
-        bases[v][:] = prev[v]
+    _copy_block(prev, bases, 0, bases[0].shape[0])
     for s in broke:
         live[s] = True
 
