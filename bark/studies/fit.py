@@ -575,18 +575,19 @@ def _abcsmc(fit: Fit, sampler):
                         eps=pyabc.QuantileEpsilon(alpha=0.5))
 
 
-def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None,
+def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None, pool=None,
             progress: Callable[[int, int, int, int], None] | None = None,
             generation_done: Callable[[Generation], None] | None = None) -> FitResult:
     """Run ``fit`` into ``database`` (pyabc's SQLite file), going on from the generations already
     there: every generation starts from the database alone, so a fit stopped at any moment and run
     again gives the posterior an uninterrupted one gives.  ``client``: a ``distributed.Client`` to
-    run on; else ``workers`` local processes.  ``progress(t, accepted, population, runs)`` after
+    run on; else ``pool`` (a started ``LocalPool`` or ``DaskPool``, left open: several fits share its warm
+    workers); else ``workers`` local processes.  ``progress(t, accepted, population, runs)`` after
     each batch of runs, ``generation_done(generation)`` after each generation stored."""
     database = Path(database)
     if workers < 1:
         raise BarkError(f"fit: workers must be at least 1, given {workers}")
-    fit.check(None if client is not None else workers)
+    fit.check(None if client is not None or pool is not None else workers)
     stored = _stored_settings(database)
     settings = fit.settings()
     if stored and stored != json.loads(_canonical(settings)):
@@ -604,7 +605,9 @@ def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None,
     if len(done) >= fit.generations:
         result.stop_reason = "generations"
         return result
-    pool = DaskPool(client) if client is not None else LocalPool(workers, "fit")
+    own = pool is None
+    if own:
+        pool = DaskPool(client) if client is not None else LocalPool(workers, "fit")
     sampler_class = _sampler_class()
     try:
         while len(result.generations) < fit.generations:
@@ -627,7 +630,8 @@ def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None,
         else:
             result.stop_reason = "generations"
     finally:
-        pool.close()
+        if own:
+            pool.close()
     return result
 
 

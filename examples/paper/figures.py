@@ -11,6 +11,7 @@ run)::
     python examples/paper/figures.py recovery   # bark fit finds known (G, f_max) again: 5 points
     python examples/paper/figures.py fit        # posteriors for the two photographs' summaries
     python examples/paper/figures.py resins     # viscoelastic, plastic, disordered resin: the three regimes
+    python examples/paper/figures.py sbc        # simulation-based calibration of bark fit: 60 prior draws
 
 Options: ``--out DIR`` (default ``runs/paper``), ``--workers N`` (sweeps).  Runs already there are
 reused: ``bark sweep`` skips finished points, and a regime's run folder with its summary is kept.
@@ -378,8 +379,67 @@ def _rows(folder: Path, stats: list[str], axis: str | None = None, value: float 
     return [dict(zip(stats, r)) for r in got]
 
 
+SBC = {"draws": 60, "population": 30, "generations": 3}
+"""The calibration study's size: 60 settings from the default priors, each fitted with 30 accepted runs a
+generation for three generations (about 240 runs and 50 s a fit on 2 workers of an Intel Xeon)."""
+
+
+def sbc(out: Path, workers: int) -> None:
+    """Simulation-based calibration of ``bark fit`` (``bark.studies.sbc``): :data:`SBC`'s draws from the
+    default priors over (G, f_max), each grown in the reticulate scene (3000 bases, to 115 patches,
+    a seed of its own) and fitted on the eight statistics over the same priors.  ``sbc.png``: the
+    ranks' histograms (G, f_max, and the joint highest-density level) against the uniform band, and
+    the coverage of the 50/80/95 % intervals against their nominal level; ``sbc.json``: the figures."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from scipy.stats import binom
+
+    from bark.engine.scene import read_toml
+    from bark.io.files import write_json
+    from bark.studies.sbc import LEVELS, Calibration, run_calibration, summarise
+
+    cal = Calibration(base=read_toml("reticulate"), **SBC)
+    folder = out / "sbc"
+    rows = run_calibration(cal, folder, workers=workers, draw_done=lambda r: print(
+        f"draw {r['draw']}: " + (r.get("skipped") or ", ".join(f"{k} rank {v:.2f}" for k, v in r["rank"].items())
+                                 + f", joint {r['hpd_level']:.2f}, {r['runs']} runs"), flush=True))
+    summary = summarise(rows, cal.keys)
+    write_json(folder / "sbc.json", summary)
+    panels = (*cal.keys, "joint")
+    titles = {"growth.G": "G: posterior weight below the truth", "mechanics.f_max": "f_max: weight below the truth",
+              "joint": "joint: weight more probable than the truth"}
+    n, bins = summary["draws"], summary["bins"]
+    fig, axes = plt.subplots(1, len(panels) + 1, figsize=(4.2 * (len(panels) + 1), 3.6))
+    lo, hi = binom.ppf(0.005, n, 1 / bins), binom.ppf(0.995, n, 1 / bins)
+    for ax, key in zip(axes, panels):
+        ax.axhspan(lo, hi, color="0.85", label="99 % band, uniform")
+        ax.bar((np.arange(bins) + 0.5) / bins, summary[key]["counts"], width=1 / bins, edgecolor="k", color="C0")
+        ax.set(xlim=(0, 1), xlabel="rank (0 to 1)", ylabel="draws",
+               title=f"{titles[key]}\nχ² p = {summary[key]['chi2_p']:.2g}")
+    axes[0].legend(loc="lower center", fontsize=8)
+    ax = axes[-1]
+    q = np.array(LEVELS)
+    band = np.array([summary["joint"]["coverage"][f"{v:g}"]["expected"] for v in LEVELS])
+    ax.fill_between(q, band[:, 0], band[:, 1], color="0.85", label="95 % range if calibrated")
+    ax.plot([0.4, 1], [0.4, 1], "k:", lw=1)
+    for i, key in enumerate(panels):
+        ax.plot(q, [summary[key]["coverage"][f"{v:g}"]["covered"] for v in LEVELS], "o-", color=f"C{i}", label=key)
+    ax.set(xlabel="interval level", ylabel="draws covered", title=f"coverage over {n} draws", xlim=(0.4, 1),
+           ylim=(0, 1.02))
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(folder / "sbc.png", dpi=120)
+    for key in panels:
+        cover = ", ".join(f"{v:g}: {summary[key]['coverage'][f'{v:g}']['covered']:.2f}" for v in LEVELS)
+        print(f"{key:16s} ranks {summary[key]['counts']}  chi2 p {summary[key]['chi2_p']:.3g}  coverage {cover}")
+    print(f"{n} draws fitted, {summary['skipped']} without a pattern; {folder / 'sbc.png'}")
+
+
 FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11, "packing": packing,
-           "recovery": recovery, "fit": fit, "resins": resins}
+           "recovery": recovery, "fit": fit, "resins": resins, "sbc": sbc}
 
 
 def main(argv: list[str] | None = None) -> None:
