@@ -235,7 +235,7 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, ou
     from rich.console import Console
     from rich.table import Table
 
-    from bark.studies.accuracy import METRICS, pareto_front, pattern_study, position_study
+    from bark.studies.accuracy import METRICS, SIGNED, pareto_front, pattern_study, position_study
     from bark.io.files import write_csv, write_json
     from bark.engine.scene import RunSettings, read_toml
     from bark_cli.plot import plot_work_precision
@@ -270,12 +270,14 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, ou
     within = [all(r[m] <= spread[m] or (np.isnan(r[m]) and np.isnan(spread[m])) for m in METRICS) for r in pat_rows]
 
     table = Table("method", "dt / tol", "wall s", "steps", *METRICS, "within spread", "on front",
+                  "broken bias (seeds +/−)", "patch bias (seeds +/−)",
                   title=f"(b) pattern error at t = {until_time:g}, mean of {seeds} seeds vs Euler–Cromer dt = {reference_dt:g}")
     for i, r in enumerate(pat_rows):
         on = ",".join(m.split("_")[0] for m in METRICS if i in fronts[m]) or "-"
         table.add_row(r["method"], f"{r['param']:g}", f"{r['wall_s']:.3g}", f"{r['steps']:.0f}",
-                      *(f"{r[m]:.3g}" for m in METRICS), "yes" if within[i] else "no", on)
-    table.add_row("seed-to-seed spread", "", "", "", *(f"{spread[m]:.3g}" for m in METRICS), "", "")
+                      *(f"{r[m]:.3g}" for m in METRICS), "yes" if within[i] else "no", on,
+                      *(f"{r[m]:+.3g} ({r[m + '_above']}/{r[m + '_below']})" for m in SIGNED))
+    table.add_row("seed-to-seed spread", "", "", "", *(f"{spread[m]:.3g}" for m in METRICS), "", "", "", "")
     console.print(table)
     ptable = Table("method", "dt", "wall s", "steps", "error", "error vs massive model", title="(a) position error, no breaking")
     for r in pos_rows:

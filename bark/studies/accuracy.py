@@ -14,7 +14,9 @@ time, one line per integrator and stepping mode, one point per dt or tolerance):
     reference of the same seed: relative difference in broken springs, difference in patch count,
     and the Hellinger distance (paper, eq. 12) between the orientation distributions.  The same
     three measures between *different seeds* of the reference are the seed-to-seed spread: a
-    difference below it is not an error.
+    difference below it is not an error.  The first two are also reported signed (run minus
+    reference, :data:`SIGNED`), with the number of seeds on each side: a difference within the spread
+    that has the same sign on every seed is a bias, which the unsigned measures hide.
 
 Nothing here prints or plots; the command line does.
 """
@@ -36,7 +38,7 @@ from bark.engine.scene import DEFAULT_STRATEGIES, Scene, merge
 from bark.engine.simulation import Simulation, Stop
 from bark.engine.stepping import Numerics
 
-__all__ = ["Method", "position_study", "pattern_study", "spread", "pareto_front", "fit_order"]
+__all__ = ["METRICS", "SIGNED", "Method", "position_study", "pattern_study", "spread", "pareto_front", "fit_order"]
 
 
 @attrs.frozen
@@ -146,14 +148,18 @@ def _pattern_run(scene: dict, settings: dict, integrator: str, seed: int, until_
 
 def _distance(a: dict, b: dict) -> dict:
     both = len(a["orientations"]) >= 2 and len(b["orientations"]) >= 2
+    broken, patches = (a["n_broken"] - b["n_broken"]) / max(b["n_broken"], 1), a["n_patches"] - b["n_patches"]
     return {
-        "broken_rel_diff": abs(a["n_broken"] - b["n_broken"]) / max(b["n_broken"], 1),
-        "patch_count_diff": abs(a["n_patches"] - b["n_patches"]),
+        "broken_rel_diff": abs(broken), "patch_count_diff": abs(patches),
         "hellinger": orientation_hellinger(a["orientations"], b["orientations"]) if both else float("nan"),
+        "broken_rel_bias": broken, "patch_count_bias": patches,
     }
 
 
 METRICS = ("broken_rel_diff", "patch_count_diff", "hellinger")
+"""The unsigned errors: what the seed-to-seed spread bounds and the Pareto fronts are drawn on."""
+SIGNED = ("broken_rel_bias", "patch_count_bias")
+"""The signed errors (run minus reference; broken springs relative to the reference's)."""
 
 
 def spread(reference: dict[int, dict]) -> dict[str, float]:
@@ -191,9 +197,12 @@ def pattern_study(
             dist = [_distance(r, reference[seed]) for r, seed in zip(runs, seeds)]
             row = {"method": method.label, "param": param, "wall_s": float(np.mean([r["wall_s"] for r in runs])),
                    "steps": float(np.mean([r["steps"] for r in runs]))}
-            for m in METRICS:
+            for m in METRICS + SIGNED:
                 row[m] = _mean_of_defined([d[m] for d in dist])
                 row[m + "_per_seed"] = [d[m] for d in dist]
+            for m in SIGNED:  # how many seeds lie above and below the reference: all on one side is a bias
+                row[m + "_above"] = sum(d[m] > 0 for d in dist)
+                row[m + "_below"] = sum(d[m] < 0 for d in dist)
             rows.append(row)
             if progress:
                 progress(f"(b) {method.label} {param:g}: " + ", ".join(f"{m} {row[m]:.3g}" for m in METRICS))
