@@ -9,7 +9,7 @@ import numpy as np
 
 from bark.validators import one_of, positive, positive_int
 from bark.errors import BarkError, Ref, StepFailedError
-from bark.model.stability import euler_cromer_h_max
+from bark.model.stability import euler_cromer_h_max, lambda_max
 from bark.contract.parts import IntegratorPart
 from bark.contract.strategies import Integrator
 
@@ -81,6 +81,12 @@ class ImplicitOverdamped(Integrator):
             raise BarkError("{0}: the implicit-overdamped integrator needs damping > 0 (and the 'damping' effect)",
                             Ref("mechanics", "b", forces.mechanics.b))
         return float("inf")
+
+    def accuracy_limit(self, state, forces) -> float:
+        """The layer's fastest relaxation time ``b/λ_max(K)`` (λ by Gershgorin's bound, as the explicit
+        stability guard takes it): a fixed step longer than that resolves none of the relaxation
+        that follows a break, and springs that would break one after another break together."""
+        return forces.mechanics.b / lambda_max(state, forces, "gershgorin")
 
     def step(self, state, dt: float, forces) -> None:
         from scipy.sparse.linalg import LinearOperator, cg  # here, not at import: a run without it never pays for it

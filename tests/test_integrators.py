@@ -160,7 +160,8 @@ def test_implicit_step_dissipates_energy_without_growth(mechanics, stiffness_ste
     energy slightly before it decays (measured: at most ×1.002 with the tangent-plane solve; it was
     ×3.6 when the step was solved in 3-D and then projected): the next test bounds that regime."""
     dt = min(50.0, max(1e-3, stiffness_steps * mechanics.b / mechanics.k))
-    sim = _sim(ImplicitOverdamped(), dt, n_bases=100, mechanics=mechanics, seed=seed % 1000)
+    # adaptive: a fixed step is held to the accuracy limit; with nothing breaking, adaptive steps are dt
+    sim = _sim(ImplicitOverdamped(), dt, n_bases=100, mechanics=mechanics, seed=seed % 1000, stepping="adaptive")
     assert sim.stability_limit == math.inf and sim.clock.h == dt  # never refused, never sub-stepped
     _displace(sim, amplitude, seed)
     energies = [_energy(sim)]
@@ -192,7 +193,10 @@ def test_implicit_step_stays_bounded_with_growth_and_large_displacements(mechani
     was there plus what growth injects (an unstable method grows it geometrically)."""
     if breaking:
         mechanics = attrs.evolve(mechanics, f_max=0.0028)
-    sim = _sim(ImplicitOverdamped(), dt, n_bases=100, mechanics=mechanics, G=G, seed=seed % 1000)
+    # adaptive: the way a step this long is taken (fixed, it is above the accuracy limit); the clock
+    # halves it only around breaks
+    sim = _sim(ImplicitOverdamped(), dt, n_bases=100, mechanics=mechanics, G=G, seed=seed % 1000, stepping="adaptive")
+    assert sim.clock.h == dt
     _displace(sim, amplitude, seed)
     e0 = _energy(sim)
     steps = 12
@@ -204,7 +208,7 @@ def test_implicit_step_stays_bounded_with_growth_and_large_displacements(mechani
         sim.step()
         assert sim.state.is_finite() and np.all(np.isfinite(sim.state.anchor))
         assert _energy(sim) <= bound, (_energy(sim), e0, injected)
-    assert sim.state.t == pytest.approx(steps * dt)
+    assert sim.state.t == pytest.approx(steps * dt) or (breaking and 0 < sim.state.t < steps * dt)
 
 
 # -- the explicit stability guard --------------------------------------------------------------
@@ -263,6 +267,33 @@ def test_guard_refuses_or_substeps_exactly_above_h_max(mechanics, bound, factor)
     auto = _guarded(mechanics, bound, dt, "auto")
     auto.run(Stop(until_time=dt))  # one dt = n sub-steps of size h
     assert auto.step_count == n and auto.state.t == pytest.approx(dt, rel=1e-12)
+
+
+@given(mechanics=guard_mechanics.filter(lambda m: m.b > 0.01), factor=st.floats(1.0 + 1e-6, 50.0))
+def test_fixed_implicit_steps_are_refused_above_the_fastest_relaxation_and_split_under_auto(mechanics, factor):
+    """The implicit method has no stability limit, so its steps are bounded by the layer's fastest
+    relaxation time b/λ_max: a fixed step above it is refused in one line, auto splits it, and
+    adaptive stepping (whose overshoot control is the accuracy control) takes it as it is."""
+    probe = _sim(ImplicitOverdamped(), 1e-9, n_bases=150, mechanics=mechanics, G=0.014, seed=5)
+    tau = mechanics.b / lambda_max(probe.state, probe.forces, "gershgorin")
+    assert ImplicitOverdamped().accuracy_limit(probe.state, probe.forces) == tau
+    assert probe.stability_limit == math.inf
+    below = _sim(ImplicitOverdamped(), tau * (1 - 1e-9), n_bases=150, mechanics=mechanics, G=0.014, seed=5).build()
+    assert below.clock.h == below.numerics.dt
+    dt = tau * factor
+    with pytest.raises(BarkError) as err:
+        _sim(ImplicitOverdamped(), dt, n_bases=150, mechanics=mechanics, G=0.014, seed=5).build()
+    assert "accuracy limit" in str(err.value) and "adaptive" in str(err.value) and "\n" not in str(err.value)
+    auto = _sim(ImplicitOverdamped(), dt, n_bases=150, mechanics=mechanics, G=0.014, seed=5, stepping="auto").build()
+    n = round(dt / auto.clock.h)
+    assert n >= 2 and auto.clock.h <= SAFETY * tau * (1 + 1e-9) and dt / (n - 1) > SAFETY * tau * (1 - 1e-9)
+    adaptive = _sim(ImplicitOverdamped(), dt, n_bases=150, mechanics=mechanics, G=0.014, seed=5, stepping="adaptive")
+    assert adaptive.build().clock.h == dt
+
+
+def test_an_explicit_method_has_no_accuracy_limit_of_its_own():
+    sim = _sim(EulerCromer(), 0.01)
+    assert EulerCromer().accuracy_limit(sim.state, sim.forces) == math.inf
 
 
 @given(
@@ -607,20 +638,26 @@ def test_nan_radius_on_the_step_path_leaves_last_finite_state(backend):
 STIFF = ["simulate", "--k", "100", "--m", "0.01", "--dt", "0.01", "--n-bases", "300", "--until-time", "0.2", "--quiet"]
 
 
-def test_cli_refuses_stiff_scene_with_fixed_steps(tmp_path):
+@pytest.mark.parametrize("extra,words", [
+    ([], "stability limit h_max"),
+    (["--integrator", "implicit-overdamped"], "accuracy limit for fixed steps, 0.006249"),  # b/λ = 5/800.1
+])
+def test_cli_refuses_stiff_scene_with_fixed_steps(tmp_path, extra, words):
     out = tmp_path / "out"
-    result = CliRunner().invoke(cli, [*STIFF, "--stepping", "fixed", "--out", str(out)])
+    result = CliRunner().invoke(cli, [*STIFF, "--stepping", "fixed", *extra, "--out", str(out)])
     assert result.exit_code == 2, result.output
     text = result.output.strip()
     assert "\n" not in text and "Traceback" not in text
-    assert "h_max" in text
+    assert words in text and "--dt 0.01" in text
     assert not out.exists()
 
 
 @pytest.mark.parametrize(
     "extra",
-    [["--stepping", "auto"], ["--stepping", "adaptive"], ["--stepping", "fixed", "--integrator", "implicit-overdamped"]],
-    ids=["auto", "adaptive", "implicit"],
+    [["--stepping", "auto"], ["--stepping", "adaptive"], ["--stepping", "adaptive", "--integrator", "implicit-overdamped"],
+     ["--stepping", "auto", "--integrator", "implicit-overdamped"],
+     ["--stepping", "fixed", "--integrator", "implicit-overdamped", "--dt", "0.005"]],
+    ids=["auto", "adaptive", "implicit", "implicit-auto", "implicit-fixed"],
 )
 def test_cli_runs_stiff_scene_with_substeps_or_implicit(tmp_path, extra):
     out = tmp_path / "out"

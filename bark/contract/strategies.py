@@ -19,7 +19,9 @@ Integrator     ``step(state, dt, forces) -> None``   advance ``state.x`` and ``s
                                                      Touches nothing else (its ``writes``): the
                                                      simulation advances ``t``, applies the surface
                                                      constraint and breaks springs.  Explicit methods
-                                                     also give ``stability_limit(state, forces)``.
+                                                     also give ``stability_limit(state, forces)``,
+                                                     unconditionally stable ones
+                                                     ``accuracy_limit(state, forces)``.
 Breaker        ``select(state, tension, rng)``       ids (int array) of *intact* springs to break now.
                ``-> ids``                            Changes nothing but its own declared fields;
                                                      draws from ``rng`` only.
@@ -288,6 +290,14 @@ class Integrator(Strategy):
         """Largest ``dt`` for which this method is stable on ``state``; ``inf`` if unconditionally stable.
 
         The simulation refuses (or, with automatic stepping, sub-steps) a ``dt`` above it."""
+        return float("inf")
+
+    def accuracy_limit(self, state, forces) -> float:
+        """Largest ``dt`` of a step nothing controls (``fixed`` and ``auto`` stepping) for this method
+        on ``state``: the time scale a step must resolve where stability does not bound it; ``inf``
+        where the stability limit is the only one.  Refused (``fixed``) or sub-stepped (``auto``)
+        above it, as above the stability limit; ``adaptive`` stepping controls each breaking step's
+        overshoot instead."""
         return float("inf")
 
 

@@ -134,23 +134,38 @@ class Clock:
 def stable_step(sim) -> tuple[float, float]:
     """``(stability limit, full step)``: the integrator's limit — of the lattice as it will be, when
     bases are still to join — and the step, ``dt`` or ``dt`` split into equal sub-steps below the
-    limit (``auto``, ``adaptive``).  A ``dt`` above the limit with ``fixed`` stepping is refused."""
+    limit (``auto``, ``adaptive``).  A ``dt`` above the limit with ``fixed`` stepping is refused.
+    The integrator's accuracy limit bounds the steps nothing controls in the same way (``fixed``:
+    refused above it; ``auto``: sub-stepped); ``adaptive`` stepping controls overshoot instead."""
     stiff = sim.resin_part.stiffness  # a resin stiffer than k·(its stretch) lowers the bound
     forces = sim.forces if stiff == 1.0 else ForceField(attrs.evolve(sim.mechanics, k=sim.mechanics.k * stiff), sim.backend)
-    limit = float(sim.integrator.stability_limit(sim.state, forces))
+    whole = None
     if sim.lattice.initial < sim.lattice.n_bases:  # its own forces: their caches are of the simulation's state
-        limit = min(limit, float(sim.integrator.stability_limit(sim.whole_lattice(), ForceField(forces.mechanics, sim.backend))))
+        whole = (sim.whole_lattice(), ForceField(forces.mechanics, sim.backend))
+
+    def least(limit_of) -> float:
+        return min(float(limit_of(sim.state, forces)), float(limit_of(*whole)) if whole else math.inf)
+
+    limit = least(sim.integrator.stability_limit)
+    accurate = math.inf if sim.numerics.stepping == "adaptive" else least(sim.integrator.accuracy_limit)
     h = sim.numerics.dt
-    if h <= limit:
+    if h <= min(limit, accurate):
         return limit, h
-    if sim.numerics.stepping == "fixed":
+    method = type(sim.integrator).__name__
+    if sim.numerics.stepping == "fixed" and h > limit:
         massless = [name for kind, name in registry.find(lambda cls: cls.kind == "integrator" and cls.overdamped)]
         refs = [Ref("run", "dt", h), Ref("run", "stepping", "auto"), *(Ref("integrator", "name", n) for n in massless[:1])]
         raise BarkError(
-            f"{{0}} is above {type(sim.integrator).__name__}'s stability limit h_max = {limit:.4g} for this scene: "
+            f"{{0}} is above {method}'s stability limit h_max = {limit:.4g} for this scene: "
             f"use a step of at most {_round_down(limit)}, or {{1}} for sub-steps"
             + (", or {2}, which has no such limit" if massless else "") + " (docs/numerics.md)", *refs)
-    return limit, h / math.ceil(h / (SAFETY * limit))
+    if sim.numerics.stepping == "fixed":
+        raise BarkError(
+            f"{{0}} is above {method}'s accuracy limit for fixed steps, {accurate:.4g} for this scene (the time "
+            "scale a step must resolve; docs/numerics.md): springs that would break one after another would "
+            f"break together. Use a step of at most {_round_down(accurate)}, or {{1}}, which holds each breaking "
+            "step to the overshoot tolerance", Ref("run", "dt", h), Ref("run", "stepping", "adaptive"))
+    return limit, h / math.ceil(h / (SAFETY * min(limit, accurate)))
 
 
 def expected_work(sim) -> float | None:
@@ -184,10 +199,11 @@ def check_countable(sim, stop) -> None:
 
 def _round_down(x: float) -> str:
     """``x`` rounded down to two significant digits, as text (for suggestions)."""
-    if not x > 0:
+    if not (x > 0 and math.isfinite(x)):
         return f"{x:g}"
     exp = math.floor(math.log10(x)) - 1
-    return f"{math.floor(x / 10**exp) * 10**exp:.{max(0, -exp)}f}"
+    v = math.floor(x / 10**exp) * 10**exp
+    return f"{v:.{max(0, -exp)}f}" if -8 <= exp <= 15 else f"{v:.2g}"  # 0.0034, 120; 5.6e-124, not 124 digits
 
 
 def _first(flags: np.ndarray) -> int:
