@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.colors import LogNorm, Normalize
-from matplotlib.ticker import MaxNLocator
+from matplotlib.ticker import MaxNLocator, NullFormatter
 
 from bark.analysis.compare import QUANTITIES, Comparison
 from bark.analysis.pattern import PatternStatistics
@@ -291,16 +291,18 @@ def plot_fracture_history(history, path: str | Path) -> Path:
 
 
 def plot_power_law(x: np.ndarray, y: np.ndarray, groups: np.ndarray, fit, path: str | Path, group_label: str,
-                   xlabel: str) -> Path:
-    """Initial fractures against the dissipation rate on log–log axes, one colour per value of
-    ``groups`` (a swept setting), with the fitted power law ``fit`` (``bark.analysis.fracture.PowerLaw``)."""
-    fig = new_figure(figsize=(6.0, 4.6), dpi=130)
-    ax = fig.add_subplot()
+                   xlabel: str, check=None) -> Path:
+    """Initial fractures against the dissipation rate on log–log axes, one colour and marker per value
+    of ``groups`` (a swept setting), with the fitted power law ``fit`` (``bark.analysis.fracture.PowerLaw``)
+    and, given, its ``check`` (``PowerLawCheck``: the F tests' p in the title)."""
+    fig = new_figure(figsize=(7.8, 4.6), dpi=130)
+    ax = fig.add_axes((0.1, 0.12, 0.6, 0.78))
     values = sorted(set(groups.tolist()))
     cmap = colormaps["viridis"]
     for k, g in enumerate(values):
         on = groups == g
-        ax.plot(x[on], y[on], "o", ms=5, color=cmap(k / max(len(values) - 1, 1)), label=f"{group_label} = {g:g}")
+        ax.plot(x[on], y[on], "osD^v<>p"[k % 8], ms=4, color=cmap(k / max(len(values) - 1, 1)), alpha=0.8,
+                label=f"{group_label} = {g:g}")
     ok = (x > 0) & (y > 0)
     xs = np.geomspace(x[ok].min(), x[ok].max(), 50)
     lo, hi = fit.ci
@@ -308,7 +310,11 @@ def plot_power_law(x: np.ndarray, y: np.ndarray, groups: np.ndarray, fit, path: 
             label=f"fit: exponent {fit.exponent:.3f} ({fit.level:.0%} CI {lo:.3f} to {hi:.3f}), R² {fit.r2:.3f}")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel(xlabel)
+    ax.xaxis.set_minor_formatter(NullFormatter())  # decades only: minor labels overlap
+    ax.set_xlabel(xlabel, fontsize=8)
     ax.set_ylabel("initial fractures (most cracks at once)")
-    ax.legend(fontsize=7, frameon=False)
+    if check is not None:
+        ax.set_title(f"{check.decades:.1f} decades; F tests: straight in log–log p = {check.curvature_p:.2g}"
+                     + ("" if check.alone_p is None else f", rate alone sets it p = {check.alone_p:.2g}"), fontsize=8)
+    ax.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return save_figure(fig, path)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from bark.studies import runner
 from bark.errors import BarkError
-from bark.analysis.fracture import crack_counts, patch_count, power_law
+from bark.analysis.fracture import check_power_law, crack_counts, patch_count, power_law
 from bark.engine.scene import Scene
 
 A, B, N = 3, 5, 60
@@ -84,6 +84,33 @@ def test_power_law_recovers_an_exponent_and_covers_it_with_its_interval():
     for bad in ([1.0, 2.0], [1.0, 0.0, -1.0, np.nan, np.inf]):
         with pytest.raises(ValueError):
             power_law(bad, np.ones(len(bad)))
+
+
+def test_the_power_law_check_passes_a_power_law_and_rejects_a_curve_or_a_second_cause():
+    """p of each F test: uniform-ish for a true power law of x alone (rejected at 1 % about 1 % of the
+    time), tiny for a bent law in log-log, and tiny for y that depends on a setting beyond x."""
+    rng = np.random.default_rng(11)
+    b = np.repeat(np.geomspace(0.5, 50.0, 7), 10)
+    g = np.tile(np.repeat([0.005, 0.01], 5), 7)
+    x = b * g**2 * np.exp(rng.normal(0.0, 0.1, b.size))
+    rejected = {"curvature": 0, "alone": 0}
+    for _ in range(200):
+        y = 2.0 * x**0.3 * np.exp(rng.normal(0.0, 0.15, x.size))
+        c = check_power_law(x, y, {"b": b, "G": g})
+        rejected["curvature"] += c.curvature_p < 0.01
+        rejected["alone"] += c.alone_p < 0.01
+    assert rejected["curvature"] <= 8 and rejected["alone"] <= 8  # about 2 of 200 expected
+    bent = np.exp(0.3 * np.log(x) + 0.2 * np.log(x) ** 2 + rng.normal(0.0, 0.1, x.size))
+    assert check_power_law(x, bent).curvature_p < 1e-6
+    second = 2.0 * x**0.3 * b**0.5 * np.exp(rng.normal(0.0, 0.1, x.size))  # b acts beyond the rate
+    checked = check_power_law(x, second, {"b": b, "G": g})
+    assert checked.alone_p < 1e-6 and checked.n == x.size
+    assert checked.decades == pytest.approx(np.log10(x.max() / x.min()))
+    exact = check_power_law(x, 2.0 * x**0.3, {"b": b})
+    assert exact.alone_p == 1.0 and exact.curvature_p == 1.0  # a perfect fit: nothing to add
+    assert check_power_law(x, 2.0 * x**0.3).alone_p is None
+    with pytest.raises(ValueError, match="at least five"):
+        check_power_law([1.0, 2.0, 3.0, 0.0, -1.0, np.nan], np.ones(6))
 
 
 def _read(path):

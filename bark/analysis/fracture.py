@@ -34,7 +34,7 @@ import attrs
 import numpy as np
 
 
-__all__ = ["FractureHistory", "crack_counts", "history", "power_law"]
+__all__ = ["FractureHistory", "PowerLaw", "PowerLawCheck", "check_power_law", "crack_counts", "history", "power_law"]
 
 COLUMNS = ["t", "n_broken", "n_cracks", "n_patches", "dissipation"]
 """Columns of ``fracture.csv``: one row per sample."""
@@ -173,3 +173,55 @@ def power_law(x, y, level: float = 0.95) -> PowerLaw:
     half = float(stats.t.ppf(0.5 + level / 2, n - 2) * fit.stderr)  # n ≥ 3: checked above
     return PowerLaw(exponent=float(fit.slope), ci=(float(fit.slope - half), float(fit.slope + half)), level=level,
                     prefactor=float(math.exp(fit.intercept)), r2=float(fit.rvalue**2), n=n)
+
+
+@attrs.frozen
+class PowerLawCheck:
+    """Whether ``log y`` is a straight line in ``log x`` and nothing else (nested least-squares models,
+    F tests): ``curvature_p``, the p of adding ``(log x)²``; ``alone_p``, the p of adding the
+    covariates (the settings that set ``x``): small when ``y`` depends on them other than through ``x``,
+    so that no single power law of ``x`` describes it; ``decades``: the ``x`` range, log10(max/min)."""
+
+    curvature_p: float
+    alone_p: float | None
+    decades: float
+    n: int
+
+
+def _rss(y: np.ndarray, columns: list[np.ndarray]) -> tuple[float, int]:
+    design = np.column_stack([np.ones_like(y), *columns])
+    coef = np.linalg.lstsq(design, y, rcond=None)[0]
+    return float(np.sum((y - design @ coef) ** 2)), design.shape[1]
+
+
+def _nested_p(y: np.ndarray, smaller: list[np.ndarray], larger: list[np.ndarray]) -> float:
+    """The F test's p of the larger least-squares model against the smaller one it contains."""
+    from scipy import stats
+
+    rss0, p0 = _rss(y, smaller)
+    rss1, p1 = _rss(y, larger)
+    dof = y.size - p1
+    if dof <= 0 or p1 <= p0:
+        return math.nan
+    exact = 1e-20 * float(np.sum(y * y)) + 1e-300  # residuals of round-off only: a perfect fit
+    if rss1 <= exact:
+        return 0.0 if rss0 > exact else 1.0
+    f = ((rss0 - rss1) / (p1 - p0)) / (rss1 / dof)
+    return float(stats.f.sf(max(f, 0.0), p1 - p0, dof))
+
+
+def check_power_law(x, y, covariates: dict[str, np.ndarray] | None = None) -> PowerLawCheck:
+    """Test the power law ``y = A·x^k`` on the points with ``x, y > 0`` (see :class:`PowerLawCheck`);
+    ``covariates``: the settings behind ``x`` (e.g. b and G), each entered as its logarithm."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+    extra = [np.log(np.asarray(v, dtype=float)) for v in (covariates or {}).values()]
+    for v in extra:
+        ok &= np.isfinite(v)
+    if np.count_nonzero(ok) < 5:
+        raise ValueError(f"a power law's check needs at least five points with both values positive, not {np.count_nonzero(ok)}")
+    lx, ly = np.log(x[ok]), np.log(y[ok])
+    extra = [v[ok] for v in extra]
+    return PowerLawCheck(curvature_p=_nested_p(ly, [lx], [lx, lx**2]),
+                         alone_p=_nested_p(ly, [lx], [lx, *extra]) if extra else None,
+                         decades=float(np.log10(x[ok].max() / x[ok].min())), n=int(lx.size))

@@ -33,7 +33,11 @@ REGIMES = {  # Fig. 7's rows: Table 2's first regime, the reticulate fit (43 %),
     "intermediate-43": HERE / "intermediate-43.toml",
     "diamond": SCENES / "diamond.toml",
 }
-FRACTURE_GRID = ["--grid", "mechanics.b=1,2,5,10,20", "--grid", "growth.G=0.007,0.01,0.014"]
+FRACTURE_B = "mechanics.b=0.5,1,2,5,10,20,50"
+FRACTURE_GRID = ["--grid", FRACTURE_B, "--grid", "growth.G=0.005,0.007,0.01,0.014,0.02,0.03,0.04"]
+FRACTURE_SLOW = ["--grid", FRACTURE_B, "--grid", "growth.G=0.003", "--set", "run.until_time=900"]
+"""The slowest growth, its first breaks near t = 280: a sweep of its own, run longer."""
+FRACTURE_SEEDS = 10
 FIG11_GRID = ["--grid", "mechanics.c=0.03,0.06,0.1,0.15,0.2", "--grid", "mechanics.b=2,5",
               "--grid", "lattice.jitter=0.03,0.05"]
 FIG11_EFFECTS = '["bulges", "anchors", "damping", "patch-statistics"]'  # the statistics only: no pictures
@@ -95,22 +99,30 @@ def fig9(out: Path, workers: int) -> None:
 
 
 def fractures(out: Path, workers: int) -> None:
+    """The paper's brittleness claim, measured: initial fractures against the dissipation rate over
+    :data:`FRACTURE_GRID` and :data:`FRACTURE_SLOW` (b over two decades, G over a factor 13,
+    :data:`FRACTURE_SEEDS` seeds a point), fitted as a power law in log–log with the exponent's 95 % interval, and checked: whether
+    log–log is straight (adding (log rate)²) and whether the rate alone sets the count (adding log b
+    and log G); F tests, p printed.  Against the measured rate first, the growth-driven one second."""
     import numpy as np
 
-    from bark.analysis.fracture import power_law
+    from bark.analysis.fracture import check_power_law, power_law
     from bark_cli.figures import plot_power_law
 
     folder = out / "fractures"
-    bark("sweep", "--scene", str(HERE / "fractures.toml"), *FRACTURE_GRID, "--seeds", "2", "--workers", str(workers),
-         "--out", str(folder), "--quiet")
-    con = sqlite3.connect(folder / "sweep.sqlite")
-    rows = con.execute('SELECT "mechanics.b", "growth.G", seed, dissipation_rate, growth_dissipation, initial_fractures '
-                       'FROM runs ORDER BY "growth.G", "mechanics.b", seed').fetchall()
-    con.close()
-    b, G, _, measured, growth, count = (np.array(c, dtype=float) for c in zip(*rows))
+    rows = []
+    for grid, where in ((FRACTURE_SLOW, folder / "slow"), (FRACTURE_GRID, folder)):
+        bark("sweep", "--scene", str(HERE / "fractures.toml"), *grid, "--seeds", str(FRACTURE_SEEDS),
+             "--workers", str(workers), "--out", str(where), "--quiet")
+        con = sqlite3.connect(where / "sweep.sqlite")
+        rows += con.execute('SELECT "mechanics.b", "growth.G", seed, dissipation_rate, growth_dissipation, '
+                            'initial_fractures FROM runs ORDER BY "growth.G", "mechanics.b", seed').fetchall()
+        con.close()
+    b, G, _, measured, growth, count = (np.array([np.nan if v is None else v for v in c], dtype=float)
+                                        for c in zip(*rows))
     rates = {  # two readings of "the rate of energy dissipation" (README: Fracture history)
-        "dissipation_rate": (measured, "dissipation rate (damping power per base, first break to most cracks)"),
-        "growth_dissipation": (growth, "growth dissipation b·(dr/dt)² at the first break"),
+        "dissipation_rate": (measured, "measured dissipation rate (damping power per base, first break to most cracks)"),
+        "growth_dissipation": (growth, "growth-driven rate b·(dr/dt)² at the first break (set by b and G)"),
     }
     report = {}
     print(f"{'against':>19} {'runs':>10} {'exponent':>9} {'95 % CI':>19} {'R²':>6}")
@@ -118,14 +130,23 @@ def fractures(out: Path, workers: int) -> None:
         fits = {"all": power_law(x, count)}
         for g in sorted(set(G.tolist())):
             fits[f"G = {g:g}"] = power_law(x[G == g], count[G == g])
-        plot_power_law(x, count, G, fits["all"], folder / f"power-law-{name}.png", "G", label)
+        check = check_power_law(x, count, {"b": b, "G": G})
+        plot_power_law(x, count, G, fits["all"], folder / f"power-law-{name}.png", "G", label, check)
         for group, f in fits.items():
             print(f"{name:>19} {group:>10} {f.exponent:9.3f} [{f.ci[0]:8.3f}, {f.ci[1]:8.3f}] {f.r2:6.3f}   (n = {f.n})")
+        print(f"{name:>19} over {check.decades:.2f} decades: straight in log-log? p = {check.curvature_p:.3g}; "
+              f"the rate alone sets the count? p = {check.alone_p:.3g}")
         report[name] = {k: {"exponent": f.exponent, "ci": f.ci, "level": f.level, "prefactor": f.prefactor, "r2": f.r2,
                             "n": f.n} for k, f in fits.items()}
-    print(f"{'b':>5} {'G':>6} {'dissipation rate':>17} {'growth dissipation':>19} {'initial fractures':>18}")
-    for row in rows:
-        print(f"{row[0]:5g} {row[1]:6g} {row[3]:17.4g} {row[4]:19.4g} {row[5]:18d}")
+        report[name]["check"] = {"decades": check.decades, "curvature_p": check.curvature_p,
+                                 "alone_p": check.alone_p, "n": check.n}
+    print(f"{'b':>5} {'G':>6} {'dissipation rate':>27} {'initial fractures':>24}   (mean, lowest–highest of the seeds)")
+    for g in sorted(set(G.tolist())):
+        for bb in sorted(set(b.tolist())):
+            on = (G == g) & (b == bb)
+            r, c = measured[on], count[on]
+            print(f"{bb:5g} {g:6g} {np.nanmean(r):11.3g} ({np.nanmin(r):.3g}–{np.nanmax(r):.3g}) "
+                  f"{np.nanmean(c):9.1f} ({np.nanmin(c):.0f}–{np.nanmax(c):.0f})")
     (folder / "power-law.json").write_text(json.dumps(report, indent=2))
     print(f"power laws: {folder}/power-law-*.png, {folder / 'power-law.json'}")
 
