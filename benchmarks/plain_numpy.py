@@ -44,16 +44,25 @@ def lattice(rng: np.random.Generator):
     return x, theta, z, pairs, rest
 
 
+def _lengths(x):
+    """Each spring's vector and length, offset by offset (the springs are in the lattice's blocks):
+    two shifted views of the positions, no gather."""
+    d = np.concatenate([x[o:] - x[:-o] for o in OFFSETS])
+    return d, np.sqrt(np.einsum("ij,ij->i", d, d))
+
+
 def step(x, v, theta0, z0, pairs, rest, intact, t):
     """One Euler–Cromer step to t + DT; returns the springs' tensions of the new state."""
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = x[j] - x[i]
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    d, length = _lengths(x)
     tension = np.where(intact, K * (length - rest), 0.0)
     f = d * (tension / length)[:, None]
     force = np.zeros_like(x)
-    np.add.at(force, i, f)
-    np.subtract.at(force, j, f)
+    start = 0
+    for o in OFFSETS:  # base i pulled toward i + o, i + o toward i: two shifted adds, no scatter
+        block = f[start:start + N - o]
+        force[:-o] += block
+        force[o:] -= block
+        start += N - o
     r = R0 + G * math.sqrt(t)
     anchor = np.column_stack([r * np.cos(theta0), r * np.sin(theta0), z0])
     force -= C * (x - anchor) + B * v
@@ -61,8 +70,7 @@ def step(x, v, theta0, z0, pairs, rest, intact, t):
     x = x + DT * v
     r_new = R0 + G * math.sqrt(t + DT)
     x[:, :2] *= (r_new / np.hypot(x[:, 0], x[:, 1]))[:, None]  # held on the trunk's surface
-    d = x[j] - x[i]
-    return x, v, K * (np.sqrt(np.einsum("ij,ij->i", d, d)) - rest), r_new
+    return x, v, K * (_lengths(x)[1] - rest), r_new
 
 
 def patches(pairs, intact):

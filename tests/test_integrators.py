@@ -15,7 +15,7 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 from bark import Lattice, Mechanics, Simulation, Stop
-from bark.errors import BarkError, NonFiniteStateError
+from bark.errors import BarkError, NonFiniteStateError, StepFailedError
 from bark.model.forces import stiffness_matvec
 from bark.analysis.reference import solve_reference
 from bark.engine.scene import Scene
@@ -186,6 +186,8 @@ def test_implicit_step_dissipates_energy_without_growth(mechanics, stiffness_ste
 )
 @example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), dt=0.01, amplitude=0.3, G=0.1, breaking=False, seed=0)
 @example(mechanics=Mechanics(k=100.0, m=0.01, f_max=NO_BREAKS), dt=5.0, amplitude=0.3, G=0.1, breaking=True, seed=0)
+@example(mechanics=Mechanics(k=62.0, c=0.0, b=0.1, m=1.0, f_max=NO_BREAKS), dt=24.0, amplitude=0.25, G=0.0, breaking=False,
+         seed=0)  # dt·k/b ≈ 15 000 without anchors: CG short of its tolerance in maxiter, said so
 @pytest.mark.slow  # seconds of implicit solves: the quick subset (-m "not slow") leaves it out
 def test_implicit_step_stays_bounded_with_growth_and_large_displacements(mechanics, dt, amplitude, G, breaking, seed):
     """Any dt up to 50 (over 10⁴ × the stiff scene's explicit limit), large displacements, growth,
@@ -205,7 +207,12 @@ def test_implicit_step_stays_bounded_with_growth_and_large_displacements(mechani
     injected = 0.5 * mechanics.k * float(np.sum(((r_end / R0 - 1.0) * sim.state.rest) ** 2))
     bound = 100.0 * (e0 + injected) + 1e-300
     for _ in range(steps):
-        sim.step()
+        try:
+            sim.step()
+        except StepFailedError as err:  # a solve short of its tolerance is said, and the last good state kept
+            assert "conjugate-gradient" in str(err) and sim.state.is_finite()
+            assert _energy(sim) <= bound
+            return
         assert sim.state.is_finite() and np.all(np.isfinite(sim.state.anchor))
         assert _energy(sim) <= bound, (_energy(sim), e0, injected)
     assert sim.state.t == pytest.approx(steps * dt) or (breaking and 0 < sim.state.t < steps * dt)
@@ -708,7 +715,7 @@ def test_the_backends_agree_to_the_bit(stepping, dt, extra):
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_the_benchmarks_plain_numpy_step_is_the_same_model(backend):
     """The baseline every speed-up is quoted against computes what bark computes (to round-off: it
-    sums forces with bincount), so the ratios compare like with like."""
+    sums forces in another order), so the ratios compare like with like."""
     from bark_cli.bench import PlainNumpy
 
     sim = build_sim(n_bases=400, G=0.05, dt=0.05, seed=2, backend=backend, fmax_spread=0.05)
@@ -719,7 +726,7 @@ def test_the_benchmarks_plain_numpy_step_is_the_same_model(backend):
         plain.step()
     assert sim.n_broken > 20
     np.testing.assert_allclose(plain.x, sim.state.x, rtol=0, atol=1e-10)
-    np.testing.assert_array_equal(plain.intact, sim.state.intact)
+    np.testing.assert_array_equal(plain.intact_in_bark_order, sim.state.intact)
 
 
 @pytest.mark.parametrize("bound", ["gershgorin", "lanczos"])
