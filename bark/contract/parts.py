@@ -290,10 +290,16 @@ def spring_inputs(state, tension: np.ndarray, reads: tuple[str, ...], length: np
     if "length" in reads and length is None:
         from bark.model.forces import spring_geometry
 
-        _, length = spring_geometry(state.x, state.pairs)
-    fields = {"tension": tension, "length": length, "rest": state.rest, "fmax": state.fmax}
-    return [1.0 / state.fmax if name == "inv_fmax" else fields[name] if name in fields else state[name]
-            for name in reads]
+        _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
+    out = []
+    for name in reads:  # the state's fields as plain read-only views: a part reads them, as in the kernel
+        if name in ("tension", "length"):
+            out.append(tension if name == "tension" else length)
+            continue
+        rows = state._rows("fmax" if name == "inv_fmax" else name).view()
+        rows.flags.writeable = False
+        out.append(1.0 / rows if name == "inv_fmax" else rows)
+    return out
 
 
 def picks(part: BreakerPart, state, tension: np.ndarray, live: np.ndarray, length: np.ndarray | None = None) -> np.ndarray:

@@ -194,6 +194,12 @@ class Backend:
     def measure(self, state, mech, out: np.ndarray) -> bool:
         raise NotImplementedError
 
+    def geometry(self, state, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every spring's vector ``x_j − x_i`` and length, on whole arrays (the array call's)."""
+        from bark.model.forces import spring_geometry
+
+        return spring_geometry(x, state._rows("pairs"))
+
     def constrain(self, state, r_x, r_anchor) -> None:
         raise NotImplementedError
 

@@ -23,6 +23,8 @@ class NumpyBackend(Backend):
     def __init__(self) -> None:
         self._inc_key = None
         self._inc = None
+        self._runs_key = None
+        self._runs = None
         self._order = SpringOrder()
 
     def incidence(self, state) -> sp.csr_matrix:
@@ -34,17 +36,55 @@ class NumpyBackend(Backend):
             self._inc_key = key
         return self._inc
 
+    def runs(self, state) -> list[tuple[int, int, int, int]] | None:
+        """The springs as runs ``(first id, length, first i, offset o)`` of springs ``(i, i + o), (i + 1,
+        i + 1 + o), ...`` when their ids are in summation order and they are few (a lattice: one run per
+        offset); ``None`` otherwise (springs joined during the run, an irregular graph).  A run's springs
+        are two shifted views of the positions, and its forces two shifted in-place sums: no gather
+        and no sparse product (derived; made again when the topology grows)."""
+        key = (state.n_bases, state.n_springs, id(state._store["pairs"]))
+        if key != self._runs_key:
+            self._runs = None
+            if self._order.of(state._rows("pairs"), state) is None:
+                starts, lengths, first, offsets = self._order.runs()
+                if len(starts) <= max(16, state.n_springs // 256):
+                    self._runs = list(zip(starts.tolist(), lengths.tolist(), first.tolist(), offsets.tolist()))
+            self._runs_key = key
+        return self._runs
+
+    def geometry(self, state, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every spring's vector ``x_j − x_i`` and length (:func:`~bark.model.forces.spring_geometry`,
+        the same numbers), run by run where the springs are runs."""
+        runs = self.runs(state)
+        if runs is None:
+            return spring_geometry(x, state._rows("pairs"))
+        d = np.empty((state.n_springs, 3), order="F")  # the positions' layout: each axis contiguous
+        for at, n, i, o in runs:
+            np.subtract(x[i + o:i + o + n], x[i:i + n], out=d[at:at + n])
+        return d, physics.length(d[:, 0], d[:, 1], d[:, 2])
+
     def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
-        d, length = spring_geometry(x, state._rows("pairs"))
-        t = resin_tension(self.resin, state, length, mech.k)
+        d, length = self.geometry(state, x)
+        return self.forces_of(state, d, length, resin_tension(self.resin, state, length, mech.k), intact)
+
+    def forces_of(self, state, d, length, t, intact) -> np.ndarray:
+        """The springs' forces on the bases from their vectors ``d``, lengths and tensions ``t``."""
         g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
-        return np.asarray(self.incidence(state) @ (d * g[:, None]))
+        pull = d * g[:, None]
+        runs = self.runs(state)
+        if runs is None:
+            return np.asarray(self.incidence(state) @ pull)
+        f = np.zeros((state.n_bases, 3), order="F")
+        for at, n, i, o in runs:  # a base's springs in summation order: as j of a run's spring, then as its i
+            f[i + o:i + o + n] -= pull[at:at + n]
+            f[i:i + n] += pull[at:at + n]
+        return f
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         return self._spring_forces(state, mech, x, state._rows("intact"))
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
-        _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
+        _, length = self.geometry(state, state._rows("x"))
         out[:] = resin_tension(self.resin, state, length, mech.k)
         return bool(np.isfinite(out).all())
 
@@ -114,11 +154,11 @@ class ArrayCall(Call):
                 r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
                 r_a = r_x if growth.uniform else growth.radius(t, z0, q)
             self.backend.constrain(state, r_x, r_a)
-            _, length = spring_geometry(x, state._rows("pairs"))
+            d, length = self.backend.geometry(state, x)
             t_all = resin_tension(resin, state, length, mech.k)
             loads = [largest_load(p, state, t_all, live, length) for p in judged]
             load = math.nan if any(map(math.isnan, loads)) else max(loads, default=-math.inf)
-            finite = bool(np.isfinite(x).all() and np.isfinite(t_all[live]).all()) and not math.isnan(load)
+            finite = bool(np.isfinite(x).all() and (np.isfinite(t_all).all() or np.isfinite(t_all[live]).all())) and not math.isnan(load)
             load, done = (load if finite else math.nan), step
             picked = picks(part, state, t_all, live, length) if finite else np.empty(0, np.int64)
             candidate, broke = bool(picked.size) and not breaking, picked.size if breaking else 0
@@ -131,8 +171,8 @@ class ArrayCall(Call):
                     live[picked] = False
                     broken += broke
                     log.append((picked, step, t_all[picked]))
-                if verbs is None:
-                    fs = self.backend._spring_forces(state, mech, x, live)
+                if verbs is None:  # the next step's forces: the springs as they are now, tensions as just taken
+                    fs = self.backend.forces_of(state, d, length, self.tension, live)
             if ends_call(finite, load, plan.accept_load, plan.report_load, candidate, broke, broken, plan.break_budget,
                          plan.max_batch, relax[step - 1]):
                 break
