@@ -287,7 +287,11 @@ def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures
 
 
 def _label(key: str) -> str:
-    return {"growth.G": "G (growth rate)", "mechanics.f_max": "f_max (breaking force)"}.get(key, key)
+    """An axis label with its unit, in the model's units as table columns name them (bark.units:
+    lu length units of 0.3 m, tu time units of 88.5 days, fu force units)."""
+    return {"growth.G": "G, growth constant (lu / tu^½, sqrt growth)", "mechanics.f_max": "f_max, breaking force (fu)",
+            "mechanics.b": "b, damping (fu · tu / lu)", "mechanics.c": "c, anchor stiffness (fu / lu)",
+            "mechanics.k": "k, spring stiffness (fu / lu)"}.get(key, key)
 
 
 def plot_corner(result, marks: dict, path) -> None:
