@@ -53,7 +53,7 @@ def parse_grid(items: tuple[str, ...]):
             values = [setting_value(word) for word in text.split(",")]
         axis = Axis(f"{section}.{name}", tuple(values))
         axes.append(axis)
-        layer.setdefault(axis.section, {})[axis.name] = list(values)
+        layer.setdefault(axis.section, {})[axis.name.partition(".")[0]] = list(values)  # nested: its top key
     return axes, layer
 
 
@@ -85,7 +85,7 @@ def parse_points(path: str):
             raise BarkError(f"--points {shlex.quote(path)} row {line}: {len(row)} values for {len(keys)} columns")
     axes = [Axis(k, tuple(setting_value(row[j]) for row in values)) for j, k in enumerate(keys)]
     for a in axes:
-        layer.setdefault(a.section, {})[a.name] = list(a.values)
+        layer.setdefault(a.section, {})[a.name.partition(".")[0]] = list(a.values)
     return axes, layer
 
 
@@ -175,7 +175,7 @@ def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, 
         axes = list(design_axes(design, parse_ranges(ranges), samples, design_seed))
         layer = {}
         for a in axes:
-            layer.setdefault(a.section, {})[a.name] = list(a.values)
+            layer.setdefault(a.section, {})[a.name.partition(".")[0]] = list(a.values)
         source = "--range"
     elif points_file is not None:
         axes, layer = parse_points(points_file)

@@ -33,6 +33,12 @@ def _rows(db) -> list[dict]:
         return [{k: v for k, v in r.items() if k not in VOLATILE} for r in t.rows()]
 
 
+BULGED = {**TINY, "growth": {"name": "bulge", "base": {"name": "sqrt", "G": 0.014},
+                              "bulges": [{"z": 0.07, "half_width": 0.03, "magnitude": 0.01}]},
+          "breaker": {"name": "threshold", "regions": {"bulge": 0.004}}}
+"""TINY with one bulge: settings inside its tables and arrays of tables to sweep."""
+
+
 def _grid(n=2):
     return (Axis("growth.G", [0.01 + 0.01 * i for i in range(n)]), Axis("mechanics.f_max", (0.003, 0.006)))
 
@@ -57,11 +63,45 @@ def test_points_cover_the_grid_and_seeds_with_distinct_keys():
     (lambda: Sweep(base={}, axes=(Axis("growth.G", (0.01, -1.0)),)).points(), "G"),
     (lambda: Sweep(base={}, axes=(Axis("growth.G", (0.01, float("nan"))),)).points(), "G"),
     (lambda: Sweep(base={}, axes=(Axis("mechanics.nonsense", (1.0,)),)).points(), "nonsense"),
+    (lambda: Sweep(base=BULGED, axes=(Axis("growth.bulges.1.magnitude", (0.1,)),)).points(),
+     "growth.bulges is an array of 1 table; give an index from 0 to 0"),
+    (lambda: Sweep(base=BULGED, axes=(Axis("growth.bulges.first.magnitude", (0.1,)),)).points(), "give an index"),
+    (lambda: Sweep(base=BULGED, axes=(Axis("growth.base.G.x", (0.1,)),)).points(), "growth.base.G is not a table"),
+    (lambda: Sweep(base=BULGED, axes=(Axis("growth.bulges.0.magnitude", (-0.1,)),)).points(), "magnitude"),
 ])
 def test_a_bad_grid_is_one_line_before_any_run(make, message):
     with pytest.raises(BarkError) as err:
         make()
     assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_axis_reaches_into_tables_and_arrays_of_tables_and_changes_only_its_value():
+    plan = Sweep(base=BULGED, axes=(Axis("growth.bulges.0.magnitude", (0.0, 0.02)), Axis("breaker.regions.bulge", (0.005,)),
+                                    Axis("growth.base.G", (0.011,))), seeds=(0,))
+    points = plan.points()
+    assert [p.scene["growth"]["bulges"][0]["magnitude"] for p in points] == [0.0, 0.02]
+    for p in points:
+        assert p.scene["growth"]["bulges"][0]["half_width"] == 0.03 and p.scene["breaker"]["regions"] == {"bulge": 0.005}
+        assert p.scene["growth"]["base"] == {"name": "sqrt", "G": 0.011}
+        assert p.checked.strategies["growth"].bulges[0].magnitude == p.settings["growth.bulges.0.magnitude"]
+    assert BULGED["growth"]["bulges"][0]["magnitude"] == 0.01  # the base scene is not changed
+    flat = Sweep(base=TINY, axes=_grid(2)).points()  # keys of sweeps without such axes are those of before
+    assert [p.scene for p in flat] == [{**TINY, "growth": {"G": g}, "mechanics": {"f_max": f}, "run": {**TINY["run"], "seed": 0}}
+                                       for g in (0.01, 0.02) for f in (0.003, 0.006)]
+
+
+def test_a_grid_inside_an_array_of_tables_runs_and_is_named_as_typed(tmp_path):
+    scene = tmp_path / "bulged.toml"
+    scene.write_text('[lattice]\nn_bases = 300\n[growth]\nname = "bulge"\nbase = { name = "sqrt" }\n'
+                     'bulges = [{ z = 0.07, half_width = 0.03 }]\n[run]\nuntil_time = 20.0\n')
+    out = CliRunner().invoke(cli, ["sweep", "--scene", str(scene), "--grid", "growth.bulges.0.magnitude=0,0.02",
+                                   "--out", str(tmp_path / "s"), "--quiet"])
+    assert out.exit_code == 0, out.output
+    con = sqlite3.connect(tmp_path / "s" / "sweep.sqlite")
+    assert sorted(v for (v,) in con.execute('SELECT "growth.bulges.0.magnitude" FROM runs')) == [0.0, 0.02]
+    bad = CliRunner().invoke(cli, ["sweep", "--scene", str(scene), "--grid", "growth.bulges.2.magnitude=0.1",
+                                   "--out", str(tmp_path / "t"), "--quiet"])
+    assert bad.exit_code != 0 and "growth.bulges.2.magnitude" in bad.output and not (tmp_path / "t").exists()
 
 
 # -- the table and resuming -------------------------------------------------------------------------

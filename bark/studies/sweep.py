@@ -75,7 +75,9 @@ MAX_RUNS = 1_000_000
 
 @attrs.frozen
 class Axis:
-    """One swept setting: ``key`` is ``section.name`` as in ``--set`` (``growth.G``), ``values`` its values."""
+    """One swept setting: ``key`` is ``section.name`` as in ``--set`` (``growth.G``), ``values`` its values.
+    The name may reach into a table or an array of tables, a dotted part each, arrays indexed from 0:
+    ``breaker.regions.bulge``, ``growth.bulges.0.magnitude`` (the first bulge's)."""
 
     key: str
     values: tuple = attrs.field(converter=tuple)
@@ -177,13 +179,39 @@ class Sweep:
             settings = {a.key: a.values[i] for a, i in zip(self.axes, at)}
             overrides: dict = {}
             for a, i in zip(self.axes, at):
-                overrides.setdefault(a.section, {})[a.name] = a.values[i]
+                if "." not in a.name:
+                    overrides.setdefault(a.section, {})[a.name] = a.values[i]
+            here = merge(self.base, overrides)
+            for a, i in zip(self.axes, at):
+                if "." in a.name:  # a key inside a table or an array of tables: growth.bulges.0.magnitude
+                    _put(here, a, a.values[i])
             for seed in self.seeds:
-                scene = merge(merge(self.base, overrides), {"run": {"seed": seed}})
+                scene = merge(here, {"run": {"seed": seed}})
                 checked = Scene.from_dict(scene)  # a bad value: one line, before anything runs
                 key = hashlib.sha256(_canonical({"scene": scene, "seed": seed}).encode()).hexdigest()[:20]
                 out.append(Point(index=index, settings=settings, seed=seed, scene=scene, key=key, checked=checked))
         return tuple(out)
+
+
+def _put(scene: dict, axis: Axis, value) -> None:
+    """``value`` set at ``axis``'s path in ``scene`` (changed in place): each dotted part after the
+    section names a key of a table, or the index (from 0) of an element of an array of tables.  A
+    table on the way that is not there is made; an element that is not there is refused in one line."""
+    parts = axis.name.split(".")
+    where = scene.setdefault(axis.section, {})
+    for depth, part in enumerate(parts[:-1]):
+        if isinstance(where, list):
+            if not part.isdigit() or int(part) >= len(where):
+                raise BarkError(f"sweep axis {axis.key}: {'.'.join([axis.section, *parts[:depth]])} is an array of "
+                                f"{len(where)} table{'s' if len(where) != 1 else ''}; give an index from 0 to {len(where) - 1}")
+            where = where[int(part)]
+        elif isinstance(where, dict):
+            where = where.setdefault(part, {})
+        else:
+            raise BarkError(f"sweep axis {axis.key}: {'.'.join([axis.section, *parts[:depth]])} is a value, not a table")
+    if not isinstance(where, dict):
+        raise BarkError(f"sweep axis {axis.key}: {'.'.join([axis.section, *parts[:-1]])} is not a table")
+    where[parts[-1]] = value
 
 
 DESIGNS = ("random", "lhs")
