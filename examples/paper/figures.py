@@ -12,6 +12,7 @@ run)::
     python examples/paper/figures.py fit        # posteriors for the two photographs' summaries
     python examples/paper/figures.py resins     # viscoelastic, plastic, disordered resin: the three regimes
     python examples/paper/figures.py sbc        # simulation-based calibration of bark fit: 60 prior draws
+    python examples/paper/figures.py boundary   # the elongated/reticulate boundary near a bulge, as a law
 
 Options: ``--out DIR`` (default ``runs/paper``), ``--workers N`` (sweeps).  Runs already there are
 reused: ``bark sweep`` skips finished points, and a regime's run folder with its summary is kept.
@@ -24,6 +25,7 @@ import json
 import sqlite3
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -151,16 +153,29 @@ def fractures(out: Path, workers: int) -> None:
     print(f"power laws: {folder}/power-law-*.png, {folder / 'power-law.json'}")
 
 
+def _fig11_seed(straight: dict, bulge: dict) -> tuple[bool, float, float]:
+    """Whether one run meets Fig. 11's three tests (README: Fig. 11 on whole patches), and the
+    bulges' axial distance from the straight trunk's mean and their anisotropy's shortfall."""
+    from bark.analysis.circular import axial_difference
+
+    dmean = abs(float(axial_difference(bulge["mean_orientation_deg"], straight["mean_orientation_deg"])))
+    daniso = straight["mean_anisotropy"] - bulge["mean_anisotropy"]
+    ok = (straight["largest_patch_share"] <= 0.1 and abs(straight["mean_orientation_deg"] - 90) <= 15
+          and straight["circular_sd_deg"] < 25 and (dmean > 20 or daniso > 0.1))
+    return ok, dmean, daniso
+
+
 def fig11(out: Path, workers: int) -> None:
     """Fig. 11's comparison on whole patches: the shipped whole tree over anchor stiffness c, damping
     b and the lattice's jitter, three seeds a point; per point the straight trunk of the start (its
     largest patch's share, the mean orientation and SD of its patches, their anisotropy) and the
     bulges' difference from it, each seed's figure, and whether the point meets the three tests:
     no patch over 10 % of the straight trunk's bases, its mean within 15° of vertical with an SD
-    under 25°, and the bulges' mean over 20° from it or their anisotropy over 0.1 lower."""
+    under 25°, and the bulges' mean over 20° from it or their anisotropy over 0.1 lower.  Then the
+    two bulges of the trunk of the start over their own G and f_max (:data:`FIG11_BULGES`) at the
+    scene's c, b and jitter; fig11-map.png maps the seeds that pass over both.  Last, the whole tree
+    with Table 1's own values (:data:`FIG11_TABLE1`) beside the shipped scene, 3 seeds each."""
     import csv
-
-    from bark.analysis.circular import axial_difference
 
     folder = out / "fig11"
     bark("sweep", "--scene", str(SCENES / "whole-tree.toml"), *FIG11_GRID, "--seeds", "3", "--workers", str(workers),
@@ -174,27 +189,269 @@ def fig11(out: Path, workers: int) -> None:
         points.setdefault(tuple(settings), []).append(json.loads(regions))
     columns = [*FIG11_AXES, "straight share", "straight mean", "straight SD", "straight anisotropy",
                "bulge − straight mean", "straight − bulge anisotropy", "passes"]
-    lines = []
+    lines, passing = [], {}
     for settings, seeds in points.items():
         s = [r["straight"] for r in seeds]
-        b = [r["bulge"] for r in seeds]
-        dmean = [abs(float(axial_difference(y["mean_orientation_deg"], x["mean_orientation_deg"]))) for x, y in zip(s, b)]
-        daniso = [x["mean_anisotropy"] - y["mean_anisotropy"] for x, y in zip(s, b)]
-        passes = sum(x["largest_patch_share"] <= 0.1 and abs(x["mean_orientation_deg"] - 90) <= 15
-                     and x["circular_sd_deg"] < 25 and (dm > 20 or da > 0.1) for x, dm, da in zip(s, dmean, daniso))
+        tests = [_fig11_seed(r["straight"], r["bulge"]) for r in seeds]
+        passing[settings] = sum(t[0] for t in tests)
         lines.append([*(f"{v:g}" for v in settings),
                       " / ".join(f"{x['largest_patch_share']:.3f}" for x in s),
                       " / ".join(f"{x['mean_orientation_deg']:.1f}" for x in s),
                       " / ".join(f"{x['circular_sd_deg']:.1f}" for x in s),
                       " / ".join(f"{x['mean_anisotropy']:.2f}" for x in s),
-                      " / ".join(f"{d:.1f}" for d in dmean), " / ".join(f"{d:.2f}" for d in daniso),
-                      f"{passes} of {len(seeds)}"])
+                      " / ".join(f"{t[1]:.1f}" for t in tests), " / ".join(f"{t[2]:.2f}" for t in tests),
+                      f"{passing[settings]} of {len(seeds)}"])
     with open(folder / "fig11-study.csv", "w", newline="") as fh:
         csv.writer(fh).writerows([columns, *lines])
     print("| " + " | ".join(columns) + " |\n|" + "---|" * len(columns))
     for line in lines:
         print("| " + " | ".join(line) + " |")
     print(f"table: {folder / 'fig11-study.csv'} (each cell: seeds 0 / 1 / 2; orientations in degrees)")
+
+    scene_bulges = _toml(SCENES / "whole-tree.toml")["growth"]["bulges"]
+    points = folder / "bulges-points.csv"  # the two bulges of the trunk of the start take each (G, f_max)
+    rows = [[g] * len(scene_bulges) + [f] for g in FIG11_BULGES["G"] for f in FIG11_BULGES["f_max"]]
+    points.write_text("\n".join(",".join(map(str, r)) for r in
+                                [[*(f"growth.bulges.{i}.G" for i in range(len(scene_bulges))), "breaker.regions.bulge"], *rows]) + "\n")
+    bark("sweep", "--scene", str(SCENES / "whole-tree.toml"), "--points", str(points), "--seeds", "3",
+         "--workers", str(workers), "--set", f"effects.want={FIG11_EFFECTS}", "--out", str(folder / "bulges"), "--quiet")
+    con = sqlite3.connect(folder / "bulges" / "sweep.sqlite")
+    got = con.execute('SELECT "growth.bulges.0.G", "breaker.regions.bulge", seed, regions FROM runs '
+                      'ORDER BY "growth.bulges.0.G", "breaker.regions.bulge", seed').fetchall()
+    con.close()
+    tested: dict[tuple, list] = {}
+    for g, f, _seed, regions in got:
+        r = json.loads(regions)
+        tested.setdefault((g, f), []).append(_fig11_seed(r["straight"], r["bulge"]))
+    bulges = {}  # (G, f_max) → seeds passing
+    for (g, f), passed in tested.items():
+        bulges[(g, f)] = sum(p[0] for p in passed)
+        print(f"bulges G {g:g}, f_max {f:g}: bulge − straight mean "
+              + " / ".join(f"{p[1]:.1f}" for p in passed) + f"; {bulges[(g, f)]} of {len(passed)} pass")
+    _fig11_table1(folder, workers)
+    _fig11_map(passing, bulges, folder / "fig11-map.png")
+    own = (scene_bulges[0]["G"], _toml(SCENES / "whole-tree.toml")["breaker"]["regions"]["bulge"])
+    mapped = [*passing.values(), *(v for k, v in bulges.items() if k != own)]  # the shipped scene's point once
+    runs, every = sum(mapped), sum(v == 3 for v in mapped)
+    print(f"Fig. 11 holds on {runs} of {3 * len(mapped)} runs ({100 * runs / (3 * len(mapped)):.0f} %); on every seed at "
+          f"{every} of {len(mapped)} points (the shipped scene's counted once); map: {folder / 'fig11-map.png'}")
+
+
+FIG11_BULGES = {"G": (0.01, 0.02, 0.03), "f_max": (0.005, 0.006, 0.007)}
+"""The bulges' own growth constant and breaking force mapped (the scene: 0.02 and Table 1's 0.006)."""
+
+
+FIG11_TABLE1 = ["--set", "mechanics.c=0.03", "--set", "mechanics.b=2", "--set", "lattice.jitter=0.05",
+                "--grid", "growth.series.0.G=0.02"]
+"""The whole tree with Table 1's own values where the shipped scene departs from them: c, b, the
+series' bulges' G at the peak (0.02) and bark's default jitter (Table 1 has none)."""
+
+
+def _fig11_table1(folder: Path, workers: int) -> None:
+    """The whole tree with Table 1's values (:data:`FIG11_TABLE1`), 3 seeds to 60 years, its regions'
+    statistics printed beside the shipped scene's (the sweep's c 0.1, b 5, jitter 3 % point)."""
+    bark("sweep", "--scene", str(SCENES / "whole-tree.toml"), *FIG11_TABLE1, "--seeds", "3", "--workers", str(workers),
+         "--set", f"effects.want={FIG11_EFFECTS}", "--out", str(folder / "table1"), "--quiet")
+    shown = {}
+    for name, db, where in (("Table 1's values", folder / "table1" / "sweep.sqlite", ""),
+                            ("the shipped scene", folder / "sweep.sqlite",
+                             ' WHERE "mechanics.c" = 0.1 AND "mechanics.b" = 5 AND "lattice.jitter" = 0.03')):
+        con = sqlite3.connect(db)
+        shown[name] = [json.loads(r) for (r,) in con.execute(f"SELECT regions FROM runs{where} ORDER BY seed")]
+        con.close()
+    print("| whole tree, 60 years | straight: largest patch | straight: patches | straight: mean | straight: SD | "
+          "straight: anisotropy | bulges: mean | bulges: SD | bulges: anisotropy | Fig. 11's tests |\n|" + "---|" * 10)
+    for name, seeds in shown.items():
+        s, b = [r["straight"] for r in seeds], [r["bulge"] for r in seeds]
+        cells = [" / ".join(f"{x[k]:{fmt}}" for x in xs) for xs, k, fmt in (
+            (s, "largest_patch_share", ".3f"), (s, "n_patches", "d"), (s, "mean_orientation_deg", ".1f"),
+            (s, "circular_sd_deg", ".1f"), (s, "mean_anisotropy", ".2f"), (b, "mean_orientation_deg", ".1f"),
+            (b, "circular_sd_deg", ".1f"), (b, "mean_anisotropy", ".2f"))]
+        passed = sum(_fig11_seed(r["straight"], r["bulge"])[0] for r in seeds)
+        print(f"| {name} | " + " | ".join(cells) + f" | {passed} of {len(seeds)} pass |")
+
+
+def _toml(path: Path) -> dict:
+    import tomllib
+
+    return tomllib.loads(path.read_text())
+
+
+def _fig11_map(passing: dict, bulges: dict, path: Path) -> None:
+    """Seeds of three that meet Fig. 11's tests: a c × b panel per jitter, and the bulges' G × f_max."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    jitters = sorted({k[2] for k in passing})
+    cs, bs = sorted({k[0] for k in passing}), sorted({k[1] for k in passing})
+    gs, fs = FIG11_BULGES["G"], FIG11_BULGES["f_max"]
+    fig, axes = plt.subplots(1, len(jitters) + 1, figsize=(3.8 * (len(jitters) + 1), 3.6),
+                             gridspec_kw={"width_ratios": [len(cs)] * len(jitters) + [len(gs)]})
+    cmap = plt.get_cmap("Greys", 4)
+
+    def panel(ax, grid, xs, ys, xlabel, ylabel, title, shipped):
+        ax.imshow(grid, origin="lower", cmap=cmap, vmin=-0.5, vmax=3.5, aspect="auto")
+        for (i, j), v in np.ndenumerate(grid):
+            ax.text(j, i, f"{v:.0f}", ha="center", va="center", color="white" if v >= 2 else "black", fontsize=9)
+        ax.set_xticks(range(len(xs)), [f"{x:g}" for x in xs])
+        ax.set_yticks(range(len(ys)), [f"{y:g}" for y in ys])
+        ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+        if shipped is not None:
+            ax.add_patch(plt.Rectangle((shipped[0] - 0.5, shipped[1] - 0.5), 1, 1, fill=False, lw=2.5, color="C3"))
+
+    for ax, jit in zip(axes, jitters):
+        grid = np.array([[passing.get((c, b, jit), np.nan) for c in cs] for b in bs])
+        shipped = (cs.index(0.1), bs.index(5.0)) if jit == 0.03 and 0.1 in cs and 5.0 in bs else None
+        panel(ax, grid, cs, bs, "anchor stiffness c (Table 1: 0.03)", "damping b (Table 1: 2)",
+              f"jitter {100 * jit:g} % of the spacing", shipped)
+    grid = np.array([[bulges.get((g, f), np.nan) for g in gs] for f in fs])
+    panel(axes[-1], grid, gs, fs, "bulges' G (length / time½)", "bulges' f_max (force)",
+          "bulges (c 0.1, b 5, 3 %)", (gs.index(0.02), fs.index(0.006)))
+    fig.suptitle("Fig. 11 on whole patches: seeds of 3 that pass (red: the shipped scene)", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+BOUNDARY_RANGES = ["--range", "growth.bulges.0.magnitude=0:0.1", "--range", "growth.bulges.0.G=0.007:0.028:log",
+                   "--range", "growth.bulges.0.decay=0:0.01", "--range", "breaker.regions.bulge=0.0014:0.0084:log"]
+"""The bulge's magnitude (up to half the trunk's starting radius), growth constant (half to twice the
+trunk's), fading and threshold (half to three times the trunk's): a Latin hypercube over them."""
+BOUNDARY_POINTS, BOUNDARY_FIT_SEEDS = 240, (0, 1)
+"""Points of the design, three seeds each; the law is fitted on these seeds and tested on the third."""
+
+
+def _table2(out: Path) -> dict[str, list[dict]]:
+    """The summaries of Table 2's vertical and reticulate scenes, seeds 0–2."""
+    runs = {}
+    for name in ("vertical", "reticulate"):
+        runs[name] = []
+        for seed in range(3):
+            run = out / "runs" / f"{name}-seed{seed}"
+            if not (run / "summary.json").is_file():
+                bark("simulate", "--scene", name, "--seed", str(seed), "--out", str(run), "--quiet")
+            runs[name].append(json.loads((run / "summary.json").read_text()))
+    return runs
+
+
+def boundary(out: Path, workers: int) -> None:
+    """The elongated/reticulate boundary as a law (``bark.analysis.boundary``): the trunk segment of
+    ``boundary.toml`` with one bulge, over :data:`BOUNDARY_RANGES` (240 points, 3 seeds), each run
+    stopped when the plain segment (Table 2's vertical scene, seed 0) has its 110 patches.  The bulge's
+    pattern is elongated when its mean orientation lies nearer vertical than the midpoint between
+    Table 2's vertical and reticulate scenes (3 seeds each).  The law, a logistic regression on the
+    bulge's strain ratio ε_a/ε_h and ln(f_max/G) (each the bulge's profile-weighted mean), is fitted on
+    seeds 0–1 and its misclassification measured on seed 2; ``boundary.png`` and ``boundary.json``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from bark.analysis.boundary import fit_boundary, nested_p, stretch_strains
+    from bark.engine.scene import Scene
+    from bark.io.files import write_json
+
+    folder = out / "boundary"
+    table2 = _table2(folder)
+    t_stop = table2["vertical"][0]["t"]
+    off = {k: [abs(r["mean_orientation_deg"] - 90) for r in v] for k, v in table2.items()}
+    cut = (np.mean(off["vertical"]) + np.mean(off["reticulate"])) / 2
+    print(f"stop at t = {t_stop!r} (vertical, seed 0: {table2['vertical'][0]['n_patches']} patches); elongated within "
+          f"{cut:.1f}° of vertical: midway between the vertical scene's {np.mean(off['vertical']):.1f}° and the "
+          f"reticulate scene's {np.mean(off['reticulate']):.1f}° (3 seeds each)")
+    bark("sweep", "--scene", str(HERE / "boundary.toml"), "--design", "lhs", "--samples", str(BOUNDARY_POINTS),
+         *BOUNDARY_RANGES, "--seeds", "3", "--workers", str(workers), "--set", f"run.until_time={t_stop!r}",
+         "--out", str(folder), "--quiet")
+    con = sqlite3.connect(folder / "sweep.sqlite")
+    got = con.execute("SELECT scene, seed, regions, t FROM runs").fetchall()
+    con.close()
+    rows = []
+    for scene, seed, regions, t in got:
+        sc, bulge = json.loads(scene), json.loads(regions).get("bulge")
+        if sc["run"]["until_time"] != t_stop:
+            continue  # an older study's stop
+        b = sc["growth"]["bulges"][0]
+        law = Scene.from_dict(sc).strategies["growth"]
+        hoop, axial = stretch_strains(law.radius, t, b["z"] - b["half_width"], b["z"] + b["half_width"])
+        # the bulge's threshold and growth constant as the runs weight them: by its profile, here its mean
+        w = float(np.mean(law.bulges[0].profile(np.linspace(b["z"] - b["half_width"], b["z"] + b["half_width"], 2001))))
+        f = sc["mechanics"]["f_max"] + w * (sc["breaker"]["regions"]["bulge"] - sc["mechanics"]["f_max"])
+        g = sc["growth"]["base"]["G"] + w * (b["G"] - sc["growth"]["base"]["G"])
+        rows.append({"seed": seed, "ratio": axial / hoop, "log_f_over_G": float(np.log(f / g)), "log_f": float(np.log(f)),
+                     "log_G": float(np.log(g)), "hoop": hoop, "axial": axial,
+                     "patches": bulge["n_patches"] if bulge else 0,
+                     "off": abs(bulge["mean_orientation_deg"] - 90) if bulge and bulge["n_patches"] else None,
+                     "anisotropy": bulge["mean_anisotropy"] if bulge and bulge["n_patches"] else None})
+    cracked = [r for r in rows if r["off"] is not None and r["patches"] >= CRACKED]
+    print(f"{len(rows)} runs; {len(rows) - len(cracked)} with fewer than {CRACKED} patches in the bulge left out")
+    fit_rows = [r for r in cracked if r["seed"] in BOUNDARY_FIT_SEEDS]
+    test_rows = [r for r in cracked if r["seed"] not in BOUNDARY_FIT_SEEDS]
+
+    def columns(rs, names):
+        return np.array([[r[n] for n in names] for r in rs]), np.array([r["off"] < cut for r in rs])
+
+    names = ("ratio", "log_f_over_G")
+    law = fit_boundary(*columns(fit_rows, names), names)
+    x_test, y_test = columns(test_rows, names)
+    miss = law.misclassified(x_test, y_test)
+    guess = min(y_test.mean(), 1 - y_test.mean())
+    alone = {n: fit_boundary(*columns(fit_rows, (n,)), (n,)) for n in names}
+    apart = fit_boundary(*columns(fit_rows, ("ratio", "log_f", "log_G")), ("ratio", "log_f", "log_G"))
+    ratio_p = nested_p(law, apart)
+    # the same law with anisotropy as the kind: elongated above the midpoint of the two scenes'
+    a_cut = (np.mean([r["mean_anisotropy"] for r in table2["vertical"]])
+             + np.mean([r["mean_anisotropy"] for r in table2["reticulate"]])) / 2
+    by_a = [np.array([[r[n] for n in names] for r in rs]) for rs in (fit_rows, test_rows)]
+    ya = [np.array([r["anisotropy"] >= a_cut for r in rs]) for rs in (fit_rows, test_rows)]
+    law_a = fit_boundary(by_a[0], ya[0], names)
+    miss_a = law_a.misclassified(by_a[1], ya[1])
+    labels = {"ratio": "ε_a/ε_h", "log_f_over_G": "ln(f_max/G)"}
+    print(f"law: logit P(elongated) = β0 + β1·ε_a/ε_h + β2·ln(f_max/G), fitted on seeds 0–1 ({law.n} runs):")
+    for name, c, lo, hi in zip(("β0", *(f"β{i + 1} ({labels[n]})" for i, n in enumerate(names))), law.coef, law.low, law.high):
+        print(f"  {name:22s} {c:8.3g}  (95 % interval {lo:.3g} to {hi:.3g})")
+    print(f"  likelihood-ratio p against no feature {law.llr_p:.2g}, McFadden R² {law.pseudo_r2:.2f}")
+    print(f"misclassified on seed 2: {miss:.3f} of {len(test_rows)} runs (always guessing the commoner kind: {guess:.3f}); "
+          + "; ".join(f"{labels[n]} alone {alone[n].misclassified(*columns(test_rows, (n,))):.3f}" for n in names))
+    ratio_adds_p = nested_p(alone["log_f_over_G"], law)
+    print(f"the strain ratio added to ln(f_max/G) alone: likelihood-ratio p {ratio_adds_p:.2g}")
+    print(f"ln f_max and ln G apart: {apart.coef[2]:.3g} and {apart.coef[3]:.3g} (the ratio's law: equal and opposite; "
+          f"likelihood-ratio p of setting them apart {ratio_p:.2g})")
+    print(f"with anisotropy as the kind (elongated from {a_cut:.3f}): misclassified {miss_a:.3f} on seed 2 "
+          f"(commoner kind {min(ya[1].mean(), 1 - ya[1].mean()):.3f}), McFadden R² {law_a.pseudo_r2:.2f}")
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4.8))
+    seeds_at: dict[tuple, list[bool]] = {}  # a point's seeds share its features: its share of elongated seeds
+    for r in cracked:
+        seeds_at.setdefault((r["ratio"], r["log_f_over_G"]), []).append(r["off"] < cut)
+    at = np.array(list(seeds_at))
+    share = ax.scatter(at[:, 0], at[:, 1], s=16, c=[np.mean(v) for v in seeds_at.values()], cmap="coolwarm_r",
+                       vmin=0, vmax=1, edgecolors="k", linewidths=0.3)
+    fig.colorbar(share, ax=ax, label="share of its 3 seeds elongated")
+    xs = np.linspace(*ax.get_xlim(), 50)
+    ax.plot(xs, -(law.coef[0] + law.coef[1] * xs) / law.coef[2], "k-", label="law (seeds 0–1): P(elongated) = ½")
+    ax.set(xlabel="strain ratio ε_a/ε_h over the bulge", ylabel="ln(f_max/G) over the bulge",
+           title=f"{len(seeds_at)} points: {100 * miss:.1f} % of seed 2's runs misclassified")
+    ax.legend(fontsize=8, loc="lower right")
+    v = np.array([r["log_f_over_G"] for r in cracked])
+    fig.colorbar(bx.scatter(v, [r["off"] for r in cracked], s=10, c=[r["ratio"] for r in cracked], cmap="viridis"),
+                 ax=bx, label="ε_a/ε_h")
+    bx.axhline(cut, color="k", ls="--", label=f"cut: {cut:.1f}°, midway between Table 2's scenes")
+    bx.set(xlabel="ln(f_max/G) over the bulge", ylabel="bulge's mean orientation from vertical (°)",
+           title="the kind: elongated below the cut (colour: ε_a/ε_h)")
+    bx.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(folder / "boundary.png", dpi=120)
+    write_json(folder / "boundary.json", {
+        "formula": law.formula(), "names": list(names), "coef": law.coef, "low": law.low, "high": law.high,
+        "level": law.level, "llr_p": law.llr_p, "pseudo_r2": law.pseudo_r2, "fitted_runs": law.n,
+        "held_out_runs": len(test_rows), "misclassified": miss, "commoner_kind": guess, "cut_deg": cut,
+        "stop_time": t_stop, "ratio_restriction_p": ratio_p, "strain_ratio_adds_p": ratio_adds_p, "left_out": len(rows) - len(cracked),
+        "anisotropy_kind": {"cut": a_cut, "misclassified": miss_a, "pseudo_r2": law_a.pseudo_r2}})
+    print(f"{folder / 'boundary.png'}, {folder / 'boundary.json'}")
 
 
 PACKINGS = [  # (organ area in mm², or None: one base's area on the trunk of the start; area exponent p)
@@ -402,7 +659,7 @@ def _rows(folder: Path, stats: list[str], axis: str | None = None, value: float 
 
 SBC = {"draws": 60, "population": 30, "generations": 3}
 """The calibration study's size: 60 settings from the default priors, each fitted with 30 accepted runs a
-generation for three generations (about 240 runs and 50 s a fit on 2 workers of an Intel Xeon)."""
+generation for three generations (the study prints the runs each fit took and the whole study's time)."""
 
 
 def sbc(out: Path, workers: int) -> None:
@@ -424,6 +681,7 @@ def sbc(out: Path, workers: int) -> None:
 
     cal = Calibration(base=read_toml("reticulate"), **SBC)
     folder = out / "sbc"
+    began = time.monotonic()
     rows = run_calibration(cal, folder, workers=workers, draw_done=lambda r: print(
         f"draw {r['draw']}: " + (r.get("skipped") or ", ".join(f"{k} rank {v:.2f}" for k, v in r["rank"].items())
                                  + f", joint {r['hpd_level']:.2f}, {r['runs']} runs"), flush=True))
@@ -456,11 +714,12 @@ def sbc(out: Path, workers: int) -> None:
     for key in panels:
         cover = ", ".join(f"{v:g}: {summary[key]['coverage'][f'{v:g}']['covered']:.2f}" for v in LEVELS)
         print(f"{key:16s} ranks {summary[key]['counts']}  chi2 p {summary[key]['chi2_p']:.3g}  coverage {cover}")
-    print(f"{n} draws fitted, {summary['skipped']} without a pattern; {folder / 'sbc.png'}")
+    print(f"{n} draws fitted, {summary['skipped']} without a pattern, in {(time.monotonic() - began) / 60:.0f} min "
+          f"on {workers} workers (draws already there reused); {folder / 'sbc.png'}")
 
 
 FIGURES = {"fig7": fig7, "fig8": fig8, "fig9": fig9, "fractures": fractures, "fig11": fig11, "packing": packing,
-           "recovery": recovery, "fit": fit, "resins": resins, "sbc": sbc}
+           "recovery": recovery, "fit": fit, "resins": resins, "sbc": sbc, "boundary": boundary}
 
 
 def main(argv: list[str] | None = None) -> None:
