@@ -209,7 +209,10 @@ class Simulation:
             self.rng = np.random.default_rng(self.seed)
         self.growth = self.growth.on(self.lattice)  # features placed relative to the growing top
         self.packing = Packing.of(self.lattice, self.growth)
-        self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self))
+        kernel = kernels.KernelParts(self.integrator.part_, stepping.breaking_part(self.breakers), self.growth.part_,
+                                     self.resin_part, tuple(d.name for d in declared if d.per == "spring"),
+                                     self.numerics.threads, self.lattice.initial)
+        self.backend = kernels.load(self.numerics.backend, stepping.expected_work(self), kernel)
         self.backend.resin = self.resin_part
         self.forces = ForceField(self.mechanics, self.backend)
         if state is None:

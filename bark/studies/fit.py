@@ -324,6 +324,9 @@ def _evaluate(blob: bytes, digest: str, seed: int, t: int, ids: list[int]) -> li
     ``(seed, t, id)`` (numpy's legacy global one, which pyabc's proposals and scipy's priors draw from)."""
     import random
 
+    from bark.engine import kernels
+
+    kernels.expect_many()  # a worker's runs (local or Dask) share its kernels' compile
     simulate_one = _UNPICKLED.get(digest)
     if simulate_one is None:
         import cloudpickle

@@ -94,9 +94,12 @@ def worker_start(threads: int) -> None:
     """A local worker leaves signals to the study: Ctrl-C stops the study (which stops handing out
     runs), not the runs in flight mid-step with a traceback each.  Its kernels' threads are its share
     of the cores (``NUMBA_NUM_THREADS``, read when numba is imported, unless the user has set it), so
-    that workers do not contend for them."""
+    that workers do not contend for them.  It runs many simulations (``kernels.expect_many``)."""
     import signal
 
     for sig in (signal.SIGINT, signal.SIGHUP):
         signal.signal(sig, signal.SIG_IGN)
     os.environ.setdefault("NUMBA_NUM_THREADS", str(threads))
+    from bark.engine import kernels
+
+    kernels.expect_many()  # its runs share a kernel's compile: ``auto`` takes numba for them

@@ -243,11 +243,13 @@ def run_point(scene: dict, key: str, folder: str | None = None) -> dict[str, Any
     its final pattern.  Pure: the same scene gives the same row, wherever it runs.  With ``folder``
     the run also writes its outputs there, as ``bark simulate --out folder`` would (pictures drawn
     in the worker)."""
+    from bark.engine import kernels
     from bark.studies import runner
     from bark.units import unwrap
     from bark.analysis.pattern import simulation_colours
     from bark.engine.scene import Scene
 
+    kernels.expect_many()  # a worker's runs (local or Dask) share its kernels' compile
     sc = Scene.from_dict(scene)
     start = time.perf_counter()
     outcome = runner.run(sc, folder, overwrite=True, checkpoint_every=0) if folder is not None else runner.run(sc, None)

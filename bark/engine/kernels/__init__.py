@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import logging
 import math
 import sys
 import warnings
@@ -206,11 +207,49 @@ class Backend:
     def patch_labels(self, state) -> np.ndarray:
         raise NotImplementedError
 
+    def ready(self, kernel: KernelParts) -> bool:
+        """Whether a run of ``kernel`` can start at once, with nothing to compile first."""
+        return True
+
 
 AUTO_WORK = 3e6
 """Base-steps below which ``auto`` takes numpy: numba's start in a fresh process (importing it,
 loading its compiled code: about 0.55 s measured) costs more than it saves (about 0.18 µs a
 base-step at 3000 bases, measured with adaptive stepping)."""
+
+
+AUTO_COMPILE_WORK = 5e7
+"""Expected base-steps (``stepping.expected_work``) below which ``auto`` runs a lone simulation on
+numpy rather than first compile numba's kernel for it.  The compile takes 25–55 s once per
+combination of parts (serial and threaded kernels, 2-core machines); numpy costs 0.2–0.4 µs a
+base-step more than numba; and the estimate can be 3× low (the whole tree: 9.2e7 expected, 2.4e8
+taken), so below this bound numpy costs at most about what the compile would.  A process that runs
+many simulations (a sweep's or a fit's worker, :func:`expect_many`) compiles regardless: its runs
+share the cost."""
+
+LOG = logging.getLogger("bark")
+_MANY = [False]
+
+
+def expect_many() -> None:
+    """Tell ``auto`` that this process will run many simulations (a worker of a sweep or a fit):
+    a kernel compiled for the first is then worth its compile whatever one run's length."""
+    _MANY[0] = True
+
+
+@attrs.frozen
+class KernelParts:
+    """What a run's stepping kernel is made of, as ``auto`` asks whether it is compiled already
+    (``Backend.ready``): the parts (``None`` where a strategy has none: the run then steps in
+    Python), the declared per-spring fields, the threads asked for and the bases at the start."""
+
+    integrator: IntegratorPart | None
+    breaker: BreakerPart | None
+    growth: GrowthPart | None
+    resin: object
+    columns: tuple[str, ...]
+    threads: int
+    n_bases: int
 
 
 def _numba_available() -> bool:
@@ -240,9 +279,11 @@ def resolve(name: str, work: float | None = None) -> str:
     return name
 
 
-def load(name: str, work: float | None = None) -> Backend:
+def load(name: str, work: float | None = None, kernel: KernelParts | None = None) -> Backend:
     """A new instance of the backend ``name`` stands for (``resolve``; its module imported only when
-    asked for; its compiled code is shared, its work buffers are this instance's: one per simulation)."""
+    asked for; its compiled code is shared, its work buffers are this instance's: one per simulation).
+    ``auto`` with the run's ``kernel``: numpy where numba would first have to compile that kernel and
+    the run is too short to repay it (:data:`AUTO_COMPILE_WORK`), unless this process runs many."""
     concrete = resolve(name, work)
     try:
         module = importlib.import_module(f"bark.engine.kernels.{concrete}_backend")
@@ -255,4 +296,10 @@ def load(name: str, work: float | None = None) -> Backend:
         warnings.warn(f"the numba backend cannot be loaded here ({type(err).__name__}: {err}): running on numpy, "
                       "with the same results, more slowly", BarkWarning, stacklevel=2)
         module = importlib.import_module("bark.engine.kernels.numpy_backend")
-    return module.BACKEND_CLASS()
+    backend = module.BACKEND_CLASS()
+    if (name == "auto" and backend.name == "numba" and kernel is not None and not _MANY[0] and work is not None
+            and work < AUTO_COMPILE_WORK and not backend.ready(kernel)):
+        LOG.info("running on numpy, with the same results: this run is too short to repay compiling numba's kernel "
+                 "for it first (tens of seconds, once); `bark compile` or --backend numba compiles it")
+        return importlib.import_module("bark.engine.kernels.numpy_backend").BACKEND_CLASS()
+    return backend

@@ -877,22 +877,10 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
     :class:`~bark.contract.parts.ResinPart`; the paper's spring by default) reading the declared
     per-spring fields by their ``columns`` of the frame's ``own``.  Functions that cannot be imported by name (lambdas, local
     functions) get a wrapper compiled in this process only."""
-    inner = growth.inner
-    resin = HOOKEAN if resin is None else resin
-    named = {"update": integrator.update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
-             "load": breaker.load, "radii": growth.radii, "law": resin.tension, "flow": resin.evolve,
-             "inner_time": inner.time if inner is not None else None,
-             "inner_radius": inner.radius if inner is not None else None}
-    named = {k: fn for k, fn in named.items() if fn is not None}
-    columns = tuple(columns)
-    if not set(columns) & {*breaker.reads, *breaker.load_reads, *resin.reads, *resin.writes}:
-        columns = ()  # it reads no declared field: one kernel, whatever fields the state carries
-    key = (breaker.reads, breaker.load_reads, resin.reads, resin.writes, columns, *named.items(), bool(parallel))
+    key, named, helpers, names = _combination(integrator, breaker, growth, parallel, columns, resin)
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
-    helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
-    _make_jitable(helpers)
-    names = {k: _importable(fn) for k, fn in named.items()}
+    resin, columns = HOOKEAN if resin is None else resin, key[4]
     if None in names.values():
         u, g = inline(integrator.update), inline(growth.radius)
         p = _time_of(growth)
@@ -908,6 +896,42 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
 
         _SPECIALIZED[key] = steps
         return steps
+    name, text = _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpers, names)
+    path = _write_once(name, text)
+    if not _compiled_before(path):
+        LOG.info(f"compiling the stepping kernel for {integrator.update.__name__}, {breaker.rule.__name__} and "
+                 f"{growth.radius.__name__} (once: later runs load it from {str(path.parent)!r})")
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    _SPECIALIZED[key] = module.steps
+    return module.steps
+
+
+def _combination(integrator, breaker, growth, parallel, columns, resin) -> tuple:
+    """The kernel's key for these parts (what ``_SPECIALIZED`` keys on), the functions it inlines by
+    role, their helpers (made jitable), and the name each is imported by (``None``: it cannot be)."""
+    inner = growth.inner
+    resin = HOOKEAN if resin is None else resin
+    named = {"update": integrator.update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
+             "load": breaker.load, "radii": growth.radii, "law": resin.tension, "flow": resin.evolve,
+             "inner_time": inner.time if inner is not None else None,
+             "inner_radius": inner.radius if inner is not None else None}
+    named = {k: fn for k, fn in named.items() if fn is not None}
+    columns = tuple(columns)
+    if not set(columns) & {*breaker.reads, *breaker.load_reads, *resin.reads, *resin.writes}:
+        columns = ()  # it reads no declared field: one kernel, whatever fields the state carries
+    key = (breaker.reads, breaker.load_reads, resin.reads, resin.writes, columns, *named.items(), bool(parallel))
+    helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
+    _make_jitable(helpers)
+    return key, named, helpers, {k: _importable(fn) for k, fn in named.items()}
+
+
+def _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpers, names) -> tuple[str, str]:
+    """The generated module's name and text for these parts: named by a digest of everything its
+    compiled code depends on (numba's version, the sources), so that a change compiles it again."""
+    inner = growth.inner
     adapters = _adapters(breaker, columns)
     resin_text = _resin_adapters(resin, columns)
     digest = hashlib.sha256()
@@ -929,16 +953,22 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
                            adapters=adapters, parallel=bool(parallel), law=refs["law"],
                            flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text)
     name = f"bark_steps_{digest.hexdigest()[:20]}"
-    path = _write_once(name, text)
-    if not _compiled_before(path):
-        LOG.info(f"compiling the stepping kernel for {integrator.update.__name__}, {breaker.rule.__name__} and "
-                 f"{growth.radius.__name__} (once: later runs load it from {str(path.parent)!r})")
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    _SPECIALIZED[key] = module.steps
-    return module.steps
+    return name, text
+
+
+def compiled(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None) -> bool:
+    """Whether the kernel :func:`specialized` gives for these parts is compiled already, in this
+    process or in the cache on disk (numba's index of it there, undamaged), so that a run can start
+    without compiling it.  Compiles nothing."""
+    key, named, helpers, names = _combination(integrator, breaker, growth, parallel, columns, resin)
+    if key in _SPECIALIZED:
+        return True
+    if None in names.values():
+        return False  # compiled in each process that uses it
+    resin = HOOKEAN if resin is None else resin
+    name, text = _wrapper(integrator, breaker, growth, parallel, key[4], resin, named, helpers, names)
+    path = cache_dir() / f"{name}.py"
+    return _holds(path, text) and _compiled_before(path)
 
 
 def _cache_folders(source: Path) -> list[Path]:
@@ -1451,6 +1481,14 @@ class NumbaBackend(Backend):
         if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
             numba.set_num_threads(self.threads)
         return _NumbaCall(self, state, mech, plan, tension)
+
+    def ready(self, kernel) -> bool:
+        """Whether the stepping kernel of ``kernel``'s parts is compiled already (:func:`compiled`);
+        a run whose strategies have no compiled parts steps in Python and compiles no kernel."""
+        if kernel.integrator is None or kernel.breaker is None or kernel.growth is None:
+            return True
+        return compiled(kernel.integrator, kernel.breaker, kernel.growth, self._threads(kernel.threads, kernel.n_bases) > 1,
+                        kernel.columns, kernel.resin)
 
     def patch_labels(self, state) -> np.ndarray:
         labels = np.empty(state.n_bases, dtype=np.int32)
