@@ -13,7 +13,7 @@ import time
 import click
 
 from bark.errors import BarkError
-from bark_cli.options import SCENE_RULE
+from bark_cli.options import SCENE_RULE, progress_option
 from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -86,9 +86,10 @@ def parse_marks(items: tuple[str, ...], keys: tuple[str, ...]) -> dict[str, dict
               help="Folder for fit.db (every generation, as it ends), fit.json, posterior.csv, corner.png and "
                    "predictive.png. A fit run again into it goes on where it stopped.")
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
+@progress_option
 @picture_options
 def fit(observed, scene_file, priors, sets, statistics, population, generations, min_acceptance, seed, mirror, min_size,
-        predictive, marks, workers, dask_address, out, quiet, picture_format, dpi):
+        predictive, marks, workers, dask_address, out, quiet, progress_every, picture_format, dpi):
     """Find the scene settings that grow bark like OBSERVED (a run folder, a state .npz, a leaf-base
     .csv or a .toml summary, as bark compare takes): approximate Bayesian computation by sequential
     Monte Carlo on the patterns' statistics. Each generation is kept in --out/fit.db as it ends;
@@ -126,47 +127,36 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
     points = parse_marks(marks, plan.keys)
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:
-        _fit(plan, held.path, workers or 1, client, quiet, predictive, points, (picture_format, dpi))
+        _fit(plan, held.path, workers or 1, client, quiet, predictive, points, (picture_format, dpi), progress_every)
 
 
 class _Progress:
-    """A line per generation on stderr; within one, a rich bar where stderr is a terminal."""
+    """A line per generation on stderr, and within one the accepted runs counted (``Tally``: a bar on
+    a terminal, a line every ``every_s`` seconds in a log)."""
 
-    def __init__(self, quiet: bool) -> None:
+    def __init__(self, quiet: bool, every_s: float = 30.0) -> None:
+        from bark_cli.progress import Tally
+
         self.quiet = quiet
         self.t0 = time.perf_counter()
-        self.bar = self.task = None
-        self.live = not quiet and sys.stderr.isatty()
+        self.tally = Tally("fit", "accepted", every_s, quiet)
+        self.label = None
 
     def runs(self, t: int, accepted: int, n: int, runs: int) -> None:
-        if not self.live:
-            return
-        if self.bar is None:
-            from rich.console import Console
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TextColumn("accepted,"),
-                                TextColumn("{task.fields[runs]} runs"), TimeElapsedColumn(), console=Console(stderr=True),
-                                transient=True)
-            self.bar.start()
         label = "calibration" if t < 0 else f"generation {t}"
-        if self.task is None or self.bar.tasks[0].description != label:
-            if self.task is not None:
-                self.bar.remove_task(self.task)
-            self.task = self.bar.add_task(label, total=n, runs=0)
-        self.bar.update(self.task, completed=accepted, runs=runs)
+        if label != self.label:
+            self.tally.restart()
+            self.label = label
+        self.tally.update(accepted, n, f"{label}, {runs:,} runs")
 
     def generation(self, g) -> None:
         if self.quiet:
             return
-        self.close()
-        click.echo(f"bark: generation {g.t}: {g.accepted} accepted of {g.runs} runs ({100 * g.acceptance:.1f} %), "
-                   f"ε {g.epsilon:.4g}, ESS {g.ess:.0f}, {_clock(time.perf_counter() - self.t0)}", err=True)
+        self.tally.say(f"bark: generation {g.t}: {g.accepted} accepted of {g.runs} runs ({100 * g.acceptance:.1f} %), "
+                       f"ε {g.epsilon:.4g}, ESS {g.ess:.0f}, {_clock(time.perf_counter() - self.t0)}")
 
     def close(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
-            self.bar = self.task = None
+        self.tally.close()
 
 
 def _clock(seconds: float) -> str:
@@ -174,12 +164,13 @@ def _clock(seconds: float) -> str:
     return f"{m}m{s:02d}s" if m else f"{seconds:.1f}s"
 
 
-def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, marks: dict, pictures) -> None:
+def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, marks: dict, pictures,
+         every_s: float = 30.0) -> None:
     from bark.studies.fit import predictive, run_fit
     from bark.studies.pool import WorkerDied
     from bark_cli.main import Signals
 
-    progress = _Progress(quiet)
+    progress = _Progress(quiet, every_s)
     database = folder / "fit.db"
     with Signals() as signals:  # SIGTERM and SIGHUP stop a fit as Ctrl-C does: the finished generations stay
         try:

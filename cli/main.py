@@ -29,7 +29,7 @@ from bark.errors import BarkError, BarkWarning
 from bark.engine.scene import DEFAULT_STRATEGIES, Scene, merge, read_toml
 from bark.contract.strategies import KINDS
 from bark_cli import REASONS, Interrupted
-from bark_cli.options import (NAMER, SCENE_RULE, LazyHelpOption, Provenance, name_ref, overrides_from,
+from bark_cli.options import (NAMER, SCENE_RULE, LazyHelpOption, Provenance, name_ref, overrides_from, seconds,
                               parameter_options, setting_value, split_setting)
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -331,7 +331,7 @@ def scene_of(params: dict) -> Scene:
 @click.option("--checkpoint-every", type=click.FloatRange(0, 1e9), default=60.0, show_default=True,
               help="Seconds of wall time between checkpoints (0: only at the end and on a signal).")
 @click.option("--quiet", is_flag=True, help="No progress, no summary table, no notices (warnings and errors stay).")
-@click.option("--progress-every", type=click.FloatRange(0, 1e9), default=30.0, show_default=True,
+@click.option("--progress-every", type=click.FloatRange(0, 1e9), default=30.0, show_default=True, callback=seconds,
               help="Where stderr is not a terminal (a batch job's log): seconds of wall time between two progress "
                    "lines (0: one a step).")
 @click.option("--json", "as_json", is_flag=True, help="Print the run's summary as JSON on stdout (summary.json's "

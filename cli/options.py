@@ -241,6 +241,21 @@ def name_ref(ref: Ref) -> str:
     return namer(ref) if namer is not None else Provenance().name(ref)
 
 
+def seconds(ctx, param, value: float) -> float:
+    """A click callback refusing NaN, which passes a ``FloatRange``'s comparisons."""
+    if value != value:
+        raise click.BadParameter(f"{value} is not a number of seconds.")
+    return value
+
+
+progress_option = click.option(
+    "--progress-every", "progress_every", type=click.FloatRange(0.1, 86400), default=30.0, show_default=True,
+    callback=seconds,
+    metavar="SECONDS", help="With stderr not a terminal (a batch job's log): seconds between two progress lines, "
+                            "whether or not a run finished; the first is written at once.")
+"""The option of every long command that counts its progress (``bark_cli.progress.Tally``)."""
+
+
 def split_setting(item: str) -> tuple[str, str, str] | None:
     """``SECTION.KEY=TEXT`` (``--set``, ``--grid``) → ``(section, key, text)``, the names stripped, or
     ``None`` when the item is not of that form."""

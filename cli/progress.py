@@ -152,3 +152,104 @@ def _region_line(r: dict) -> str:
     text = "no patches" if not n else (f"{n} patch{'es' if n > 1 else ''} at {num('mean_orientation_deg', '.1f')}° "
                                        f"(SD {num('circular_sd_deg', '.1f')}°), anisotropy {num('mean_anisotropy', '.3f')}")
     return text + ("" if share is None else f"; largest {100 * share:.0f} % of {r['n_bases']:,} bases")
+
+
+class Tally:
+    """Progress of a long command counted in things done (a sweep's runs, a fit's accepted runs), on
+    stderr, the same for every command: on a terminal a bar with the time left that fits 80 columns;
+    in a log (stderr a file) a plain line at once, then every ``every_s`` seconds whether or not
+    anything finished since, and a last one at :meth:`close`.  The time left scales the time since
+    the first update by what is still to do, counting only what was done in this command (a run
+    already in a sweep's table took none of its time).  ``quiet``: nothing."""
+
+    def __init__(self, what: str, unit: str, every_s: float = 30.0, quiet: bool = False) -> None:
+        import math
+        import threading
+
+        if not (math.isfinite(every_s) and every_s > 0):
+            raise ValueError(f"progress every {every_s} s: expected a finite number of seconds above 0")
+        self.what, self.unit, self.every_s = what, unit, every_s
+        self.done = self.total = self.first = None
+        self.detail = ""
+        self.began = self.start = time.monotonic()  # the command's start; the count's (for the time left)
+        self._lock, self._stop = threading.Lock(), threading.Event()
+        self._bar = self._task = self._thread = None
+        self.live = not quiet and sys.stderr.isatty()
+        self.log = not quiet and not self.live
+        if self.log:
+            self._line()
+            self._thread = threading.Thread(target=self._every, name=f"bark {what} progress", daemon=True)
+            self._thread.start()
+
+    def update(self, done: int, total: int, detail: str = "") -> None:
+        with self._lock:
+            if self.first is None:
+                self.first, self.start = done, time.monotonic()
+            self.done, self.total, self.detail = done, total, detail
+        if self.live:
+            self._show()
+
+    def restart(self) -> None:
+        """A new stretch of the count (a fit's next generation): the time left is taken from here."""
+        with self._lock:
+            self.first = None
+
+    def say(self, line: str) -> None:
+        """A line of the command's own on stderr, above the bar where there is one."""
+        if self._bar is not None:
+            try:
+                self._bar.console.print(line, highlight=False, markup=False)
+                return
+            except (OSError, ValueError):
+                self.live, self._bar = False, None
+        try:
+            print(line, file=sys.stderr, flush=True)
+        except (OSError, ValueError):
+            pass
+
+    def _left(self) -> str:
+        done, total, first = self.done, self.total, self.first
+        if done is None or total is None or done <= first or done >= total:
+            return ""
+        return f", about {_duration((time.monotonic() - self.start) * (total - done) / (done - first))} left"
+
+    def _line(self) -> None:
+        with self._lock:
+            done, total = self.done or 0, self.total
+            count = f"{done:,} of {total:,} {self.unit}" if total is not None else "starting"
+            detail = f"; {self.detail}" if self.detail else ""
+            line = f"bark: {self.what}: {count}{detail}; {_duration(time.monotonic() - self.began)} elapsed{self._left()}"
+        try:
+            print(line, file=sys.stderr, flush=True)
+        except (OSError, ValueError):  # a closed or full stderr: the command goes on without its log
+            self._stop.set()
+
+    def _every(self) -> None:
+        while not self._stop.wait(self.every_s):
+            self._line()
+
+    def _show(self) -> None:
+        try:
+            if self._bar is None:
+                from rich.progress import MofNCompleteColumn, Progress as Bar, TimeRemainingColumn
+
+                self._bar = Bar(TextColumn(self.what), BarColumn(bar_width=24), MofNCompleteColumn(), TextColumn(self.unit),
+                                TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True)
+                self._bar.start()
+                self._task = self._bar.add_task(self.what, total=self.total, completed=self.done)
+            self._bar.update(self._task, total=self.total, completed=self.done)
+        except (OSError, ValueError):  # the terminal went away: the command goes on unseen
+            self.live, self._bar = False, None
+
+    def close(self) -> None:
+        """The last line (in a log) or the bar taken down (on a terminal); the ticking stopped."""
+        if self._thread is not None and not self._stop.is_set():
+            self._stop.set()
+            self._thread.join()
+            self._line()
+        if self._bar is not None:
+            try:
+                self._bar.stop()
+            except (OSError, ValueError):
+                pass
+            self._bar = None

@@ -12,7 +12,7 @@ import sys
 import click
 
 from bark.errors import BarkError
-from bark_cli.options import SCENE_RULE, setting_value, split_setting, value_text
+from bark_cli.options import SCENE_RULE, progress_option, setting_value, split_setting, value_text
 from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -144,10 +144,11 @@ def parse_ranges(items: tuple[str, ...], option: str = "--range") -> dict:
               help="Folder for sweep.sqlite (the table) and montage.png. A sweep run again into it goes on where it stopped.")
 @click.option("--run-folders", is_flag=True,
               help="Each run also writes its outputs (as bark simulate does) into --out/runs/KEY, KEY its row's key.")
-@click.option("--quiet", is_flag=True, help="No progress bar and no table.")
+@click.option("--quiet", is_flag=True, help="No progress and no table.")
+@progress_option
 @picture_options
 def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, sets, seeds, max_runs, workers,
-          dask_address, out, run_folders, quiet, picture_format, dpi):
+          dask_address, out, run_folders, quiet, progress_every, picture_format, dpi):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
@@ -201,24 +202,35 @@ def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, 
         check_fits(plan, workers or 1)
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:  # one sweep at a time in a folder
-        _sweep(plan, held.path, workers, client, quiet, held.path / "runs" if run_folders else None, (picture_format, dpi))
+        _sweep(plan, held.path, workers, client, quiet, held.path / "runs" if run_folders else None, (picture_format, dpi),
+               progress_every)
 
 
-def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, pictures=("png", 150)) -> None:
+def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, pictures=("png", 150), every_s: float = 30.0
+           ) -> None:
     from bark.studies.sweep import WorkerDied, run_sweep
     from bark_cli.main import Signals
+    from bark_cli.progress import Tally
 
-    bar = None if quiet or not sys.stdout.isatty() else _bar()
+    tally = Tally("sweep", "runs", every_s, quiet)
+
+    def progress(done: int, total: int, point) -> None:
+        last = "" if point is None else "last " + ", ".join(f"{k}={value_text(v)}" for k, v in point.settings.items()) \
+            + f", seed {point.seed}"
+        tally.update(done, total, last if len(last) <= 100 else last[:99] + "…")
+
     with Signals() as signals:  # SIGTERM and SIGHUP stop a sweep as Ctrl-C does: a run is in the table whole or not at all
         try:
             counts = run_sweep(plan, folder / "sweep.sqlite", workers=workers or 1, client=client,
-                               progress=bar.update if bar is not None else None, run_folders=run_folders)
+                               progress=progress, run_folders=run_folders)
         except WorkerDied as err:
+            tally.close()
             click.echo(f"bark: {err}", err=True)
             sys.exit(1)
         except KeyboardInterrupt:
             from bark.studies.sweep import SweepTable
 
+            tally.close()
             with SweepTable(folder / "sweep.sqlite") as table:
                 n = len(table.done() & {p.key for p in plan.points()})
             signum = signals.received or signal.SIGINT
@@ -226,8 +238,7 @@ def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, picture
                        f"{folder / 'sweep.sqlite'}; the same command goes on", err=True)
             sys.exit(128 + int(signum))
         finally:
-            if bar is not None:
-                bar.close()
+            tally.close()
             if client is not None:
                 client.close()
     _finish(plan, folder, counts, quiet, pictures)
@@ -261,28 +272,6 @@ def _dask_client(address: str):
         raise BarkError(f"--dask {address}: no Dask scheduler answers there ({type(got).__name__}: "
                         f"{str(got).splitlines()[0][:120] if str(got) else ''})") from None
     return got
-
-
-class _bar:
-    """A rich progress bar over the sweep's runs."""
-
-    def __init__(self) -> None:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-        self.progress = Progress(TextColumn("sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                                 TimeRemainingColumn(), TextColumn("{task.fields[last]}"))
-        self.task = None
-
-    def update(self, done: int, total: int, point) -> None:
-        if self.task is None:
-            self.progress.start()
-            self.task = self.progress.add_task("runs", total=total, completed=done, last="")
-        last = "" if point is None else ", ".join(f"{k}={value_text(v)}" for k, v in point.settings.items()) \
-            + f", seed {point.seed}"
-        self.progress.update(self.task, completed=done, last=last)
-
-    def close(self) -> None:
-        self.progress.stop()
 
 
 def _finish(plan, folder, counts: dict, quiet: bool, pictures=("png", 150)) -> None:

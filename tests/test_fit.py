@@ -273,6 +273,14 @@ def test_an_observed_pattern_that_is_not_one_is_one_line(tmp_path, observed):
     assert r.exit_code == 2
 
 
+def _generation_line(proc) -> str:
+    """The first line of stderr that is not a progress line (``bark: fit: ...``): the first generation's."""
+    for line in proc.stderr:
+        if not line.startswith("bark: fit:"):
+            return line
+    return ""
+
+
 @pytest.mark.slow  # a fit of whole processes, stopped from outside
 def test_a_fit_stopped_by_a_signal_goes_on_from_its_last_generation(tmp_path):
     out = tmp_path / "fit"
@@ -280,7 +288,7 @@ def test_a_fit_stopped_by_a_signal_goes_on_from_its_last_generation(tmp_path):
             "--generations", "3", "--predictive", "0", "--out", str(out)]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        line = proc.stderr.readline()  # the first generation's line: it is in fit.db
+        line = _generation_line(proc)  # the first generation's line: it is in fit.db
         assert line.startswith("bark: generation 0:"), line + proc.communicate()[1]
         os.kill(proc.pid, signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
@@ -311,7 +319,7 @@ def test_a_killed_fit_worker_is_one_line_and_the_rerun_goes_on(tmp_path):
             "--generations", "3", "--predictive", "0", "--workers", "2", "--out", str(out)]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        line = proc.stderr.readline()  # a generation is in fit.db, and the workers are running the next
+        line = _generation_line(proc)  # a generation is in fit.db, and the workers are running the next
         assert line.startswith("bark: generation 0:"), line + proc.communicate()[1]
         workers = [k for k in _children(proc.pid) if "python" in Path(f"/proc/{k}/cmdline").read_bytes().decode(errors="replace")]
         os.kill(workers[-1], signal.SIGKILL)
