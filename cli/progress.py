@@ -34,6 +34,11 @@ def _fields(sim, stop) -> dict:
             "r": r, "r_cm": 100 * metres(r), "broken": sim.n_broken, "patches": sim.patch_count(stop.min_patch_size)}
 
 
+WIDE = 165
+"""Terminal columns from which ``bark simulate``'s bar shows every field; below, the fields that fit
+80 columns with the bar and the time left."""
+
+
 class ProgressBar:
     """An ``observe(sim, stop)`` callback for :func:`bark.studies.runner.run` that shows a progress bar,
     refreshed at most every ``every_s``; it starts at the first call and ends at :meth:`close`."""
@@ -57,17 +62,28 @@ class ProgressBar:
     def _show(self, sim, stop) -> None:
         if self._progress is None:
             self._r0 = sim.radius
-            columns = (
-                TextColumn("[bold]bark"),
-                BarColumn(),
-                TextColumn("t={task.fields[t]:>8.2f} ({task.fields[years]:.1f} y)  bases={task.fields[bases]}  "
-                           "height={task.fields[height]:.2f} m  r={task.fields[r]:.4f} ({task.fields[r_cm]:.1f} cm)  "
-                           "broken={task.fields[broken]:>6}  patches={task.fields[patches]:>4}"),
-                TimeElapsedColumn(),
-                TextColumn("left"),
-                TimeRemainingColumn(),
-            )
-            progress = Progress(*columns, transient=False, console=Console(stderr=True))
+            console = Console(stderr=True)
+            if console.width >= WIDE:
+                columns = (
+                    TextColumn("[bold]bark"),
+                    BarColumn(),
+                    TextColumn("t={task.fields[t]:>8.2f} ({task.fields[years]:.1f} y)  bases={task.fields[bases]}  "
+                               "height={task.fields[height]:.2f} m  r={task.fields[r]:.4f} ({task.fields[r_cm]:.1f} cm)  "
+                               "broken={task.fields[broken]:>6}  patches={task.fields[patches]:>4}"),
+                    TimeElapsedColumn(),
+                    TextColumn("left"),
+                    TimeRemainingColumn(),
+                )
+            else:  # a narrower terminal (80 columns): the bar, time, breaks and patches, and the time left
+                columns = (
+                    TextColumn("[bold]bark"),
+                    BarColumn(bar_width=12),
+                    TextColumn("t={task.fields[t]:.1f} ({task.fields[years]:.1f} y)  {task.fields[broken]} broken  "
+                               "{task.fields[patches]} patches"),
+                    TextColumn("left"),
+                    TimeRemainingColumn(),
+                )
+            progress = Progress(*columns, transient=False, console=console)
             progress.start()
             self._task = progress.add_task("run", total=1.0, **_fields(sim, stop))
             self._progress = progress  # whole: a signal in the middle of this leaves none to close
