@@ -85,27 +85,44 @@ def plot_tree(data: TreeData, path: str | Path, min_size: int = 7) -> Path:
     return save_figure(fig, path)
 
 
+SERIES_COLUMNS = 6
+"""The most panels a row of tree-series.png holds; more ages wrap into further rows."""
+
+
 def plot_tree_series(data: SeriesData, path: str | Path, min_size: int = 7) -> Path:
-    """The tree at each age of ``data`` side by side, on one scale (the paper's Fig. 10), into ``path``."""
+    """The tree at each age of ``data`` on one scale (the paper's Fig. 10), into ``path``: side by
+    side, in rows of at most :data:`SERIES_COLUMNS` panels, read left to right and down."""
+    import math
+
     extents = [_extent(tree) for tree in data.trees]
     z_lo = min(e[1] for e in extents)
     z_hi = max(e[2] for e in extents)
     half = max(e[0] for e in extents)
-    panel_in = 2.0 * WIDTH_IN / max(len(data.trees), 1) * 1.5
-    height_in = min(MAX_HEIGHT_IN, max(1.5, panel_in * (z_hi - z_lo) / (2 * half)))
-    fig = new_figure(figsize=(panel_in * len(data.trees), height_in + 0.7), dpi=150)
-    axes = fig.subplots(1, len(data.trees), sharey=True, squeeze=False)[0]
+    n = max(len(data.trees), 1)
+    cols = min(n, SERIES_COLUMNS)
+    rows = math.ceil(n / cols)
+    panel_in = 2.0 * WIDTH_IN / cols * 1.5
+    height_in = min(MAX_HEIGHT_IN / rows, max(1.5, panel_in * (z_hi - z_lo) / (2 * half)))
+    squeezed = height_in < panel_in * (z_hi - z_lo) / (2 * half)
+    fig = new_figure(figsize=(panel_in * cols, rows * (height_in + 0.6) + 0.4), dpi=150)
+    grid = fig.subplots(rows, cols, sharex=True, sharey=True, squeeze=False)  # inner panels: no tick labels
+    axes = list(grid.ravel())
     for ax, tree in zip(axes, data.trees):
         draw_tree(ax, tree, (half, z_lo, z_hi), 72.0 * height_in / (z_hi - z_lo))
-        ax.set_aspect("auto" if height_in == MAX_HEIGHT_IN else "equal")
+        ax.set_aspect("auto" if squeezed else "equal")
         ax.set_title(f"{years(tree.t):.0f} years: {tree.n_bases:,} bases, {patches(tree.n_patches)}", fontsize=8)
+    for ax in axes[len(data.trees):]:  # the last row's empty places
+        ax.set_visible(False)
+    for row in grid:
+        row[0].set_ylabel("height (m)" + (", compressed" if squeezed else ""))
+    for ax in axes[max(len(data.trees) - cols, 0):len(data.trees)]:  # the lowest panel of each column
+        ax.xaxis.set_tick_params(labelbottom=True)
         ax.set_xlabel("x (m)")
-    axes[0].set_ylabel("height (m)" + ("" if height_in < MAX_HEIGHT_IN else ", compressed"))
     for ax in axes:
         ax.apply_aspect()  # where the panels end up, so that the heading sits just above them
-    top = max(ax.get_position().y1 for ax in axes)
-    fig.text(0.5, top + 0.35 / (height_in + 0.7), f"The tree as it grew (patches of ≥ {min_size} bases coloured; "
-             "fragments grey)", ha="center", va="bottom", fontsize=9)
+    top = max(ax.get_position().y1 for ax in axes[:cols])
+    fig.text(0.5, top + 0.35 / (rows * (height_in + 0.6) + 0.4), f"The tree as it grew (patches of ≥ {min_size} "
+             "bases coloured; fragments grey)", ha="center", va="bottom", fontsize=9)
     return save_figure(fig, path)
 
 
