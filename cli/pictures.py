@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import atexit
 import importlib
+import math
 import multiprocessing
 import os
 import queue
@@ -31,6 +32,9 @@ from bark.engine.stepping import cores
 from bark.units import metres
 from bark_cli import matplotlib_folder
 
+LEAVES_CUT_DEG = 55.0
+"""tree.png's cut-away: the leaves that leave the plant in front of the trunk within this angle of
+the line of sight (either side) are not drawn, so that the bark they would hide shows."""
 
 @attrs.frozen
 class PatternData:
@@ -98,7 +102,8 @@ class TreeData:
     """Each segment's width, ``(n, points − 1)``, metres."""
     leaf_colours: np.ndarray = np.empty((0, 3))
     leaf_front: np.ndarray = np.empty(0, bool)
-    """Whether each leaf is on the viewer's side of the trunk (drawn over it)."""
+    """Whether each leaf is on the viewer's side of the trunk (drawn over it).  The leaves in front
+    within :data:`LEAVES_CUT_DEG` of the line of sight are cut away: the bark shows through."""
 
     @classmethod
     def of(cls, sim, min_size: int, dome, leaves=None) -> "TreeData":
@@ -136,7 +141,9 @@ class TreeData:
             from bark.model.leaves import plant_leaves
 
             plant = plant_leaves(leaves, apex, sim.growth, t, x)
-            order = np.argsort(plant.axes[:, :, 1].mean(axis=1))  # far first
+            base = plant.axes[:, 0]  # where each leaf leaves the plant: in front of the trunk within the cut, not drawn
+            kept = ~((base[:, 1] > 0.0) & (np.abs(base[:, 0]) < base[:, 1] * math.tan(math.radians(LEAVES_CUT_DEG))))
+            order = np.flatnonzero(kept)[np.argsort(plant.axes[kept, :, 1].mean(axis=1))]  # far first
             segments = 0.5 * (plant.widths[:, 1:] + plant.widths[:, :-1])
             drawn = {"leaves": metres(plant.axes[order][..., [0, 2]]), "leaf_widths": metres(segments[order]),
                      "leaf_colours": plant.colours[order], "leaf_front": plant.axes[order, 0, 1] > 0.0}

@@ -102,6 +102,22 @@ def test_the_plant_has_leaves_on_the_dome_and_on_the_young_trunk():
     assert np.count_nonzero(on_trunk >= sim.state.n_bases - lifespan_bases) == pytest.approx(lifespan_bases, abs=2)
 
 
+def test_the_side_view_cuts_away_the_leaves_in_front_of_the_trunk_and_keeps_the_others():
+    from bark_cli.pictures import LEAVES_CUT_DEG, TreeData
+
+    scene = Scene.from_toml(SCENES / "whole-tree-small.toml")
+    sim = scene.simulation()
+    sim.build()
+    apex = Apex(dome=scene.dome, packing=sim.packing)
+    plant = plant_leaves(scene.leaves, apex, sim.growth, 0.0, sim.state.x)
+    base = plant.axes[:, 0]
+    azimuth = np.degrees(np.abs(np.arctan2(base[:, 0], base[:, 1])))  # 0: towards the viewer
+    data = TreeData.of(sim, 7, scene.dome, scene.leaves)
+    drawn = np.count_nonzero(azimuth >= LEAVES_CUT_DEG)
+    assert len(data.leaves) == drawn and 0 < drawn < len(base)  # the cut ones, and only they, are left out
+    assert np.count_nonzero(data.leaf_front) == np.count_nonzero((azimuth >= LEAVES_CUT_DEG) & (base[:, 1] > 0))
+
+
 def test_leaves_ask_for_the_tree_and_their_settings_are_checked_in_one_line():
     scene = Scene.from_toml(SCENES / "whole-tree-small.toml", {"effects": {"want": ["leaves"]}})
     assert scene.has("tree-image") and scene.effects["tree-image"] == "needed by leaves"
