@@ -51,7 +51,8 @@ def draw_radial(ax, stats: PatternStatistics):
     theta = np.radians(table.orientation_deg)
     size = table.size.astype(float)
     both = np.concatenate([theta, theta + np.pi])
-    lo, hi = size.min(initial=1.0), size.max(initial=1.0)
+    lo = float(size.min()) if size.size else 1.0  # the smallest patch drawn (``initial`` would count as one)
+    hi = float(size.max()) if size.size else lo
     norm = LogNorm(lo, hi) if hi > 10 * lo else Normalize(lo, max(hi, lo + 1))  # a few huge patches: log scale
     art = ax.scatter(both, np.concatenate([table.anisotropy] * 2), c=np.concatenate([size] * 2), cmap="viridis",
                      norm=norm, s=18, edgecolors="k", linewidths=0.3)

@@ -20,6 +20,7 @@ from bark_cli import matplotlib_folder
 
 matplotlib_folder()  # before matplotlib looks for its own
 
+import matplotlib  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
@@ -129,9 +130,14 @@ def save_figure(fig: Figure, path: str | Path, fast: bool = True) -> Path:
     dpi = DPI.get()
     buf = io.BytesIO()
     extra = {"pil_kwargs": FAST_PNG} if fast and fmt == "png" else {"metadata": NO_DATE[fmt]} if fmt in NO_DATE else {}
-    fig.savefig(buf, format=fmt, bbox_inches="tight", dpi=dpi if dpi is not None else "figure", **extra)
+    with matplotlib.rc_context(EDITABLE_TEXT):
+        fig.savefig(buf, format=fmt, bbox_inches="tight", dpi=dpi if dpi is not None else "figure", **extra)
     return atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
+
+EDITABLE_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
+"""Text that a journal's tools can edit: TrueType fonts in a PDF (matplotlib's default is Type 3),
+text as text in an SVG (the default draws each glyph as a path)."""
 
 FAST_PNG = {"compress_level": 1}
 """zlib level of the pictures a run writes: the default (6) took a third of drawing a 3000-base
@@ -178,6 +184,12 @@ def rgba(rgb: np.ndarray) -> np.ndarray:
     return np.column_stack([rgb / 255.0, np.ones(len(rgb))])
 
 
+MARKERS = ("o", "s", "^", "D", "v", "P", "X")
+DASHES = ("-", "--", ":", "-.")
+"""Each method's marker and line style beside its colour: series told apart in grey and with any
+colour vision (tab10's green and red look alike under deuteranopia)."""
+
+
 def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None, title=""):
     """Work-precision diagram: log-log error against wall time, one line per method, one marker per
     dt or tolerance; the pattern panels shade the seed-to-seed spread (below it: not an error)."""
@@ -193,7 +205,8 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
     }
 
     methods = list(dict.fromkeys(r["method"] for r in [*pos_rows, *pat_rows]))
-    colour = {m: f"C{i % 10}" for i, m in enumerate(methods)}  # one colour per method, in every panel
+    colour = {m: f"C{i % 10}" for i, m in enumerate(methods)}  # one colour per method, in every panel, and
+    style = {m: (MARKERS[i % len(MARKERS)], DASHES[i % len(DASHES)]) for i, m in enumerate(methods)}  # apart in grey too
 
     def lines(ax, rows, key, floor):
         for method in dict.fromkeys(r["method"] for r in rows):
@@ -203,7 +216,8 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
             x = [r["wall_s"] for r in mine]
             y = [max(r[key], floor) for r in mine]
             label = method + (f" (order {orders[method]:.2f})" if key == "error" and method in orders else "")
-            (line,) = ax.plot(x, y, "o-", label=label, ms=5, color=colour[method])
+            marker, dashes = style[method]
+            (line,) = ax.plot(x, y, marker=marker, ls=dashes, label=label, ms=5, color=colour[method])
             for r, xi, yi in zip(mine, x, y):
                 ax.annotate(f"{r['param']:g}", (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=7,
                             color=line.get_color())

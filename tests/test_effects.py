@@ -291,9 +291,13 @@ def test_pictures_come_in_the_format_and_resolution_asked_for(tmp_path):
     assert sizes[120][0] == pytest.approx(2 * sizes[60][0], rel=0.05)
     result = CliRunner().invoke(cli, [*base, "--format", "pdf"])
     assert result.exit_code == 0, result.output
-    assert (out / "pattern.pdf").read_bytes().startswith(b"%PDF") and not (out / "pattern.png").exists()
+    pdf = (out / "pattern.pdf").read_bytes()
+    assert pdf.startswith(b"%PDF") and not (out / "pattern.png").exists()
+    assert b"/FontFile2" in pdf and b"/Type3" not in pdf  # TrueType text a journal's tools can edit
     result = CliRunner().invoke(cli, [*base, "--format", "svg"])
     assert result.exit_code == 0, result.output
-    assert b"<svg" in (out / "pattern.svg").read_bytes()[:500] and not (out / "pattern.pdf").exists()
+    svg = (out / "pattern.svg").read_text()
+    assert "<svg" in svg[:500] and not (out / "pattern.pdf").exists()
+    assert "<text" in svg  # text as text, not glyphs drawn as paths
     result = CliRunner().invoke(cli, [*base, "--format", "bmp"])
     assert result.exit_code == 2 and "--format" in result.stderr

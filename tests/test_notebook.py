@@ -45,10 +45,11 @@ def test_every_drawing_goes_into_an_axes_of_one_s_own(done):
     flat, radial, rose = fig.add_subplot(1, 3, 1), fig.add_subplot(1, 3, 2, projection="polar"), \
         fig.add_subplot(1, 3, 3, projection="polar")
     draw_pattern(flat, PatternData.of(done.sim, 7))
-    draw_radial(radial, stats)
+    sizes = draw_radial(radial, stats)
     draw_histogram(rose, stats)
     assert flat.collections and radial.collections and rose.patches  # drawn where they were asked to be
     assert len(fig.axes) == 3  # and nowhere else: no figure of their own
+    assert sizes.norm.vmin == stats.patches.size.min() >= 7  # the colour scale of the patches drawn, none under 7
 
 
 def test_the_statistics_series_comes_as_a_data_frame(done):
