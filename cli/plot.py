@@ -231,9 +231,12 @@ def plot_work_precision(pos_rows, orders, pat_rows, spread, path, highlight=None
         if np.isfinite(spread[key]) and spread[key] > floor:  # the seeds' own spread: a line, not a band over the panel
             ax.axhline(spread[key], color="0.35", ls="--", lw=1.0, zorder=0,
                        label=f"seed-to-seed spread ({spread[key]:.3g}): below it, no error that matters")
+    from matplotlib.ticker import NullFormatter
+
     for ax, key in zip(axes, ["error", *METRICS]):
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())  # the minor labels of a short decade ran into each other
         ax.set_xlabel("wall time (s)")
         ax.set_title(names[key][0], fontsize=10)
         ax.set_ylabel(names[key][1], fontsize=9)
