@@ -53,12 +53,35 @@ def test_history_nc_opens_in_xarray_with_every_frame(history):
         intact = ds.intact.values
         assert not ((intact[:-1] == 0) & (intact[1:] == 1)).any()  # a broken spring never comes back
         assert ((intact[:-1] == 1) & (intact[1:] == 0)).any()  # and some break between frames
-        assert ds.x.attrs["units"] == "m" and float(ds.time[-1]) == pytest.approx(12.0)
+        assert ds.x.attrs["units"] == "m" and float(ds.t[-1]) == pytest.approx(12.0)
+        since = ds.time.values - np.datetime64("2000-01-01")  # decoded: dates from the epoch that stands for the start
+        assert ds.time.dtype.kind == "M" and since[-1] == np.timedelta64(int(12.0 * 88.5 * 86400), "s")
         assert "years" in ds.coords and float(ds.years[-1]) == pytest.approx(12.0 * 88.5 / 365.25)
+        assert ds.attrs["Conventions"] == "CF-1.10" and "t" in ds.coords
+        for name, v in ds.variables.items():  # every variable says its units and what it is
+            if name != "time":  # decoded: its units went into its type (dates)
+                assert v.attrs.get("units") and v.attrs.get("long_name"), name
+        assert ds.intact.attrs["flag_meanings"] == "not_yet_made broken intact"
         units = {k: ds[k].attrs.get("units") for k in ("mean_orientation_deg", "circular_sd_deg", "mean_anisotropy",
                                                           "fraction_within_45_deg", "largest_patch_share")}
         assert units == {"mean_orientation_deg": "degrees", "circular_sd_deg": "degrees", "mean_anisotropy": "1",
                          "fraction_within_45_deg": "1", "largest_patch_share": "1"}  # a fraction is not in degrees
+
+
+def test_history_nc_meets_the_cf_conventions(history, tmp_path):
+    """The IOOS compliance checker's CF 1.10 suite finds no error (its high-priority findings)."""
+    import json
+
+    from compliance_checker.runner import CheckSuite, ComplianceChecker
+
+    _, out = history
+    CheckSuite.load_all_available_checkers()
+    report = tmp_path / "cf.json"
+    passed, failed = ComplianceChecker.run_checker(str(out / "history.nc"), ["cf:1.10"], 0, "lenient",
+                                                   output_filename=str(report), output_format="json")
+    found = json.loads(report.read_text())["cf:1.10"]
+    errors = [m for check in found["high_priorities"] for m in check["msgs"]]
+    assert passed and not failed and found["high_count"] == 0 and not errors, errors
 
 
 def test_a_resumed_history_is_the_uninterrupted_one_to_the_byte(history, tmp_path):

@@ -9,9 +9,11 @@ At the end it writes:
   (``bark.io.mesh``), in metres, with cell data ``patch`` and ``base`` and the RGB point data
   ``colour`` — and ``tree.pvd``, the ParaView collection that puts them on the run's time axis
   (simulated time units; open ``tree.pvd`` in ParaView, or ``pyvista.read``);
-* ``history.nc``, a netCDF (classic, 64-bit offset) file that ``xarray.open_dataset`` reads, with
-  dimensions ``time`` (a frame each; its coordinate the simulated time), ``base``, ``spring`` and
-  ``xyz``: ``years`` per frame, ``x``
+* ``history.nc``, a netCDF (classic, 64-bit offset) file following the CF conventions (1.10) that
+  ``xarray.open_dataset`` reads, with dimensions ``time`` (a frame each; its coordinate the simulated
+  time in days since an epoch, 2000-01-01, that stands for the run's start: xarray decodes it as
+  dates), ``base``, ``spring`` and
+  ``xyz``: the coordinates ``t`` (model time units of 88.5 days) and ``years`` per frame, ``x``
   (metres; NaN for a base not yet on the trunk), ``patch`` (−1 for none), ``intact`` (1 intact, 0
   broken, −1 not yet made), ``spring_ends``, ``born``, and per frame ``n_bases``, ``n_springs``,
   ``n_broken``, ``n_patches``, ``largest_patch_share`` and the statistics of summary.json
@@ -32,9 +34,17 @@ import numpy as np
 from bark.contract.strategies import pattern_of
 from bark.io.files import atomic_write
 from bark.io.recorders import Recorder
-from bark.units import METRES_PER_LENGTH_UNIT, years
+from bark.units import DAYS_PER_TIME_UNIT, DAYS_PER_YEAR, METRES_PER_LENGTH_UNIT, years
+from bark.version import __version__
 
 __all__ = ["History", "HISTORY_FILES", "FRAMES_FOLDER"]
+
+EPOCH = "2000-01-01 00:00:00"
+"""history.nc's time is in days since this date, which stands for the start of the run: a CF time
+coordinate names an epoch, and xarray then decodes it; ``t`` and ``years`` give the model's own time."""
+
+TIME_COORDINATES = ("t", "years")
+"""history.nc's coordinates beside ``time`` (days): the model's own time units and years."""
 
 FRAMES_FOLDER = "history"
 """The folder of the run's folder that holds the frames' meshes."""
@@ -151,34 +161,43 @@ class History(Recorder):
 
         buffer = io.BytesIO()  # scipy's writer closes what it writes to: a buffer, then the file atomically
         nc = netcdf_file(buffer, "w", version=2)
+        nc.Conventions = "CF-1.10"
         nc.title = "bark: a run's history (frames of its state)"
-        nc.conventions = ("orientation: degrees from horizontal in [0, 180), 90 = along the trunk axis; "
-                          "anisotropy = 2A - 1; positions in metres; time in model time units of 88.5 days")
+        nc.source = f"bark {__version__}"
+        nc.history = f"frames recorded by bark {__version__}'s history effect along the run"
+        nc.comment = ("orientation: degrees from horizontal in [0, 180), 90 = along the trunk axis; "
+                      "anisotropy = 2A - 1; positions in metres; t in model time units of 88.5 days, time in days")
         for dim, size in (("time", n_frames), ("base", n_bases), ("spring", n_springs), ("xyz", 3), ("end", 2)):
             nc.createDimension(dim, size)
 
-        def var(name, data, dims, units=None, long_name=None):
+        def var(name, data, dims, units, long_name, **attrs):
             v = nc.createVariable(name, data.dtype, dims)
             v[...] = data
-            if units:
-                v.units = units
-            if long_name:
-                v.long_name = long_name
-            if dims[0] == "time" and name not in ("time", "years"):
-                v.coordinates = "years"  # each frame's age in years beside its time: a coordinate for xarray
+            v.units, v.long_name = units, long_name  # UDUNITS units, "1" for a count or a pure number
+            for key, value in attrs.items():
+                setattr(v, key, value)
+            if dims[0] == "time" and name not in ("time", *TIME_COORDINATES):
+                v.coordinates = " ".join(TIME_COORDINATES)  # each frame's time in model units and years: coordinates
 
-        var("time", t, ("time",), "model time units (88.5 days)", "simulated time")
-        var("years", np.asarray(years(t), float), ("time",), "years", "simulated time in years")
+        # time in days since an epoch that stands for the run's start (a CF time coordinate needs one; the
+        # model has no calendar date); t, the model's own time (a unit of 88.5 days), and years beside it
+        var("time", t * DAYS_PER_TIME_UNIT, ("time",), f"days since {EPOCH}",
+            f"simulated time; its epoch, {EPOCH[:10]}, stands for the start of the run", standard_name="time", axis="T",
+            calendar="proleptic_gregorian")
+        var("t", t, ("time",), f"{DAYS_PER_TIME_UNIT:g} days", "simulated time in model time units")
+        var("years", np.asarray(years(t), float), ("time",), f"{DAYS_PER_YEAR:g} days", "simulated time in years")
         var("x", x, ("time", "base", "xyz"), "m", "position of each leaf base (NaN: not yet on the trunk)")
-        var("patch", patch, ("time", "base"), None, "patch of each base, numbered by its smallest base (-1: none)")
-        var("intact", intact, ("time", "spring"), None, "1 intact, 0 broken, -1 not yet made")
-        var("spring_ends", sim.state.pairs.astype(np.int32), ("spring", "end"), None, "the bases each spring joins")
-        var("born", sim.state.born.astype(float), ("base",), "model time units", "when each base joined")
-        var("n_bases", np.array([len(f["x"]) for f in frames], np.int32), ("time",), None, "bases on the trunk")
-        var("n_springs", np.array([f["n_springs"] for f in frames], np.int32), ("time",), None, "springs made")
-        var("n_broken", np.array([f["n_broken"] for f in frames], np.int32), ("time",), None, "springs broken")
+        var("patch", patch, ("time", "base"), "1", "patch of each base, numbered by its smallest base (-1: none)")
+        var("intact", intact, ("time", "spring"), "1", "state of each spring", flag_values=np.array([-1, 0, 1], np.int8),
+            flag_meanings="not_yet_made broken intact")
+        var("spring_ends", sim.state.pairs.astype(np.int32), ("spring", "end"), "1", "the bases each spring joins")
+        var("born", sim.state.born.astype(float), ("base",), f"{DAYS_PER_TIME_UNIT:g} days",
+            "when each base joined, in model time units")
+        var("n_bases", np.array([len(f["x"]) for f in frames], np.int32), ("time",), "1", "bases on the trunk")
+        var("n_springs", np.array([f["n_springs"] for f in frames], np.int32), ("time",), "1", "springs made")
+        var("n_broken", np.array([f["n_broken"] for f in frames], np.int32), ("time",), "1", "springs broken")
         counts = [np.bincount(f["labels"]) for f in frames]
-        var("n_patches", np.array([int((c >= self._min_size).sum()) for c in counts], np.int32), ("time",), None,
+        var("n_patches", np.array([int((c >= self._min_size).sum()) for c in counts], np.int32), ("time",), "1",
             f"patches of at least {self._min_size} bases")
         var("largest_patch_share", np.array([c.max() / c.sum() for c in counts], float), ("time",), "1",
             "share of the bases the largest patch holds")
