@@ -2,6 +2,16 @@
 
 The model is Dale, Runions, Hobill & Prusinkiewicz (2014), "Modelling biomechanics of bark
 patterning in grasstrees".  See ARCHITECTURE.md for the data model, the loop and the plugin contract.
+
+A run from Python, as ``bark simulate`` makes it::
+
+    import bark
+    scene = bark.Scene.from_toml("reticulate")        # a shipped scene by name, or a file
+    outcome = bark.run(scene, "runs/reticulate")      # outputs, checkpoints, pictures
+    again = bark.resume("runs/reticulate")            # an interrupted run goes on, to the bit
+
+``Scene``, ``run`` and ``resume`` are loaded when first used; the drawing functions (into axes of
+one's own) are in ``bark_cli.draw``, which imports matplotlib.
 """
 
 from bark.errors import BarkError, NonFiniteStateError
@@ -13,6 +23,9 @@ from bark.contract.strategies import Analysis, Analyzer, Breaker, Growth, Integr
 from bark.version import __version__
 
 __all__ = [
+    "Scene",
+    "run",
+    "resume",
     "Analysis",
     "Analyzer",
     "BarkError",
@@ -28,3 +41,22 @@ __all__ = [
     "Stop",
     "__version__",
 ]
+
+_LAZY = {"Scene": ("bark.engine.scene", "Scene"), "run": ("bark.studies.runner", "run"),
+         "resume": ("bark.studies.runner", "resume")}
+"""The notebook API, imported when first asked for: ``import bark`` stays as light as it was."""
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        module, attribute = _LAZY[name]
+        value = getattr(importlib.import_module(module), attribute)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'bark' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})

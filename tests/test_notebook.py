@@ -35,10 +35,30 @@ def test_pattern_statistics_print_in_one_short_line(done):
     assert "\n" not in text and len(text) < 200 and f"{stats.n_patches} patches" in text and "°" in text
 
 
+def test_the_notebook_api_is_bark_s_own_and_loaded_when_first_used():
+    import subprocess
+    import sys
+
+    from bark.engine.scene import Scene
+    from bark.studies.runner import resume, run
+
+    from bark import Scene as S, resume as R, run as F  # noqa: N811  (the names a notebook uses)
+
+    assert (S, F, R) == (Scene, run, resume)
+    import bark
+
+    assert {"Scene", "run", "resume"} <= set(dir(bark)) and {"Scene", "run", "resume"} <= set(bark.__all__)
+    with pytest.raises(AttributeError, match="no attribute 'Scena'"):
+        bark.Scena  # noqa: B018
+    probe = ("import sys, bark; before = {m for m in ('bark.studies.runner', 'matplotlib') if m in sys.modules}; "
+             "bark.run; print(sorted(before), 'bark.studies.runner' in sys.modules, 'matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["[]", "True", "False"], out  # nothing until asked for; never matplotlib
+
+
 def test_every_drawing_goes_into_an_axes_of_one_s_own(done):
-    from bark_cli.figures import draw_histogram, draw_radial
-    from bark_cli.pictures import PatternData
-    from bark_cli.plot import draw_pattern, new_figure
+    from bark_cli.draw import PatternData, draw_histogram, draw_pattern, draw_radial
+    from bark_cli.plot import new_figure
 
     stats = Pattern.of_simulation(done.sim).statistics(7)
     fig = new_figure(figsize=(9, 3))
