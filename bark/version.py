@@ -1,5 +1,6 @@
-"""bark's version and the provenance of a run: the installed distribution's version (from git tags,
-setuptools-scm), the git commit of the source that ran and whether it had uncommitted changes."""
+"""bark's version and the provenance of a run: the installed distribution's version (the release
+tag's, else the one written in VERSION: ``tools/bark_build.py``), the git commit of the source that
+ran and whether it had uncommitted changes."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ __all__ = ["__version__", "DISTRIBUTION", "source_commit", "session", "provenanc
 @functools.lru_cache(maxsize=1)
 def source_commit() -> tuple[str | None, bool | None]:
     """``(commit, dirty)`` of the source bark runs from: read from git when the package sits in a
-    git checkout (an editable install), else the commit setuptools-scm put in the version (a wheel
+    git checkout (an editable install), else the commit the build put in the version (a wheel
     built between tags: ``...+gCOMMIT``), else ``(None, None)``.  Asked once a process."""
     here = Path(__file__).resolve().parent
     try:

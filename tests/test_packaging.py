@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from importlib import metadata
@@ -146,6 +147,7 @@ def test_a_built_wheel_has_every_module(tmp_path):
                             "-w", str(wheels), str(source)], capture_output=True, text=True)
     assert build.returncode == 0, build.stderr
     (wheel,) = wheels.glob("bark_grasstree-*.whl")
+    assert wheel.name.split("-")[1] == (REPO_ROOT / "VERSION").read_text().strip()  # a tree without git: VERSION's
     install = subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--target", str(site), str(wheel)],
                              capture_output=True, text=True)
     assert install.returncode == 0, install.stderr
@@ -181,3 +183,44 @@ def test_a_built_wheel_has_every_module(tmp_path):
     assert run.returncode == 0, run.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["settings"]["scene"]["name"] == "whole-tree-small" and (out / "scene.toml").is_file()
+
+
+def _git(repo, *args):
+    done = subprocess.run(["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t", *args],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
+def _written(repo) -> str | None:
+    code = "import sys; sys.path.insert(0, 'tools'); import bark_build; print(bark_build.written_version())"
+    done = subprocess.run([sys.executable, "-c", code], cwd=repo, capture_output=True, text=True,
+                          env={k: v for k, v in os.environ.items() if not k.startswith("SETUPTOOLS_SCM_PRETEND")})
+    assert done.returncode == 0, done.stderr
+    return None if done.stdout.strip() == "None" else done.stdout.strip()
+
+
+@pytest.mark.slow  # a clone of the repository, commits and a wheel built in it
+def test_the_version_is_the_release_tag_s_else_the_one_written_in_version(tmp_path):
+    from conftest import REPO_ROOT
+
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", "--no-tags", str(REPO_ROOT), str(clone)], check=True)
+    tags = _git(clone, "tag", "-l").split()
+    if tags:  # a clone carries no tag (--no-tags): as the project's own clones come
+        _git(clone, "tag", "-d", *tags)
+    (clone / "VERSION").write_text("0.7.2\n")
+    _git(clone, "commit", "-q", "-am", "release 0.7.2")
+    assert _written(clone) == "0.7.2"  # the release commit: the version written down, exactly
+    (clone / "README.md").write_text("changed\n")
+    assert _written(clone) == f"0.7.3.dev0+g{_git(clone, 'rev-parse', '--short', 'HEAD')}.dirty"
+    _git(clone, "commit", "-q", "-am", "after the release")
+    _git(clone, "commit", "-q", "--allow-empty", "-m", "and another")
+    assert _written(clone) == f"0.7.3.dev2+g{_git(clone, 'rev-parse', '--short', 'HEAD')}"  # its successor, 2 on
+    _git(clone, "tag", "v9.9.9")
+    assert _written(clone) is None  # a release tag: setuptools-scm's version
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w",
+                            str(tmp_path / "wheels"), str(clone)], capture_output=True, text=True,
+                           env={k: v for k, v in os.environ.items() if not k.startswith("SETUPTOOLS_SCM_PRETEND")})
+    assert build.returncode == 0, build.stderr
+    assert [w.name.split("-")[1] for w in (tmp_path / "wheels").glob("*.whl")] == ["9.9.9"]
