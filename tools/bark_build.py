@@ -31,8 +31,6 @@ def _git(*args: str) -> str | None:
 
 def written_version() -> str | None:
     """The version to build as, or ``None`` to leave it to setuptools-scm (a tag, or PKG-INFO)."""
-    if os.environ.get(PRETEND) or os.environ.get("SETUPTOOLS_SCM_PRETEND_VERSION"):
-        return None
     written = (ROOT / "VERSION").read_text(encoding="utf-8").strip()
     if _git("rev-parse", "--git-dir") is None:
         return None if (ROOT / "PKG-INFO").exists() else written
@@ -48,6 +46,7 @@ def written_version() -> str | None:
     return f"{major}.{minor}.{patch + 1}.dev{distance}+{local}"
 
 
-_version = written_version()
-if _version is not None:
-    os.environ[PRETEND] = _version
+if not (os.environ.get(PRETEND) or os.environ.get("SETUPTOOLS_SCM_PRETEND_VERSION")):  # else the builder chose
+    _version = written_version()
+    if _version is not None:
+        os.environ[PRETEND] = _version
