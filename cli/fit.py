@@ -13,7 +13,7 @@ import time
 import click
 
 from bark.errors import BarkError
-from bark_cli.options import SCENE_RULE, progress_option
+from bark_cli.options import SCENE_RULE, json_option, progress_option
 from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -87,9 +87,10 @@ def parse_marks(items: tuple[str, ...], keys: tuple[str, ...]) -> dict[str, dict
                    "predictive.png. A fit run again into it goes on where it stopped.")
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @progress_option
+@json_option
 @picture_options
 def fit(observed, scene_file, priors, sets, statistics, population, generations, min_acceptance, seed, mirror, min_size,
-        predictive, marks, workers, dask_address, out, quiet, progress_every, picture_format, dpi):
+        predictive, marks, workers, dask_address, out, quiet, progress_every, as_json, picture_format, dpi):
     """Find the scene settings that grow bark like OBSERVED (a run folder, a state .npz, a leaf-base
     .csv or a .toml summary, as bark compare takes): approximate Bayesian computation by sequential
     Monte Carlo on the patterns' statistics. Each generation is kept in --out/fit.db as it ends;
@@ -127,7 +128,8 @@ def fit(observed, scene_file, priors, sets, statistics, population, generations,
     points = parse_marks(marks, plan.keys)
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:
-        _fit(plan, held.path, workers or 1, client, quiet, predictive, points, (picture_format, dpi), progress_every)
+        _fit(plan, held.path, workers or 1, client, quiet, predictive, points, (picture_format, dpi), progress_every,
+             as_json)
 
 
 class _Progress:
@@ -165,7 +167,7 @@ def _clock(seconds: float) -> str:
 
 
 def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, marks: dict, pictures,
-         every_s: float = 30.0) -> None:
+         every_s: float = 30.0, as_json: bool = False) -> None:
     from bark.studies.fit import predictive, run_fit
     from bark.studies.pool import WorkerDied
     from bark_cli.main import Signals
@@ -205,7 +207,7 @@ def _fit(plan, folder, workers: int, client, quiet: bool, n_predictive: int, mar
             progress.close()
             if client is not None:
                 client.close()
-    _finish(result, folder, runs, marks, quiet, pictures)
+    _finish(result, folder, runs, marks, quiet, pictures, as_json)
 
 
 def _refused_by_the_disk(err: BaseException) -> str | None:
@@ -226,8 +228,8 @@ def _refused_by_the_disk(err: BaseException) -> str | None:
     return None
 
 
-def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures) -> None:
-    from bark.io.files import write_columns, write_json
+def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures, as_json: bool = False) -> None:
+    from bark.io.files import json_text, write_columns, write_json
     from bark.studies.fit import CREDIBLE
     from bark_cli import write_owned
 
@@ -256,7 +258,9 @@ def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures
     if runs:
         writers["predictive.png"] = lambda path: plot_predictive(fit, runs, path)
     written = write_owned(folder, in_formats(FIT_FILES), pictured(writers, *pictures))
-    if not quiet:
+    if as_json:  # fit.json's content alone on stdout, what was written said on stderr
+        click.echo(json_text(report, indent=2))
+    elif not quiet:
         from rich.console import Console
         from rich.table import Table
 
@@ -272,7 +276,7 @@ def _finish(result, folder, runs: list[dict], marks: dict, quiet: bool, pictures
             level = entry["hpd_level"]
             click.echo(f"  {label}: {100 * level:.0f} % of the posterior is more probable "
                        f"({'inside' if level <= CREDIBLE else 'outside'} the 90 % highest-density region)")
-    click.echo(f"wrote fit.db, {', '.join(written)} to {folder}")
+    click.echo(f"wrote fit.db, {', '.join(written)} to {folder}", err=as_json)
     if len(written) != len(writers):
         sys.exit(1)
 

@@ -256,6 +256,12 @@ progress_option = click.option(
 """The option of every long command that counts its progress (``bark_cli.progress.Tally``)."""
 
 
+json_option = click.option(
+    "--json", "as_json", is_flag=True,
+    help="Print the result as JSON on stdout (the document the command writes) instead of the table.")
+"""The option of every command that prints a result: its JSON, for a script to read."""
+
+
 def split_setting(item: str) -> tuple[str, str, str] | None:
     """``SECTION.KEY=TEXT`` (``--set``, ``--grid``) → ``(section, key, text)``, the names stripped, or
     ``None`` when the item is not of that form."""

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import click
 
-from bark_cli.options import SCENE_RULE
+from bark_cli.options import SCENE_RULE, json_option
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
 ANALYZE_FILES = ("statistics.json", "patches.csv", "radial.png", "histogram.png")
@@ -53,13 +53,17 @@ def pictured(writers: dict, picture_format: str, dpi: int) -> dict:
             for name, write in writers.items()}
 
 
-def _wrote(folder, owned: tuple, writers: dict) -> int:
-    """``write_owned``, then say what was written; exit status 1 if a file could not be."""
+def _wrote(folder, owned: tuple, writers: dict, document: dict | None = None) -> int:
+    """``write_owned``, then say what was written (on stderr when the result goes to stdout as JSON,
+    ``document``: --json); exit status 1 if a file could not be."""
+    from bark.io.files import json_text
     from bark_cli import write_owned
 
     written = write_owned(folder, in_formats(owned), writers)
     if written:
-        click.echo(f"wrote {', '.join(written)} to {folder}")
+        click.echo(f"wrote {', '.join(written)} to {folder}", err=document is not None)
+    if document is not None:
+        click.echo(json_text(document, indent=2))
     return 0 if len(written) == len(writers) else 1
 
 
@@ -123,8 +127,9 @@ def _statistics_table(stats):
                    "analysis-<analyzer>-<table>.csv. A pattern without springs (a photograph) gives them none.")
 @click.option("--out", default="bark-analysis", show_default=True, type=click.Path(file_okay=False),
               help="Folder for statistics.json, patches.csv, radial.png and histogram.png.")
+@json_option
 @picture_options
-def analyze(pattern, min_size, scene_file, out, picture_format, dpi):
+def analyze(pattern, min_size, scene_file, out, as_json, picture_format, dpi):
     """Measure PATTERN (a run folder, a state .npz, a leaf-base .csv or a .toml summary): per-patch orientation and anisotropy (PCA), their
     means, SDs and standard errors; draws the radial plot and the orientation histogram (the
     paper's Fig. 6B, C / 7B, C)."""
@@ -132,15 +137,15 @@ def analyze(pattern, min_size, scene_file, out, picture_format, dpi):
     (stats,) = _read_all([pattern], min_size)
     analyses = None if scene_file is None else _scene_analyses(Path(pattern), scene_file)
     with _held(out, run_files_kept=True) as held:
-        return _analyze(pattern, stats, analyses, min_size, held.path, picture_format, dpi)
+        return _analyze(pattern, stats, analyses, min_size, held.path, picture_format, dpi, as_json)
 
 
-def _analyze(pattern, stats, analyses, min_size, folder, picture_format, dpi) -> int:
+def _analyze(pattern, stats, analyses, min_size, folder, picture_format, dpi, as_json: bool = False) -> int:
     from rich.console import Console
 
     from bark.io.files import write_csv, write_json
 
-    console = Console(width=150)
+    console = Console(width=150, quiet=as_json)  # --json: the document alone on stdout
     console.print(_statistics_table([stats]))
     network = _network(Path(pattern), stats, min_size)
     if network is not None:
@@ -163,7 +168,7 @@ def _analyze(pattern, stats, analyses, min_size, folder, picture_format, dpi) ->
 
             writers.update({"radial.png": lambda path: plot_radial(stats, path),
                             "histogram.png": lambda path: plot_histogram(stats, path)})
-    return _wrote(folder, owned, pictured(writers, picture_format, dpi))
+    return _wrote(folder, owned, pictured(writers, picture_format, dpi), document if as_json else None)
 
 
 def _scene_analyzers_of(scene_file) -> list:
@@ -213,8 +218,9 @@ def _network_line(net: dict) -> str:
                    "for trees whose phyllotactic spiral turns the other way. Repeatable.")
 @click.option("--out", default="bark-compare", show_default=True, type=click.Path(file_okay=False),
               help="Folder for comparison.json and, for four patterns, quartets.png.")
+@json_option
 @picture_options
-def compare(patterns, min_size, mirror, out, picture_format, dpi):
+def compare(patterns, min_size, mirror, out, as_json, picture_format, dpi):
     """Compare two or more PATTERNs (each a run folder, a state .npz, a leaf-base .csv or a .toml
     summary): Hellinger distances and
     d_P of orientation and of anisotropy (the paper's eqs. 12–15); for four, the quartet analyses
@@ -236,17 +242,17 @@ def compare(patterns, min_size, mirror, out, picture_format, dpi):
         names = [s.name for s in stats]
     result = compare_all(stats)
     with _held(out) as held:
-        return _compare(stats, names, result, held.path, picture_format, dpi)
+        return _compare(stats, names, result, held.path, picture_format, dpi, as_json)
 
 
-def _compare(stats, names, result, folder, picture_format, dpi) -> int:
+def _compare(stats, names, result, folder, picture_format, dpi, as_json: bool = False) -> int:
     from rich.console import Console
     from rich.table import Table
 
     from bark.analysis.compare import QUANTITIES
     from bark.io.files import write_json
 
-    console = Console(width=150)
+    console = Console(width=150, quiet=as_json)  # --json: the document alone on stdout
     console.print(_statistics_table(stats))
     hands = {s.handedness for s in stats} - {None}
     if len(hands) > 1:
@@ -280,7 +286,7 @@ def _compare(stats, names, result, folder, picture_format, dpi) -> int:
         from bark_cli.figures import plot_quartets
 
         writers["quartets.png"] = lambda path: plot_quartets(result, path)
-    return _wrote(folder, COMPARE_FILES, pictured(writers, picture_format, dpi))
+    return _wrote(folder, COMPARE_FILES, pictured(writers, picture_format, dpi), report if as_json else None)
 
 
 def _shared(q, names) -> str:

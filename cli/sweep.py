@@ -12,7 +12,7 @@ import sys
 import click
 
 from bark.errors import BarkError
-from bark_cli.options import SCENE_RULE, progress_option, setting_value, split_setting, value_text
+from bark_cli.options import SCENE_RULE, json_option, progress_option, setting_value, split_setting, value_text
 from bark_cli.patterns import in_formats, picture_options, pictured
 
 CONTEXT = {"help_option_names": ["-h", "--help"]}
@@ -146,9 +146,10 @@ def parse_ranges(items: tuple[str, ...], option: str = "--range") -> dict:
               help="Each run also writes its outputs (as bark simulate does) into --out/runs/KEY, KEY its row's key.")
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @progress_option
+@json_option
 @picture_options
 def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, sets, seeds, max_runs, workers,
-          dask_address, out, run_folders, quiet, progress_every, picture_format, dpi):
+          dask_address, out, run_folders, quiet, progress_every, as_json, picture_format, dpi):
     """Run a grid of scenes, one run per point and seed, each result committed to --out/sweep.sqlite
     (table `runs`) as it finishes; then draw montage.png (the first two axes as columns and rows).
     Killed or stopped, the same command goes on without running a finished point again."""
@@ -203,11 +204,11 @@ def sweep(scene_file, grids, points_file, design, samples, ranges, design_seed, 
     client = _dask_client(dask_address) if dask_address is not None else None
     with held_folder(out) as held:  # one sweep at a time in a folder
         _sweep(plan, held.path, workers, client, quiet, held.path / "runs" if run_folders else None, (picture_format, dpi),
-               progress_every)
+               progress_every, as_json)
 
 
-def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, pictures=("png", 150), every_s: float = 30.0
-           ) -> None:
+def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, pictures=("png", 150), every_s: float = 30.0,
+           as_json: bool = False) -> None:
     from bark.studies.sweep import WorkerDied, run_sweep
     from bark_cli.main import Signals
     from bark_cli.progress import Tally
@@ -241,7 +242,7 @@ def _sweep(plan, folder, workers, client, quiet: bool, run_folders=None, picture
             tally.close()
             if client is not None:
                 client.close()
-    _finish(plan, folder, counts, quiet, pictures)
+    _finish(plan, folder, counts, quiet, pictures, as_json)
 
 
 def _dask_client(address: str):
@@ -274,7 +275,12 @@ def _dask_client(address: str):
     return got
 
 
-def _finish(plan, folder, counts: dict, quiet: bool, pictures=("png", 150)) -> None:
+JSON_COLUMNS = ("n_patches", "mean_orientation_deg", "circular_sd_deg", "mean_anisotropy", "t", "wall_s")
+"""What ``bark sweep --json`` prints of each run, beside its key, settings and seed (the table's
+columns; sweep.sqlite has every one)."""
+
+
+def _finish(plan, folder, counts: dict, quiet: bool, pictures=("png", 150), as_json: bool = False) -> None:
     from bark.studies.sweep import SweepTable
     from bark.model.effects import in_format
     from bark_cli import write_owned
@@ -295,7 +301,14 @@ def _finish(plan, folder, counts: dict, quiet: bool, pictures=("png", 150)) -> N
             drawn = folder / name if (folder / name).exists() else None
         else:  # no montage for more axes or cells: none of an earlier sweep's is left to mislead
             write_owned(folder, in_formats(("montage.png",)), {})
-    if not quiet:
+    if as_json:  # every run, as the table shows them; what was written said on stderr
+        from bark.io.files import json_text
+
+        click.echo(json_text({
+            "table": str(folder / "sweep.sqlite"), "montage": None if drawn is None else str(drawn), **counts,
+            "runs": [{"key": p.key, **p.settings, "seed": p.seed, **{c: by_key[p.key][c] for c in JSON_COLUMNS}}
+                     for p in points]}, indent=2))
+    elif not quiet:
         from rich.console import Console
         from rich.table import Table
 
@@ -312,7 +325,8 @@ def _finish(plan, folder, counts: dict, quiet: bool, pictures=("png", 150)) -> N
     click.echo(f"bark: {counts['total']} runs in {folder / 'sweep.sqlite'} ({counts['ran']} run now, "
                f"{counts['skipped']} already there)" + (f"; montage in {drawn}" if drawn else
                                                          "; no montage for a list of points" if plan.listed else
-                                                         f"; no montage for more than two axes or {MONTAGE_CELLS} points"))
+                                                         f"; no montage for more than two axes or {MONTAGE_CELLS} points"),
+               err=as_json)
 
 
 def _g(v) -> str:

@@ -212,10 +212,11 @@ CLI_FIT = ["--scene", "reticulate", *TINY_SET, "--population", "6", "--generatio
 def test_bark_fit_writes_its_summary_posterior_and_pictures(tmp_path):
     out = tmp_path / "fit"
     r = CliRunner().invoke(cli, ["fit", str(SUMMARY), *CLI_FIT, "--mirror", "--mark", "reticulate:growth.G=0.011,mechanics.f_max=0.005",
-                                 "--out", str(out)])
+                                 "--out", str(out), "--json"])
     assert r.exit_code == 0, r.output
     assert sorted(p.name for p in out.iterdir()) == ["corner.png", "fit.db", "fit.json", "posterior.csv", "predictive.png"]
     report = json.loads((out / "fit.json").read_text())
+    assert json.loads(r.stdout) == report  # --json: fit.json's content, alone on stdout
     assert report["statistics"] == ["orientation", "sd"]
     assert report["observed"]["statistics"]["orientation"] == pytest.approx(133.0)
     assert [g["t"] for g in report["generations"]] == [0, 1]
