@@ -87,12 +87,17 @@ def test_each_face_joins_two_sides_of_the_diamond_on_two_successive_rings():
     assert len({tuple(sorted(f)) for f in faces.tolist()}) == len(faces)  # none twice
 
 
-def test_the_plant_has_leaves_on_the_dome_and_on_the_young_trunk():
+def _small_tree_at_its_start():
+    """The small whole tree built, its apex and its plant's leaves at t = 0."""
     scene = Scene.from_toml(SCENES / "whole-tree-small.toml")
     sim = scene.simulation()
     sim.build()
     apex = Apex(dome=scene.dome, packing=sim.packing)
-    plant = plant_leaves(scene.leaves, apex, sim.growth, 0.0, sim.state.x)
+    return scene, sim, apex, plant_leaves(scene.leaves, apex, sim.growth, 0.0, sim.state.x)
+
+
+def test_the_plant_has_leaves_on_the_dome_and_on_the_young_trunk():
+    scene, sim, apex, plant = _small_tree_at_its_start()
     organs, _ = apex.organs(0.0, float(sim.growth.radius(0.0, float(sim.packing.top(0.0)))))
     assert set(organs) <= set(plant.ids)  # every organ on the dome has its leaf
     on_trunk = plant.ids[plant.ids < sim.state.n_bases]
@@ -105,11 +110,7 @@ def test_the_plant_has_leaves_on_the_dome_and_on_the_young_trunk():
 def test_the_side_view_cuts_away_the_leaves_in_front_of_the_trunk_and_keeps_the_others():
     from bark_cli.pictures import LEAVES_CUT_DEG, TreeData
 
-    scene = Scene.from_toml(SCENES / "whole-tree-small.toml")
-    sim = scene.simulation()
-    sim.build()
-    apex = Apex(dome=scene.dome, packing=sim.packing)
-    plant = plant_leaves(scene.leaves, apex, sim.growth, 0.0, sim.state.x)
+    scene, sim, _, plant = _small_tree_at_its_start()
     base = plant.axes[:, 0]
     azimuth = np.degrees(np.abs(np.arctan2(base[:, 0], base[:, 1])))  # 0: towards the viewer
     data = TreeData.of(sim, 7, scene.dome, scene.leaves)
