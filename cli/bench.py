@@ -11,7 +11,7 @@ import click
 import numpy as np
 
 from bark.engine.simulation import Stop
-from bark_cli.options import SCENE_RULE
+from bark_cli.options import SCENE_RULE, json_option
 
 
 @click.group()
@@ -153,6 +153,27 @@ PHASES = {
 }
 
 
+def _machine() -> dict:
+    """The machine a benchmark ran on (absolute times say it; ratios hold across machines)."""
+    import os
+    import platform
+
+    return {"processor": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "python": platform.python_version()}
+
+
+def _emit(table, document: dict, as_json: bool, width: int = 140) -> None:
+    """The benchmark's table, or with --json its rows as JSON on stdout, the machine's facts beside them."""
+    from rich.console import Console
+
+    if as_json:
+        from bark.io.files import json_text
+
+        click.echo(json_text({"machine": _machine(), **document}, indent=2))
+    else:
+        Console(width=width).print(table)
+
+
 @bench.command()
 @click.option("--n-bases", "sizes", type=click.IntRange(100, 10_000_000), multiple=True, default=(3000, 70000),
               show_default=True, help="Sizes of the default scene to measure (repeatable).")
@@ -170,11 +191,11 @@ PHASES = {
 @click.option("--threads", "thread_counts", type=click.IntRange(0, 65536), multiple=True, default=(0,), show_default=True,
               help="The numba backend's threads (repeatable: each count is measured; 0: automatic).")
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), default=None, help="Also write the table as CSV.")
-def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_path):
+@json_option
+def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_path, as_json):
     """Steps per second of the full step (integrate, constrain, tensions, breaking, stop checks) on
     the default scene, per backend (and the numba backend's threads) and phase, with ratios against a
     plain vectorised numpy step of the same model measured in this run, interleaved."""
-    from rich.console import Console
     from rich.table import Table
 
     backends = (("numpy", 1), *[(b, t) for b in dict.fromkeys(backends) if b != "numpy" for t in dict.fromkeys(thread_counts)])
@@ -205,7 +226,7 @@ def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_pat
     table = Table(*rows[0].keys(), title="bark bench speed — steps per second, interleaved")
     for r in rows:
         table.add_row(*(f"{v:.4g}" if isinstance(v, float) else str(v) for v in r.values()))
-    Console(width=140).print(table)
+    _emit(table, {"rows": rows}, as_json)
     if csv_path:
         from bark.io.files import write_csv
 
@@ -247,7 +268,8 @@ def _accuracy_methods(quick: bool, integrators=()):
 @click.option("--integrator", "integrators", type=click.Choice(["euler-cromer", "implicit-overdamped"]), multiple=True,
               help="Study only these integrators (repeatable; default: both).  The implicit one is slow on large scenes.")
 @click.option("--out", type=click.Path(file_okay=False), default="bark-bench-accuracy", show_default=True)
-def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, out):
+@json_option
+def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, out, as_json):
     """Work-precision: error against wall time per integrator and stepping mode.
 
     (a) position error on a small system without breaking, against a Radau reference, with each
@@ -263,7 +285,7 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, ou
     from bark.engine.scene import RunSettings, read_toml
     from bark_cli.plot import plot_work_precision
 
-    console = Console(width=150)
+    console = Console(width=150, quiet=as_json)  # --json: the results alone on stdout
     scene = read_toml(scene_file) if scene_file else {}
     scene.pop("run", None)  # the study sets dt, stepping, seed and stop itself
     from bark.io.folder import writable_folder
@@ -330,6 +352,8 @@ def accuracy(scene_file, seeds, until_time, reference_dt, quick, integrators, ou
     plot_work_precision(pos_rows, orders, pat_rows, spread, out / "accuracy.png",
                         highlight=(default_label, default_param), title=f"t = {until_time:g}, {seeds} seeds")
     console.print(f"wrote {out}/accuracy.png, accuracy_position.csv, accuracy_pattern.csv, accuracy_summary.json")
+    if as_json:  # the summary and both tables' rows (per seed too), as the CSV files and the JSON hold them
+        _emit(None, {"summary": verdict, "position": pos_rows, "pattern": pat_rows}, True)
 
 
 def _run_words(text: str) -> list[str]:
@@ -355,7 +379,8 @@ def _run_words(text: str) -> list[str]:
 @bench.command()
 @click.argument("scenes", nargs=-1, required=True)
 @click.option("--repeats", type=click.IntRange(1, 1000), default=3, show_default=True, help="Runs per scene, interleaved; medians.")
-def scenes(scenes, repeats):
+@json_option
+def scenes(scenes, repeats, as_json):
     """Wall time and peak memory of `bark simulate --scene S` for each scene, as the command runs it
     (a fresh process each time, outputs to a temporary folder), with ratios against the first.  A
     scene may come with options for `bark simulate`, in one argument: compare the whole tree with its
@@ -365,7 +390,6 @@ def scenes(scenes, repeats):
     import sys
     import tempfile
 
-    from rich.console import Console
     from rich.table import Table
 
     runs = {scene: _run_words(scene) for scene in scenes}
@@ -391,11 +415,14 @@ def scenes(scenes, repeats):
     t_base = float(np.median(times[base]))
     p_base = max(peaks[base])
     table = Table("scene", "wall s (median)", "time vs first", "peak RSS MiB", "memory vs first", title="bark bench scenes")
+    rows = []
     for scene in scenes:
         t = float(np.median(times[scene]))
+        rows.append({"scene": scene, "wall_s": t, "time_vs_first": t / t_base, "peak_MiB": max(peaks[scene]) / 1024,
+                     "memory_vs_first": max(peaks[scene]) / p_base, "wall_s_each": times[scene]})
         table.add_row(scene, f"{t:.3g}", f"{t / t_base:.3g}", f"{max(peaks[scene]) / 1024:.0f}",
                       f"{max(peaks[scene]) / p_base:.3g}")
-    Console(width=140).print(table)
+    _emit(table, {"rows": rows}, as_json)
 
 
 @bench.command("fit")
@@ -407,7 +434,8 @@ def scenes(scenes, repeats):
               help="The fit's workers, and the plain processes run at a time.")
 @click.option("--repeats", type=click.IntRange(1, 100), default=1, show_default=True,
               help="Measurements of each, interleaved; medians.")
-def fit_speed(scene_name, population, workers, repeats):
+@json_option
+def fit_speed(scene_name, population, workers, repeats, as_json):
     """Runs per minute of a fit against plain `bark simulate` processes: a whole `bark fit` process
     (its start-up, its warm workers, runs that write nothing but their statistics), then as many
     `bark simulate` processes of settings drawn from the same prior, each writing what the scene
@@ -418,7 +446,6 @@ def fit_speed(scene_name, population, workers, repeats):
     import tempfile
     from pathlib import Path
 
-    from rich.console import Console
     from rich.table import Table
 
     from bark.engine.scene import Scene, read_toml
@@ -468,8 +495,13 @@ def fit_speed(scene_name, population, workers, repeats):
     fit = float(np.median(rates["fit"]))
     table = Table("", "runs per minute (median)", "fit vs this",
                   title=f"bark bench fit: {scene_name}, {runs} runs, {repeats} measurement{'s' if repeats > 1 else ''}")
+    rows = []
     for at_a_time in lanes:
         p = float(np.median(rates[at_a_time]))
+        rows.append({"what": f"plain bark simulate, {at_a_time} at a time", "runs_per_min": p, "fit_vs_this": fit / p,
+                     "runs_per_min_each": rates[at_a_time]})
         table.add_row(f"plain `bark simulate` processes, {at_a_time} at a time", f"{p:.0f}", f"{fit / p:.2f}")
+    rows.append({"what": f"bark fit, {workers} workers", "runs_per_min": fit, "fit_vs_this": 1.0,
+                 "runs_per_min_each": rates["fit"]})
     table.add_row(f"`bark fit`, {workers} worker{'s' if workers > 1 else ''} (whole process)", f"{fit:.0f}", "1")
-    Console(width=120).print(table)
+    _emit(table, {"scene": scene_name, "runs": runs, "rows": rows}, as_json, width=120)

@@ -283,6 +283,24 @@ def test_bench_scenes_times_the_command_as_bark_runs_it(tmp_path):
         assert len(figures) == 4 and all(v > 0 for v in figures), row
 
 
+def test_bench_json_is_the_table_s_rows_and_the_machine(tmp_path):
+    """--json: the rows the table shows (and the measurements behind its medians) with the machine's
+    facts, alone on stdout."""
+    import shlex
+
+    scene = shlex.quote(str(REPO_ROOT / "bark" / "scenes" / "vertical.toml"))
+    result = CliRunner().invoke(cli, ["bench", "scenes", f"{scene} --until-time 0.5 --n-bases 300", "--repeats", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    assert doc["machine"]["cores"] >= 1 and [r["time_vs_first"] for r in doc["rows"]] == [1.0]
+    assert len(doc["rows"][0]["wall_s_each"]) == 2 and doc["rows"][0]["peak_MiB"] > 0
+    result = CliRunner().invoke(cli, ["bench", "speed", "--n-bases", "300", "--backend", "numpy", "--phase", "quiet",
+                                      "--steps", "5", "--repeats", "1", "--json"])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)["rows"]
+    assert {r["backend"] for r in rows} == {"numpy", "plain numpy"} and all(r["steps_per_s"] > 0 for r in rows)
+
+
 @pytest.mark.slow  # whole processes: a fit and the plain runs beside it
 def test_bench_fit_measures_a_fit_against_plain_processes(tmp_path):
     pytest.importorskip("pyabc")
