@@ -362,7 +362,7 @@ def test_bark_compile_checks_every_scene_before_it_compiles_one(tmp_path, monkey
 
 
 def test_json_with_quiet_prints_the_json_alone(tmp_path):
-    """README: --quiet leaves out the progress, the table and the notices; --json --quiet is the JSON
+    """docs/running.md: --quiet leaves out the progress, the table and the notices; --json --quiet is the JSON
     alone, for a script that reads it."""
     result = CliRunner().invoke(cli, ["simulate", "--n-bases", "300", "--until-time", "1", "--out", str(tmp_path / "o"),
                                       "--json", "--quiet"])

@@ -151,7 +151,7 @@ def test_an_on_break_trigger_fires_at_every_breaking_step(make_sim):
 
 
 def test_degenerate_events_match_with_the_exact_lattice(make_sim):
-    """The exact lattice breaks a whole offset class in one step (README, Symmetry breaking): the kernel must hand
+    """The exact lattice breaks a whole offset class in one step (docs/model.md, Symmetry breaking): the kernel must hand
     that step back so the event is recorded (and, with on_degenerate = stop, the run ends there)."""
     for on in ("warn", "stop"):
         kw = dict(n_bases=400, G=0.05, dt=0.05, seed=1, backend="numba", jitter=0.0, on_degenerate=on)

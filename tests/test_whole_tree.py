@@ -28,7 +28,7 @@ def test_the_whole_tree_scene_has_table_1s_values_and_the_papers_calibration():
     lat, mech, growth = scene.lattice, scene.mechanics, scene.simulation().growth
     assert (lat.rise, lat.offsets, lat.partition_offsets()) == (0.00012, (55, 89), (34, 144))
     assert (mech.k, mech.m, mech.f_max) == (1.0, 1.0, 0.005)
-    assert (mech.c, mech.b) == (0.1, 5.0)  # Table 2's, not Table 1's 0.03 and 2 (README: The whole tree)
+    assert (mech.c, mech.b) == (0.1, 5.0)  # Table 2's, not Table 1's 0.03 and 2 (docs/model.md: The whole tree)
     assert (growth.base.r0, growth.base.G) == (0.35, 0.04)
     static = [b for b in growth.bulges if b.start == 0.0]  # on the trunk of the start: Table 1's bulge values
     assert len(static) == 2 and all(b.G == 0.02 for b in static)

@@ -5,7 +5,7 @@ Every statistic is defined on plain arrays — the bases' positions unrolled int
 height; ``period`` the trunk's circumference, or ``None`` for a photograph), each base's patch, and,
 where there are springs, their ends and intact flags and the lattice's two spring offsets — so that
 simulated bark and digitised photographs are measured alike (a photograph has no springs: only its
-patch sizes are measured).  Definitions (README: Pattern statistics beyond the paper):
+patch sizes are measured).  Definitions (docs/patterns.md: Pattern statistics beyond the paper):
 
 * **Patch sizes** (bases per patch, patches of at least ``s_min`` bases): mean and SD; the maximum-
   likelihood power law ``p(s) ∝ s^−α`` and log-normal ``p(s) ∝ exp(−(ln s − μ)²/2σ²)/s``, each

@@ -29,7 +29,7 @@ the same at every height, ``s`` is Table 1's ``h`` for good: the leaves continue
 the paper's calibration (45,000 bases on 1.62 m, 412.5 leaves a year, 0.9 m of trunk in 60 years)
 holds; their area then grows with the trunk (``2πRh``).  ``p = 0`` keeps the paper's leaf area
 instead, ``p = 2`` the lattice's shape (its parastichy angle); no one law keeps all three as the
-trunk widens from 10.5 to 29 cm (README: The whole tree).
+trunk widens from 10.5 to 29 cm (docs/model.md: The whole tree).
 
 **The profile** is given in units of the trunk radius, as ``(ρ, u)`` = (distance from the axis,
 height above the dome's base): from ``(1, 0)``, where it meets the cylinder with a vertical tangent,

@@ -63,7 +63,7 @@ STATISTICS = {
     "t_fraction": "the share of junctions of three patches that are T-junctions",
     "nematic_order": "the nematic order of the crack pieces",
 }
-"""The statistics a fit compares, by name (README: Pattern statistics beyond the paper defines the
+"""The statistics a fit compares, by name (docs/patterns.md: Pattern statistics beyond the paper defines the
 last five).  A fit compares those the observed pattern has, or those asked for."""
 PATTERN_STATISTICS = ("orientation", "sd", "anisotropy")
 NETWORK_STATISTICS = ("n_bar", "v_bar", "t_fraction", "nematic_order")

@@ -89,7 +89,7 @@ def fig8(out: Path, workers: int) -> None:
     observed = [str(HERE / "observed-elongated.toml"), str(HERE / "observed-reticulate.toml")]
     simulated = [str(runs["vertical"]), str(runs["intermediate-43"])]
     bark("compare", *simulated, *observed, "--out", str(out / "fig8"))
-    # bark's phyllotactic spiral turns the other way from the photographed tree's (README): the same
+    # bark's phyllotactic spiral turns the other way from the photographed tree's (examples/paper/README.md): the same
     # comparison with the simulated reticulate bark seen in a mirror
     bark("compare", *simulated, *observed, "--mirror", "2", "--out", str(out / "fig8-mirrored"))
     print(f"Fig. 8: {out / 'fig8' / 'quartets.png'} and {out / 'fig8-mirrored' / 'quartets.png'}")
@@ -122,7 +122,7 @@ def fractures(out: Path, workers: int) -> None:
         con.close()
     b, G, _, measured, growth, count = (np.array([np.nan if v is None else v for v in c], dtype=float)
                                         for c in zip(*rows))
-    rates = {  # two readings of "the rate of energy dissipation" (README: Fracture history)
+    rates = {  # two readings of "the rate of energy dissipation" (docs/patterns.md: Fracture history)
         "dissipation_rate": (measured, "measured dissipation rate (damping power per base, first break to most cracks)"),
         "growth_dissipation": (growth, "growth-driven rate b·(dr/dt)² at the first break (set by b and G)"),
     }
