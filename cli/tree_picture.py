@@ -50,9 +50,14 @@ def _leaves(ax, data: TreeData, which: np.ndarray, points_per_metre: float, zord
     ax.add_collection(LineCollection(segments, linewidths=widths, colors=colours, capstyle="round", zorder=zorder))
 
 
-def draw_tree(ax, data: TreeData, extent: tuple[float, float, float], points_per_metre: float) -> None:
-    """Draw ``data`` into ``ax`` within ``extent`` (``_extent``): leaves behind, trunk, leaves in front."""
-    half, z_lo, z_hi = extent
+def draw_tree(ax, data: TreeData, extent: tuple[float, float, float] | None = None,
+              points_per_metre: float | None = None) -> None:
+    """Draw ``data`` into ``ax`` within ``extent`` (half the width, the lowest and the highest height,
+    metres; default: what the tree needs), its leaves ``points_per_metre`` wide on the page (default:
+    from the axes' height): leaves behind, trunk, leaves in front."""
+    half, z_lo, z_hi = extent = _extent(data) if extent is None else extent
+    if points_per_metre is None:
+        points_per_metre = 72.0 * ax.get_position().height * ax.figure.get_figheight() / (z_hi - z_lo)
     zo, ro = data.outline[:, 0], data.outline[:, 1]
     _leaves(ax, data, ~data.leaf_front, points_per_metre, 1.0)
     ax.fill_betweenx(zo, -ro, ro, color=TRUNK, lw=0, zorder=1.5)  # hides the leaves behind; dark in the cracks

@@ -57,7 +57,7 @@ def distances(stats: Sequence[PatternStatistics], quantity: str = "orientation")
 
 
 def d_p(stats: Sequence[PatternStatistics], quantity: str = "orientation") -> np.ndarray:
-    """``d[p, q] = d_P(P, Q)`` (eq. 15): |μ_Q − μ_P| in standard errors of P; zero diagonal, NaN where
+    """``d[p, q] = d_P(P, Q)`` (eq. 15): ``|μ_Q − μ_P|`` in standard errors of P; zero diagonal, NaN where
     a mean or P's standard error is missing, ``inf`` where P's standard error is 0 and the means differ."""
     m = [_moments(s, quantity) for s in stats]
     n = len(m)

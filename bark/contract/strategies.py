@@ -9,27 +9,27 @@ in ``bark_plugins`` are registered the same way.  What a strategy draws or compu
 per base is a field it declares (``declares``, its first values from ``initial``), never an
 attribute of its own: its parameters are its constructor's keywords (``check_recordable``).
 
-=============  ====================================  =================================================
-kind           verb                                  contract
-=============  ====================================  =================================================
-Growth         ``radius(t, z) -> r``                 trunk radius at time ``t`` for heights ``z`` (an
-                                                     array, or a scalar that broadcasts).  Pure.
-Integrator     ``step(state, dt, forces) -> None``   advance ``state.x`` and ``state.v`` by ``dt`` in
-                                                     place, with ``forces`` (a ``ForceField``).
-                                                     Touches nothing else (its ``writes``): the
-                                                     simulation advances ``t``, applies the surface
-                                                     constraint and breaks springs.  Explicit methods
-                                                     also give ``stability_limit(state, forces)``,
-                                                     unconditionally stable ones
-                                                     ``accuracy_limit(state, forces)``.
-Breaker        ``select(state, tension, rng)``       ids (int array) of *intact* springs to break now.
-               ``-> ids``                            Changes nothing but its own declared fields;
-                                                     draws from ``rng`` only.
-Resin          ``tension(length, rest, k, *fields)`` a spring's tension; its part (required: it runs
-               ``-> t``                              in the kernel) may make the resin flow each step.
-Analyzer       ``analyze(points, patches)``          statistics of a pattern, as an :class:`Analysis`
-               ``-> Analysis``                       (``reads_springs``: also given the springs).
-=============  ====================================  =================================================
+=============  ======================================  =================================================
+kind           verb                                    contract
+=============  ======================================  =================================================
+Growth         ``radius(t, z) -> r``                   trunk radius at time ``t`` for heights ``z`` (an
+                                                       array, or a scalar that broadcasts).  Pure.
+Integrator     ``step(state, dt, forces) -> None``     advance ``state.x`` and ``state.v`` by ``dt`` in
+                                                       place, with ``forces`` (a ``ForceField``).
+                                                       Touches nothing else (its ``writes``): the
+                                                       simulation advances ``t``, applies the surface
+                                                       constraint and breaks springs.  Explicit methods
+                                                       also give ``stability_limit(state, forces)``,
+                                                       unconditionally stable ones
+                                                       ``accuracy_limit(state, forces)``.
+Breaker        ``select(state, tension, rng)``         ids (int array) of *intact* springs to break now.
+               ``-> ids``                              Changes nothing but its own declared fields;
+                                                       draws from ``rng`` only.
+Resin          ``tension(length, rest, k, *fields)``   a spring's tension; its part (required: it runs
+               ``-> t``                                in the kernel) may make the resin flow each step.
+Analyzer       ``analyze(points, patches)``            statistics of a pattern, as an :class:`Analysis`
+               ``-> Analysis``                         (``reads_springs``: also given the springs).
+=============  ======================================  =================================================
 
 **Compiled work: what a strategy declares.**  A strategy whose work fits a pure,
 elementwise function may declare it; the engine then runs it inside its stepping kernel (compiled

@@ -1,5 +1,5 @@
 """Parameter sweeps: a grid over scene settings, one run per point and seed, each result committed
-to an SQLite table the moment it arrives.
+to an SQLite table the moment it arrives::
 
     from bark.studies.sweep import Axis, Sweep, run_sweep
     sweep = Sweep(base=read_toml("reticulate"),
