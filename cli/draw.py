@@ -1,5 +1,5 @@
 """bark's pictures drawn into axes of one's own (a notebook's, a paper's figure): every function
-takes a matplotlib axes first and draws there, never a figure of its own.
+takes a matplotlib axes first and draws there, never a figure of its own::
 
     import matplotlib.pyplot as plt
     import bark
@@ -13,8 +13,9 @@ takes a matplotlib axes first and draws there, never a figure of its own.
     draw_radial(fig.add_subplot(1, 3, 2, projection="polar"), stats)          # Fig. 6B / 7B
     draw_histogram(fig.add_subplot(1, 3, 3, projection="polar"), stats)       # Fig. 6C / 7C
 
-``draw_tree(ax, TreeData.of(sim, 7, dome), extent, points_per_metre)`` draws the tree from the
-side (``bark_cli.tree_picture``).  This module imports matplotlib; ``bark`` itself never does.
+``draw_tree(ax, TreeData.of(sim, 7, scene.dome, scene.leaves))`` draws the tree from the side
+(``bark_cli.tree_picture``; its extent and the leaves' width on the page from the tree and the axes
+unless given).  This module imports matplotlib; ``bark`` itself never does.
 """
 
 from bark_cli.figures import draw_histogram, draw_radial
