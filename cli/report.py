@@ -260,11 +260,27 @@ def _series(path: Path) -> str:
     import plotly.graph_objects as go
 
     for k, name in enumerate(("n_patches", "n_broken", "mean_orientation_deg")):
-        fig.add_trace(go.Scatter(x=t, y=columns[name], mode="lines+markers", name=name), row=1, col=k + 1)
+        x, y = axial_gaps(t, columns[name]) if name == "mean_orientation_deg" else (t, columns[name])
+        fig.add_trace(go.Scatter(x=x, y=y, mode="lines+markers", name=name), row=1, col=k + 1)
         fig.update_xaxes(title_text="years", row=1, col=k + 1)
+    fig.update_yaxes(range=[0, 180], tickvals=[0, 45, 90, 135, 180], row=1, col=3)  # axial: 0 and 180 are one direction
     fig.update_layout(showlegend=False, margin={"t": 40})
     return "<h2>Along the run</h2>" + pio.to_html(fig, include_plotlyjs=False, full_html=False, div_id="series",
                                                   default_height="24em")
+
+
+def axial_gaps(x: list, y: list) -> tuple[list, list]:
+    """An orientation series (degrees in [0, 180), axial: 0 and 180 are the same direction) with a gap
+    (``None``) wherever it wraps — two neighbours more than 90° apart are nearer the other way round —
+    so that its line never jumps across the plot between 179° and 1°."""
+    xs, ys = [], []
+    for k, (a, b) in enumerate(zip(x, y)):
+        if k and b is not None and ys and ys[-1] is not None and abs(b - ys[-1]) > 90.0:
+            xs.append(None)
+            ys.append(None)
+        xs.append(a)
+        ys.append(b)
+    return xs, ys
 
 
 def _settings(path: Path, summary: dict) -> str:

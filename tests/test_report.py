@@ -174,3 +174,22 @@ def test_headless_chromium_loads_the_page_without_errors_and_shows_the_trunk(rep
         pixels = np.asarray(image.convert("RGB"), dtype=int).reshape(-1, 3)
     near = np.abs(pixels[:, None, :] - PALETTE[None, :, :].astype(int)).max(axis=2) <= 12
     assert near.any(axis=1).sum() > 2000  # the trunk's leaf bases, drawn in the patches' colours by WebGL
+
+
+@pytest.mark.parametrize("y,gaps_after", [
+    ([170.0, 175.0, 5.0, 10.0], [1]),            # wraps past 180: a gap, no line across the plot
+    ([80.0, 95.0, 100.0], []),                   # no wrap
+    ([5.0, 178.0, 2.0, None, 179.0], [0, 1]),    # each wrap, either way; a missing value stays one
+])
+def test_the_orientation_series_breaks_where_it_wraps_as_axial_data_does(y, gaps_after):
+    from bark_cli.report import axial_gaps
+
+    x = list(range(len(y)))
+    xs, ys = axial_gaps(x, y)
+    assert [v for v in ys if v is not None] == [v for v in y if v is not None]  # every point kept, in order
+    real = [k for k, v in enumerate(xs) if v is not None]
+    gaps = [xs[k - 1] for k in range(1, len(xs)) if xs[k] is None]
+    assert gaps == gaps_after and len(real) == len(x)
+    for k in range(1, len(ys)):  # no segment drawn between two points more than 90° apart
+        if ys[k] is not None and ys[k - 1] is not None:
+            assert abs(ys[k] - ys[k - 1]) <= 90.0
