@@ -10,6 +10,7 @@ import base64
 import csv
 import html
 import json
+import math
 import sqlite3
 from pathlib import Path
 
@@ -106,18 +107,69 @@ def _sweep_page(path: Path) -> str:
     table = "<table><tr>" + "".join(f"<th>{html.escape(c)}</th>" for c in shown) + "</tr>" + "".join(
         "<tr>" + "".join(f"<td>{html.escape(_cell(r[columns.index(c)]))}</td>" for c in shown) + "</tr>" for r in rows
     ) + "</table>"
-    parts = [f"<h1>bark sweep: {html.escape(path.name)}</h1>",
+    maps = _sweep_maps(columns, rows)
+    parts = [f"<h1>bark sweep: {html.escape(path.name)}</h1>", _pictures(path), maps,
              f"<h2>Runs</h2><p>{total} runs{' (the first 1000 shown)' if total > 1000 else ''}; every column is in "
-             "sweep.sqlite's table <code>runs</code>.</p>" + table, _pictures(path)]
-    return _page(f"bark sweep: {path.name}", parts)
+             "sweep.sqlite's table <code>runs</code>.</p>" + table]
+    return _page(f"bark sweep: {path.name}", parts, plotly=bool(maps))
 
 
-def _page(title: str, parts: list[str]) -> str:
-    from plotly.offline import get_plotlyjs
+SWEEP_MAPS = (("n_patches", "patches"), ("mean_orientation_deg", "mean orientation (°)"),
+              ("circular_sd_deg", "circular SD (°)"), ("mean_anisotropy", "anisotropy"))
+"""The statistics a sweep's page maps over its two swept settings (or draws along its one)."""
 
+
+def _sweep_maps(columns: list[str], rows: list) -> str:
+    """A heat map per statistic over a sweep's two settings, each cell the mean of its seeds (the
+    orientation's an axial mean), or a line along its one; nothing for a list of points or more axes."""
+    from bark.analysis.circular import axial_mean
+
+    points = [json.loads(r[columns.index("point")]) for r in rows]
+    keys = list(points[0]) if points else []
+    if not 1 <= len(keys) <= 2 or any(list(p) != keys for p in points):
+        return ""
+    values = [sorted({p[k] for p in points}, key=float) for k in keys]
+    if math.prod(len(v) for v in values) != len({tuple(p.values()) for p in points}):
+        return ""  # not a grid (a list of points, a design): a table, not a map
+    import plotly.graph_objects as go
+    import plotly.io as pio
+    from plotly.subplots import make_subplots
+
+    fig = make_subplots(rows=1, cols=len(SWEEP_MAPS), subplot_titles=[label for _, label in SWEEP_MAPS],
+                        horizontal_spacing=0.08)
+    for k, (name, _) in enumerate(SWEEP_MAPS):
+        col = columns.index(name)
+
+        def mean(cell):
+            got = np.array([float(r[col]) for r, p in zip(rows, points) if tuple(p.values()) == cell
+                            and r[col] is not None], float)
+            return None if not got.size else float(axial_mean(got)) if name == "mean_orientation_deg" else float(got.mean())
+
+        if len(keys) == 1:
+            fig.add_trace(go.Scatter(x=values[0], y=[mean((v,)) for v in values[0]], mode="lines+markers"), row=1, col=k + 1)
+            fig.update_xaxes(title_text=keys[0], row=1, col=k + 1)
+        else:
+            z = [[mean((a, b)) for a in values[0]] for b in values[1]]
+            fig.add_trace(go.Heatmap(x=[str(v) for v in values[0]], y=[str(v) for v in values[1]], z=z,
+                                     colorscale="Viridis", showscale=False, texttemplate="%{z:.3g}"), row=1, col=k + 1)
+            fig.update_xaxes(title_text=keys[0], row=1, col=k + 1)
+            fig.update_yaxes(title_text=keys[1], row=1, col=k + 1)
+    fig.update_layout(showlegend=False, margin={"t": 40})
+    return ("<h2>Statistics over the sweep</h2><p>Each cell the mean over its seeds (the orientation's, an axial "
+            "mean).</p>" + pio.to_html(fig, include_plotlyjs=False, full_html=False, div_id="sweep-maps",
+                                       default_height="22em"))
+
+
+def _page(title: str, parts: list[str], plotly: bool = True) -> str:
+    """The page, plotly's bundle inlined once where a part plots (a sweep's page without a map needs none)."""
+    script = ""
+    if plotly:
+        from plotly.offline import get_plotlyjs
+
+        script = f"<script>{get_plotlyjs()}</script>"
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             f"<title>{html.escape(title)}</title><style>{STYLE}</style><script>{WATCH}</script>"
-            f"<script>{get_plotlyjs()}</script></head><body>\n" + "\n".join(p for p in parts if p) + "\n</body></html>\n")
+            f"{script}</head><body>\n" + "\n".join(p for p in parts if p) + "\n</body></html>\n")
 
 
 def _cell(value) -> str:

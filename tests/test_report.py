@@ -152,6 +152,25 @@ def test_a_sweep_gets_a_page_with_its_runs(tmp_path):
     page = (out / "report.html").read_text()
     assert "bark sweep" in page and "2 runs" in page and "mechanics.f_max" in page
     assert {p.name for p in out.iterdir()} == before | {"report.html"}  # no sweep.sqlite-wal or -shm left
+    assert 'id="sweep-maps"' in page and page.count("plotly.js v") == 1  # its statistics plotted, plotly once
+
+
+def test_a_sweep_s_page_maps_its_two_settings_and_a_list_of_points_loads_no_plotly(tmp_path):
+    out = tmp_path / "grid"
+    assert CliRunner().invoke(cli, ["sweep", "--grid", "mechanics.f_max=0.004,0.005", "--grid", "growth.G=0.01,0.02",
+                                    "--seeds", "2", "--set", "lattice.n_bases=300", "--set", "run.until_time=20",
+                                    "--out", str(out), "--quiet"]).exit_code == 0
+    assert CliRunner().invoke(cli, ["report", str(out)]).exit_code == 0
+    page = (out / "report.html").read_text()
+    assert 'id="sweep-maps"' in page and page.count('"texttemplate":"%{z:.3g}"') == 4  # one map a statistic
+    points = tmp_path / "points.csv"
+    points.write_text("growth.G,mechanics.f_max\n0.01,0.004\n0.02,0.005\n")
+    listed = tmp_path / "listed"
+    assert CliRunner().invoke(cli, ["sweep", "--points", str(points), "--set", "lattice.n_bases=300", "--set",
+                                    "run.until_time=20", "--out", str(listed), "--quiet"]).exit_code == 0
+    assert CliRunner().invoke(cli, ["report", str(listed)]).exit_code == 0
+    small = (listed / "report.html").read_text()
+    assert 'id="sweep-maps"' not in small and "plotly.js v" not in small and len(small) < 100_000
 
 
 @pytest.mark.slow
