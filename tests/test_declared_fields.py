@@ -210,3 +210,54 @@ def test_a_strategy_may_own_several_fields_of_both_kinds():
     assert [d.name for d in s.declared] == ["toughness", "age"]
     assert s["age"].shape == (300,) and np.array_equal(s["age"], s.born)  # made when each base joined
     assert s["toughness"].shape == (s.n_springs,) and sim.n_broken == 0
+
+
+@attrs.frozen(kw_only=True)
+class _Started(Breaker):
+    """A breaker whose fields are all made by their ``start`` (no ``initial`` of its own)."""
+
+    declares = (Declared(name="toughness", per="spring", start=1e9), Declared(name="made_at", per="spring", start="t"),
+                Declared(name="length0", per="spring", start="rest"), Declared(name="direction", per="spring", start="offset"),
+                Declared(name="age", per="base", start="t"), Declared(name="height0", per="base", start="z"))
+
+    def select(self, state, tension, rng):
+        return np.flatnonzero(state.intact & (tension > state["toughness"]))
+
+
+def test_a_field_with_a_start_is_made_from_it_without_an_initial():
+    sim = build_sim(n_bases=300, lattice=GROWING, seed=1, breakers=[_Started()])
+    sim.run(Stop(until_time=25.0))
+    s = sim.state
+    assert np.all(s["toughness"] == 1e9) and sim.n_broken == 0
+    assert np.array_equal(s["length0"], s.rest)  # the rest length each spring was made with (Hookean: kept)
+    assert np.array_equal(s["direction"], s.pairs[:, 1].astype(np.int64) - s.pairs[:, 0])
+    assert np.array_equal(s["age"], s.born) and set(np.unique(s["made_at"])) <= set(np.unique(s.born))
+    assert np.unique(s["made_at"]).size > 1  # springs of joining bases: made later, at their own time
+    assert s["height0"][:240] == pytest.approx(s.x[:240, 2], abs=0.05)  # the sites' heights (bases move little)
+
+
+@pytest.mark.parametrize("per, start, message", [
+    ("spring", "noise", "start='noise' is not known of a new spring"),
+    ("base", "rest", "start='rest' is not known of a new base"),
+    ("base", "offset", "start='offset' is not known of a new base"),
+    ("spring", float("nan"), "neither a finite number nor a name"),
+    ("spring", float("inf"), "neither a finite number nor a name"),
+    ("spring", -float("inf"), "neither a finite number nor a name"),
+    ("spring", True, "neither a finite number nor a name"),
+    ("spring", [1.0], "neither a finite number nor a name"),
+    ("spring", "", "start='' is not known"),
+])
+def test_a_start_that_is_not_a_number_or_a_known_name_is_refused_in_one_line(per, start, message):
+    with pytest.raises(BarkError, match=message) as err:
+        Declared(name="own", per=per, start=start)
+    assert "\n" not in str(err.value)
+
+
+def test_a_field_without_a_start_or_an_initial_says_how_to_give_one():
+    @attrs.frozen(kw_only=True)
+    class Startless(_Twice):
+        initial = Breaker.initial
+
+    sim = build_sim(n_bases=120, breakers=[Startless()])
+    with pytest.raises(NotImplementedError, match=r"declares 'threshold' without a start: give it one \(Declared"):
+        sim.build()

@@ -1,5 +1,21 @@
 """The plugin contract: the strategy base classes, the compiled parts they declare, the registry.
 
 What a plugin author subclasses and what bark's own built-ins (``bark_plugins``) use, no more:
-imports the model and the base modules only.
+imports the model and the base modules only.  A plugin's vocabulary is importable from here in one
+line — the kinds (:mod:`.strategies`), their parts (:mod:`.parts`), the rules and laws a part may
+name as they are (:mod:`bark.model.physics`) and the validators of a strategy's keywords
+(:mod:`bark.validators`)::
+
+    from bark.contract import Declared, Resin, ResinPart, positive
 """
+
+from bark.contract.parts import BreakerPart, GrowthPart, IntegratorPart, ResinPart
+from bark.contract.strategies import (Analysis, Analyzer, Breaker, Declared, Growth, Integrator, Made, Resin, Springs,
+                                      Strategy)
+from bark.model.physics import hookean, no_breaking, over_threshold, threshold_load, threshold_ratio
+from bark.validators import finite, in_range, int_in, non_negative, one_of, optional, positive, positive_int, table_of
+
+__all__ = ["Strategy", "Growth", "Integrator", "Breaker", "Resin", "Analyzer", "Analysis", "Springs", "Declared", "Made",
+           "BreakerPart", "GrowthPart", "IntegratorPart", "ResinPart",
+           "hookean", "over_threshold", "threshold_load", "threshold_ratio", "no_breaking",
+           "finite", "in_range", "int_in", "non_negative", "one_of", "optional", "positive", "positive_int", "table_of"]

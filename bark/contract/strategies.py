@@ -99,15 +99,24 @@ class Strategy(abc.ABC):
     declares: ClassVar[tuple[Declared, ...]] = ()
     """Per-spring and per-base fields this strategy owns (``bark.model.state.Declared``: name, per
     spring or base, unit): the state carries them beside its own — grown, snapshot, checkpointed,
-    restored, on both backends —, :meth:`initial` makes each new spring's or base's value, a part
-    reads them by name (a breaker's ``reads``), and its Python verb may write them."""
+    restored, on both backends —, each new spring's or base's value is its ``start`` or what
+    :meth:`initial` makes, a part reads them by name (a breaker's ``reads``), and its Python verb
+    may write them."""
 
     def initial(self, made: "Made", rng: np.random.Generator) -> dict[str, np.ndarray]:
         """The first values of the fields this strategy declares for ``made.per`` (``spring`` or
         ``base``), one per spring or base being made (:class:`Made`: when, where, which lattice
         offset), drawn from ``rng`` (the simulation's one generator: the same seed gives the same
-        values, and a resumed run goes on with the generator where it was)."""
-        raise NotImplementedError(f"{type(self).__name__} declares fields and must give their first values (initial)")
+        values, and a resumed run goes on with the generator where it was).  By default each
+        field's ``start`` (:class:`Declared`): a number, or what ``made`` knows of each by that name."""
+        values = {}
+        for field in (d for d in type(self).declares if d.per == made.per):
+            if field.start is None:
+                raise NotImplementedError(f"{type(self).__name__} declares {field.name!r} without a start: "
+                                          "give it one (Declared(start=...)) or make its first values (initial)")
+            start = getattr(made, field.start) if isinstance(field.start, str) else field.start
+            values[field.name] = np.broadcast_to(np.asarray(start, dtype=np.float64), (len(made),))
+        return values
 
     def writable(self) -> tuple[str, ...]:
         """What its Python verb may write: ``writes`` and the fields it declares."""

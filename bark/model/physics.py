@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["length", "tension", "hookean", "spring_force_scale", "base_force", "surface_scale", "radial_speed", "over_threshold",
-           "threshold_load", "no_breaking", "as_given", "weighted_radius"]
+           "threshold_load", "threshold_ratio", "no_breaking", "as_given", "weighted_radius"]
 
 
 def length(d0, d1, d2):
@@ -69,6 +69,12 @@ def threshold_load(tension, inv_fmax, params):
     """How far a spring is from the paper's threshold (a breaker part's load): ``tension / f_max``,
     as a product with the threshold's inverse (1 at breaking)."""
     return tension * inv_fmax
+
+
+def threshold_ratio(tension, threshold, params):
+    """How far a spring is from a threshold of its own kept as a declared field (a breaker part's
+    load, reading ``tension`` and that field): ``tension / threshold``, 1 at breaking."""
+    return tension / threshold
 
 
 def no_breaking(tension, params):

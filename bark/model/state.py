@@ -141,12 +141,29 @@ def _field_name(instance, attribute, value) -> None:
         raise BarkError(f"a declared field may not be called {value!r}: the engine has a field of that name")
 
 
+STARTS = {"base": ("t", "z"), "spring": ("t", "z", "rest", "offset")}
+"""What a declared field's ``start`` may name, per spring or base: the arrays ``Made`` gives."""
+
+
+def _start(instance, attribute, value) -> None:
+    if value is None:
+        return
+    if isinstance(value, str):
+        if value not in STARTS[instance.per]:
+            raise BarkError(f"declared field {instance.name!r}: start={value!r} is not known of a new {instance.per}; "
+                            f"give a number or one of {', '.join(STARTS[instance.per])}")
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise BarkError(f"declared field {instance.name!r}: start={value!r} is neither a finite number nor a name "
+                        f"({', '.join(STARTS[instance.per])})")
+
+
 @attrs.frozen(kw_only=True)
 class Declared:
     """A per-spring or per-base quantity a strategy owns (after LAMMPS's per-atom fields and OpenMM's
     per-bond parameters): the state carries it beside its own fields — grown, copied, snapshot,
-    checkpointed and restored with them, by both backends — and the strategy that declares it makes
-    each new spring's or base's value (``Strategy.initial``).  Read-only outside its declared writes,
+    checkpointed and restored with them, by both backends — and each new spring's or base's value
+    is its ``start`` or what the strategy that declares it makes (``Strategy.initial``).  Read-only outside its declared writes,
     as every field is.  Values are float64."""
 
     name: str = attrs.field(validator=_field_name)
@@ -157,6 +174,11 @@ class Declared:
     """Its unit, in the model's (``force``, ``length``, ``time``, ``1`` for a number)."""
     doc: str = attrs.field(default="", validator=attrs.validators.instance_of(str))
     """What it is, in a line."""
+    start: float | str | None = attrs.field(default=None, validator=_start, kw_only=True)
+    """Each new spring's or base's first value when its strategy does not make it itself
+    (``Strategy.initial``): a number (every new one the same), or the name of what is known of each
+    one being made (``bark.contract.strategies.Made``: ``t``, ``z``; for springs also ``rest`` and
+    ``offset``).  ``None``: the strategy's ``initial`` makes it."""
 
 
 @attrs.define(eq=False)

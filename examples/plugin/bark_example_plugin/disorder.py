@@ -2,18 +2,7 @@
 a Weibull law of shape ``m`` whose scale depends on the spring's lattice direction (its index offset)."""
 import attrs
 import numpy as np
-
-from bark.contract.parts import BreakerPart
-from bark.contract.strategies import Breaker, Declared
-from bark.validators import positive, positive_int
-
-
-def over_own(tension, threshold, params):
-    return tension > threshold
-
-
-def own_load(tension, threshold, params):
-    return tension / threshold  # 1 at breaking: adaptive stepping holds it to 1 + tol
+from bark.contract import Breaker, BreakerPart, Declared, over_threshold, positive, positive_int, threshold_ratio
 
 
 @attrs.frozen(kw_only=True)
@@ -31,5 +20,5 @@ class ParastichyWeibull(Breaker):
         scale = np.where(made.offset == self.steep, self.scale_steep, self.scale_shallow)
         return {"threshold": scale * rng.weibull(self.m, len(made))}
 
-    def part(self) -> BreakerPart:
-        return BreakerPart(rule=over_own, reads=("tension", "threshold"), load=own_load)
+    def part(self) -> BreakerPart:  # tension > threshold; its load tension/threshold steers the step
+        return BreakerPart(rule=over_threshold, reads=("tension", "threshold"), load=threshold_ratio)

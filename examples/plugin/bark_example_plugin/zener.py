@@ -1,10 +1,7 @@
 """A standard-linear-solid (Zener) resin: a spring k in parallel with a Maxwell arm of stiffness
 ratio·k whose own rest length ``arm`` relaxes toward the length with time constant ``tau``."""
 import attrs
-
-from bark.contract.parts import ResinPart
-from bark.contract.strategies import Declared, Resin
-from bark.validators import positive
+from bark.contract import Declared, Resin, ResinPart, positive
 
 
 def zener_tension(length, rest, k, arm, params):
@@ -21,10 +18,7 @@ class Zener(Resin):
 
     ratio: float = attrs.field(default=1.0, validator=positive)
     tau: float = attrs.field(default=50.0, validator=positive)
-    declares = (Declared(name="arm", per="spring", unit="length", doc="rest length of the Maxwell arm"),)
-
-    def initial(self, made, rng):
-        return {"arm": made.rest}  # made at rest: the arm too
+    declares = (Declared(name="arm", per="spring", unit="length", start="rest", doc="the Maxwell arm's rest length"),)
 
     def part(self) -> ResinPart:
         return ResinPart(tension=zener_tension, reads=("arm",), evolve=arm_relaxed, writes=("arm",),
