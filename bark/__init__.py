@@ -1,17 +1,25 @@
 """bark — grow a virtual grasstree trunk and let its bark-like layer of leaf bases crack.
 
 The model is Dale, Runions, Hobill & Prusinkiewicz (2014), "Modelling biomechanics of bark
-patterning in grasstrees".  See ARCHITECTURE.md for the data model, the loop and the plugin contract.
+patterning in grasstrees": leaf bases on a phyllotactic lattice, joined by springs that break as the
+trunk grows in girth; the patches left are the bark's pattern.
 
-A run from Python, as ``bark simulate`` makes it::
+A run from Python, as ``bark simulate`` makes it (a shipped scene by name, or a TOML file, with
+settings of one's own over it; without a folder the run stays in memory):
 
-    import bark
-    scene = bark.Scene.from_toml("reticulate")        # a shipped scene by name, or a file
-    outcome = bark.run(scene, "runs/reticulate")      # outputs, checkpoints, pictures
-    again = bark.resume("runs/reticulate")            # an interrupted run goes on, to the bit
+>>> import bark
+>>> scene = bark.Scene.from_toml("vertical", {"lattice": {"n_bases": 600}, "run": {"until_patches": 20}})
+>>> outcome = bark.run(scene)
+>>> outcome.stop_reason, outcome.summary["n_patches"]
+('patches', 20)
+>>> round(outcome.summary["mean_orientation_deg"])   # degrees from horizontal: 90 is up the trunk
+98
 
-``Scene``, ``run`` and ``resume`` are loaded when first used; the drawing functions (into axes of
-one's own) are in ``bark_cli.draw``, which imports matplotlib.
+``bark.run(scene, "runs/vertical")`` writes the run's files, checkpoints and pictures there, and
+``bark.resume("runs/vertical")`` goes on with an interrupted run, to the bit.  ``Scene``, ``run``
+and ``resume`` are loaded when first used; the drawing functions (into axes of one's own) are in
+``bark_cli.draw``, which imports matplotlib.  Strategies of one's own subclass the kinds in
+:mod:`bark.contract` (one import has them all).
 """
 
 from bark.errors import BarkError, NonFiniteStateError

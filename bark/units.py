@@ -47,12 +47,20 @@ def data_frame(rows, columns, header=None):
 
 
 def years(t):
-    """Simulated time ``t`` (time units) in years."""
+    """Simulated time ``t`` (time units) in years (a time unit is 88.5 days).
+
+    >>> round(years(412.5), 1)
+    99.9
+    """
     return t * (DAYS_PER_TIME_UNIT / DAYS_PER_YEAR)
 
 
 def metres(length):
-    """A length (length units) in metres."""
+    """A length (length units) in metres (a length unit is 0.3 m).
+
+    >>> metres(0.2)
+    0.06
+    """
     return length * METRES_PER_LENGTH_UNIT
 
 

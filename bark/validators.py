@@ -62,6 +62,8 @@ def _bounded(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = Fal
         if (v >= hi) if hi_open else (v > hi):
             raise _fail(attribute, value, f"must be {'<' if hi_open else '<='} {hi:g}")
 
+    check.__doc__ = (f"A finite number in {'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'} "
+                     "(an attrs validator: a value outside is one line naming the field).")
     return check
 
 
@@ -93,6 +95,7 @@ def int_in(lo: int, hi: int) -> Validator:
         if value > hi:
             raise _fail(attribute, value, f"must be an integer <= {hi}")
 
+    check.__doc__ = f"An integer in [{lo}, {hi}] (an attrs validator: a value outside is one line naming the field)."
     return check
 
 

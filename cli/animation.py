@@ -29,6 +29,9 @@ from bark_cli.plot import MAX_ASPECT, MIN_ASPECT, SPRINGS_UP_TO, new_figure, pat
 
 
 def write_gif(frames: Frames, path: str | Path, min_size: int = 7, fps: int = 8) -> Path:
+    """Write ``frames`` (:class:`~bark.io.recorders.Frames`) as the development animation at ``path``: each frame
+    the unwrapped pattern at its time on common axes in metres, patches of at least ``min_size`` bases
+    coloured, ``fps`` frames a second; returns the path."""
     if not frames.frames:
         raise ValueError("no frames recorded")
     width = metres(max(2 * np.pi * r for _, r, _, _ in frames.frames))

@@ -80,6 +80,8 @@ class PlainNumpy:
         self.rest, self.fmax, self.intact = (np.array(a)[self.order] for a in (s.rest, s.fmax, s.intact))
 
     def step(self) -> None:
+        """One Euler–Cromer step of the whole lattice: spring forces by shifted views, anchors and damping, the
+        update, the surface constraint at the grown radius, and the threshold rule on the intact springs."""
         x, v = self.x, self.v
         f = np.zeros_like(x)
         for o, block in self.blocks:
@@ -106,6 +108,8 @@ class PlainNumpy:
 
     @property
     def intact_in_bark_order(self) -> np.ndarray:
+        """The intact flags in bark's order of springs (this baseline keeps them grouped by offset), to compare
+        with a bark run's."""
         out = np.empty_like(self.intact)
         out[self.order] = self.intact
         return out

@@ -194,6 +194,8 @@ class Signals:
 
     @contextlib.contextmanager
     def draw(self):
+        """While the body runs a picture is being drawn: a signal then stops the command at once (the data are
+        already written)."""
         self.drawing = True
         try:
             yield
@@ -593,6 +595,7 @@ cli.add_command(report)
 
 
 def main() -> None:
+    """The ``bark`` console script: the command-line interface (``bark --help``)."""
     cli()
 
 

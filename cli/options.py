@@ -38,6 +38,8 @@ parameters (beside ``--set growth.KEY=VALUE``) and the run's own (output folder,
 
 
 class OffsetsType(click.ParamType):
+    """A click type: lattice offsets typed as comma-separated integers (``--offsets 21,34``)."""
+
     name = "INT,INT,..."
 
     def convert(self, value, param, ctx):
@@ -73,6 +75,7 @@ def _click_type(field: attrs.Attribute):
 
 
 def option_name(field_name: str) -> str:
+    """The command-line option of a scene field: ``--`` and its name with dashes (``n_bases`` → ``--n-bases``)."""
     return "--" + field_name.replace("_", "-")
 
 
@@ -107,6 +110,8 @@ class FieldOption(click.Option):
         self.field_cls, self.field, self.scene_default = field_cls, field, scene_default
 
     def get_help_record(self, ctx):
+        """The option's help, made when first shown: the field's own docstring in option terms and the scene's
+        default."""
         if self.help is None:
             default = self.scene_default if not isinstance(self.scene_default, attrs.Factory) else None
             doc = _in_option_terms(field_docs(self.field_cls).get(self.field.name, ""), self.field_cls)
@@ -124,6 +129,7 @@ class LazyHelpOption(click.Option):
         self.lazy_help = lazy_help
 
     def get_help_record(self, ctx):
+        """The option's help, made when first shown (it may list what is installed)."""
         if self.help is None:
             self.help = self.lazy_help()
         return super().get_help_record(ctx)
@@ -192,10 +198,13 @@ class Provenance:
     accuracy --reference-dt`` sets ``[run] dt``)."""
 
     def add(self, source: str, tables: dict) -> dict:
+        """Record ``tables`` as the next layer, from ``source``; returns them."""
         self.layers.append((source, tables))
         return tables
 
     def source(self, section: str | None, key: str) -> str | None:
+        """Where the value of ``key`` (in ``section``; ``None``: a top-level key) came from, the last layer that
+        sets it; ``None`` if none does (a default)."""
         for source, tables in reversed(self.layers):
             if section is None and key in tables:
                 return source

@@ -56,6 +56,7 @@ class PatternData:
 
     @classmethod
     def of(cls, sim, min_size: int) -> "PatternData":
+        """What pattern.png shows of ``sim`` now, patches of at least ``min_size`` bases coloured."""
         s, r = sim.state, sim.radius
         from bark.analysis.pattern import simulation_colours
 
@@ -160,6 +161,8 @@ class SeriesData:
 
     @classmethod
     def of(cls, sim, scene, frames) -> "SeriesData":
+        """What tree-series.png shows of ``sim``'s run under ``scene``, from its recorded ``frames``
+        (:class:`~bark.io.recorders.TreeFrames`)."""
         from bark.analysis.pattern import rgb
         from bark.model.components import count_patches
 
@@ -189,6 +192,7 @@ class RegionsData:
 
     @classmethod
     def of(cls, sim, min_size: int) -> "RegionsData":
+        """What regions.png shows of ``sim`` now, patches of at least ``min_size`` bases counted."""
         from bark.analysis.patches import pattern_summary
         from bark.contract.strategies import pattern_of
         from bark.io.output import base_regions, largest_share, patch_regions, trunk_regions
@@ -451,6 +455,8 @@ class Painter:
         return wait
 
     def close(self, kill: bool = False) -> None:
+        """Wait for the drawing processes to finish what they were handed and end them; ``kill``: end them at
+        once (a picture not yet drawn is not drawn)."""
         if self._proc is None:
             return
         atexit.unregister(self.close)

@@ -90,6 +90,7 @@ class ProgressBar:
         self._progress.update(self._task, completed=_fraction(sim, stop, self._r0), **_fields(sim, stop))
 
     def close(self) -> None:
+        """Show the bar's last state and take it off the terminal."""
         if self._progress is not None:
             self(self._sim, self._stop, force=True)
             try:
@@ -132,6 +133,7 @@ class ProgressLog:
             self.every_s = float("inf")
 
     def close(self) -> None:
+        """Write the last line (where the run stopped)."""
         if self._seen is not None:
             self(*self._seen, force=True)
 
@@ -144,6 +146,8 @@ def _duration(seconds: float) -> str:
 
 
 def print_summary(summary: dict, out: Path) -> None:
+    """Print a run's summary (summary.json's ``summary``) as a table on the terminal, with the folder ``out`` its
+    files are in."""
     table = Table(title=f"stopped by {summary['stop_reason']}", caption=f"outputs in {out}", show_header=False)
     for key in ("t", "radius", "steps", "n_broken", "n_patches", "mean_orientation_deg", "circular_sd_deg",
                 "mean_anisotropy", "fraction_within_45_deg", "wall_time_s"):
@@ -198,6 +202,8 @@ class Tally:
             self._thread.start()
 
     def update(self, done: int, total: int, detail: str = "") -> None:
+        """``done`` of ``total`` things are done now (``detail``: what to say beside the count); shown at once on
+        a terminal, in a log at the next period."""
         with self._lock:
             if self.first is None:
                 self.first, self.start = done, time.monotonic()

@@ -137,6 +137,7 @@ class Comparison:
 
     @property
     def names(self) -> list[str]:
+        """The compared patterns' names, in order."""
         return [s.name for s in self.stats]
 
 

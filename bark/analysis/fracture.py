@@ -101,11 +101,14 @@ class FractureHistory:
     """``b·(dr/dt)²`` at the first break (``None``: nothing broke)."""
 
     def summary(self) -> dict:
+        """What summary.json's ``fracture`` holds: the first break's time, the initial fractures and their time,
+        the measured dissipation rate and the growth-driven one."""
         return {"first_break_t": self.first_break_t, "initial_fractures": self.initial_fractures,
                 "initial_fractures_t": self.initial_fractures_t, "dissipation_rate": self.dissipation_rate,
                 "growth_dissipation": self.growth_dissipation}
 
     def rows(self) -> list[dict]:
+        """The samples as rows (one dict per sample, counts as integers), for a CSV."""
         ints = ("n_broken", "n_cracks", "n_patches")
         cols = [[int(v) if c in ints else float(v) for v in self.samples[c].tolist()] for c in COLUMNS]
         return [dict(zip(COLUMNS, vals)) for vals in zip(*cols)]

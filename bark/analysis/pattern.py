@@ -406,6 +406,8 @@ class PatternStatistics:
 
     @classmethod
     def of_table(cls, table: PatchTable, name: str = "", source: str = "") -> "PatternStatistics":
+        """The statistics of the patches in ``table`` (:class:`~bark.analysis.patches.PatchTable`), named
+        ``name``, from ``source``."""
         return cls.of_values(table.orientation_deg, table.anisotropy, name=name, patches=table, source=source)
 
     @classmethod

@@ -28,6 +28,8 @@ def to_cylinder(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def from_cylinder(theta: np.ndarray, z: np.ndarray, radius: float) -> np.ndarray:
+    """Points at angles ``theta`` (radians) and heights ``z`` on a cylinder of radius ``radius`` about the z
+    axis: ``(r cos θ, r sin θ, z)``, shape ``(n, 3)``."""
     return np.column_stack([radius * np.cos(theta), radius * np.sin(theta), z])
 
 

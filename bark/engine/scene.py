@@ -72,9 +72,11 @@ class RunSettings(attrs.make_class(
         return {name: getattr(self, name) for name, (owner, _) in RUN_FIELDS.items() if owner is cls}
 
     def numerics(self) -> Numerics:
+        """The run's numerics (:class:`~bark.engine.simulation.Numerics`) from these settings."""
         return Numerics(**self._part(Numerics))
 
     def stop(self) -> Stop:
+        """The run's stop conditions (:class:`~bark.engine.simulation.Stop`) from these settings."""
         return Stop(**self._part(Stop))
 
 
@@ -329,6 +331,7 @@ class Scene:
         return effects.resolve(self.wanted, self.known_effects)
 
     def has(self, effect: str) -> bool:
+        """Whether the scene simulates the effect ``effect`` (a name in ``bark.model.effects.EFFECTS``)."""
         return effect in self.effects
 
     @property
@@ -490,6 +493,7 @@ class Scene:
                             f"has {have / 2**30:.3g} GiB available", Ref("lattice", "n_bases", n))
 
     def stop(self) -> Stop:
+        """The scene's stop conditions (``[run]``)."""
         return self.run.stop()
 
     def to_toml(self) -> str:

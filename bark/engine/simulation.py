@@ -574,6 +574,7 @@ class Simulation:
 
     @property
     def n_broken(self) -> int:
+        """How many springs are broken now."""
         return int(self.state.n_springs - np.count_nonzero(self.state.intact))
 
     def tension(self) -> np.ndarray:

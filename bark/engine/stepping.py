@@ -91,10 +91,12 @@ class Clock:
 
     @property
     def h_min(self) -> float:
+        """The smallest step: ``h / 2**levels`` (one tick)."""
         return self.h / (1 << self.levels)
 
     @property
     def t(self) -> float:
+        """The time: ``ticks`` smallest steps (exact: a sum of steps never drifts)."""
         return self.ticks * self.h_min
 
     @property
@@ -104,6 +106,7 @@ class Clock:
 
     @property
     def step(self) -> float:
+        """The current step's length (``h / 2**halvings``)."""
         return self.size * self.h_min
 
     def times(self, n: int) -> np.ndarray:
@@ -111,12 +114,15 @@ class Clock:
         return (self.ticks + (np.arange(n) + 1.0) * self.size) * self.h_min
 
     def advance(self, steps: int) -> None:
+        """Move the time on by ``steps`` steps of the current size."""
         self.ticks += steps * self.size
 
     def can_halve(self) -> bool:
+        """Whether the step may be halved again (adaptive stepping's levels not used up)."""
         return self.halvings < self.levels
 
     def halve(self) -> None:
+        """Halve the current step."""
         self.halvings += 1
 
     def relax(self, load: float) -> None:

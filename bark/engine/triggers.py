@@ -34,12 +34,16 @@ class Trigger:
     """Base: ``fires(sim) -> bool`` after each step; ``next_step``/``next_time`` bound the next call."""
 
     def fires(self, sim) -> bool:  # pragma: no cover - abstract
+        """Whether the action this trigger guards runs now, asked once after each step (a trigger with memory,
+        such as :class:`Every`, counts the asking)."""
         raise NotImplementedError
 
     def next_step(self, sim) -> int | None:
+        """The next step count at which it may fire, so a kernel call ends there; ``None``: no bound by steps."""
         return None
 
     def next_time(self, sim) -> float | None:
+        """The next simulated time at which it may fire, so a kernel call ends there; ``None``: no bound by time."""
         return None
 
     def watches_breaks(self) -> bool:
@@ -61,6 +65,8 @@ class Trigger:
 
 @attrs.define
 class Periodic(Trigger):
+    """Fires every ``steps`` steps: when ``step_count % steps == phase``."""
+
     steps: int = attrs.field(validator=positive_int)
     phase: int = attrs.field(default=0, validator=non_negative)
 
@@ -77,6 +83,9 @@ class Periodic(Trigger):
 
 @attrs.define
 class Every(Trigger):
+    """Fires each time the simulated time reaches ``start + k·time`` (once per k, even when a step
+    passes several)."""
+
     time: float = attrs.field(validator=positive)
     start: float = attrs.field(default=0.0, validator=non_negative)
     _next_k: int = attrs.field(default=0, init=False)
@@ -101,6 +110,8 @@ class Every(Trigger):
 
 @attrs.define
 class At(Trigger):
+    """Fires when the simulated time first reaches each of ``times`` (once each, in order)."""
+
     times: tuple[float, ...] = attrs.field(converter=lambda v: tuple(sorted(float(t) for t in v)))
     _i: int = attrs.field(default=0, init=False)
 
@@ -121,6 +132,9 @@ class At(Trigger):
 
 @attrs.define
 class OnEvent(Trigger):
+    """Fires after a step with ``event``: ``first-break`` (once, the first step that breaks a spring),
+    ``break`` (every step that breaks springs) or ``degenerate`` (every degenerate event)."""
+
     event: str = attrs.field(validator=one_of("first-break", "break", "degenerate"))
     _seen_breaks: int = attrs.field(default=0, init=False)
     _seen_events: int = attrs.field(default=0, init=False)
@@ -147,6 +161,9 @@ def _min(a, b):
 
 @attrs.define
 class And(Trigger):
+    """Fires when both ``a`` and ``b`` fire (``a & b``; both are asked every time, so that triggers
+    with memory stay in step)."""
+
     a: Trigger
     b: Trigger
 
@@ -166,6 +183,8 @@ class And(Trigger):
 
 @attrs.define
 class Or(And):
+    """Fires when ``a`` or ``b`` fires (``a | b``; both asked)."""
+
     def fires(self, sim) -> bool:
         fa, fb = self.a.fires(sim), self.b.fires(sim)
         return fa or fb
@@ -173,6 +192,8 @@ class Or(And):
 
 @attrs.define
 class Not(Trigger):
+    """Fires when ``a`` does not (``~a``); due at any step."""
+
     a: Trigger
 
     def fires(self, sim) -> bool:

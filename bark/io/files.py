@@ -160,6 +160,8 @@ def json_text(obj: Any, indent: int | None = None) -> str:
 
 
 def write_json(path: str | Path, obj: Any) -> Path:
+    """Write ``obj`` to ``path`` as indented JSON (NaN and infinities as null), atomically: a reader sees the old
+    file or the whole new one; returns the path."""
     data = json_text(obj, indent=2).encode() + b"\n"
     return atomic_write(path, lambda fh: fh.write(data))
 

@@ -112,6 +112,7 @@ class OutputFolder:
         return cls(path, fd)
 
     def close(self) -> None:
+        """Release the folder's lock (another command may then write into it)."""
         if self._fd is not None:
             os.close(self._fd)  # releases the flock
             self._fd = None

@@ -36,7 +36,24 @@ class Recorder:
     def finish(self, sim, min_size: int) -> None:
         """At the end of the run, after its last sample (``min_size``: the smallest patch that counts)."""
 
+    def record(self, sim) -> None:
+        """Keep a sample of ``sim`` now (once per time: asked twice at one time, it keeps one)."""
+        raise NotImplementedError
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The samples kept so far as named arrays, for a checkpoint (under :attr:`name`)."""
+        raise NotImplementedError
+
+    def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Take back the samples of ``arrays`` (what :meth:`arrays` gave), resuming a run."""
+        raise NotImplementedError
+
+    def write(self, path: str | Path) -> Path:
+        """Write what the samples make to ``path`` (the run's file :attr:`file`); returns the path."""
+        raise NotImplementedError
+
     def summary(self) -> dict:
+        """What this recorder adds to summary.json (by default nothing)."""
         return {}
 
 

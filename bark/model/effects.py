@@ -35,9 +35,15 @@ def in_format(name: str, picture_format: str) -> str:
 
 @attrs.frozen
 class Effect:
+    """One effect a scene may simulate (its ``[effects] want``): what it does, what it needs, and the
+    files of a run it writes."""
+
     name: str
+    """How a scene names it (``fracture``, ``pattern-image``)."""
     does: str
+    """What it does, in a line (``bark plan`` prints it)."""
     needs: tuple[str, ...] = ()
+    """The effects it cannot be simulated without."""
     files: tuple[str, ...] = ()
     """The files of a run's folder it writes (a fresh run removes every effect's, and only those)."""
     drawn: tuple[str, ...] = ()

@@ -161,6 +161,8 @@ class ForceField:
         return out
 
     def incidence(self, state) -> sp.csr_matrix:
+        """The springs' signed incidence matrix (springs × bases, sparse), kept while the numbers of bases and
+        springs stay the same."""
         key = (state.n_bases, state.n_springs)
         if self._inc is None or self._inc[0] != key:
             self._inc = (key, incidence(state.pairs, state.n_bases))

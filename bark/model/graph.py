@@ -108,6 +108,9 @@ def _read_only(name: str):
         raise nx.NetworkXError(f"the leaf-base graph is a view of the simulation's springs and cannot be changed "
                                f"({name}): use Simulation.join, break_springs or mend_springs, or copy() it")
     refuse.__name__ = name
+    refuse.__doc__ = (f"Refused (``NetworkXError``): the leaf-base graph is a read-only view of the springs; "
+                      f"``Simulation.join``, ``break_springs`` and ``mend_springs`` change them, and ``copy()`` "
+                      f"gives a graph of one's own to change.")
     return refuse
 
 
@@ -129,6 +132,7 @@ class LeafBaseGraph(nx.Graph):
 
     @property
     def state(self):
+        """The simulation's state this graph is a view of (its current one)."""
         return self._state_of()
 
     def table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

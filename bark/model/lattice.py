@@ -68,7 +68,19 @@ def _check_partition(instance, attribute, value) -> None:
 
 @attrs.frozen(kw_only=True)
 class Lattice:
-    """Where the leaf bases start and which of them are joined by springs."""
+    """Where the leaf bases start and which of them are joined by springs.
+
+    Every parameter is a validated keyword; a value outside its range is one line naming it:
+
+    >>> lattice = Lattice(n_bases=600)
+    >>> lattice.offsets, lattice.n_springs
+    ((21, 34), 1145)
+    >>> lattice.pairs()[:2].tolist()   # base i joined to base i + 21 and i + 34
+    [[0, 21], [1, 22]]
+    >>> Lattice(n_bases=0)
+    Traceback (most recent call last):
+    bark.errors.BarkError: n_bases = 0: must be an integer >= 1
+    """
 
     n_bases: int = attrs.field(default=3000, validator=positive_int)
     """Number of leaf bases on the trunk segment (Table 2: 3000)."""

@@ -163,8 +163,15 @@ class Declared:
     """A per-spring or per-base quantity a strategy owns (after LAMMPS's per-atom fields and OpenMM's
     per-bond parameters): the state carries it beside its own fields — grown, copied, snapshot,
     checkpointed and restored with them, by both backends — and each new spring's or base's value
-    is its ``start`` or what the strategy that declares it makes (``Strategy.initial``).  Read-only outside its declared writes,
-    as every field is.  Values are float64."""
+    is its ``start`` or what the strategy that declares it makes (``Strategy.initial``).  Read-only
+    outside its declared writes, as every field is.  Values are float64.
+
+    >>> Declared(name="arm", per="spring", unit="length", start="rest").start   # begins at the rest length
+    'rest'
+    >>> Declared(name="arm", per="base", start="rest")
+    Traceback (most recent call last):
+    bark.errors.BarkError: declared field 'arm': start='rest' is not known of a new base; give a number or one of t, z
+    """
 
     name: str = attrs.field(validator=_field_name)
     """How it is read: ``state[name]``, and by name in a part's ``reads``."""
@@ -399,6 +406,7 @@ class State:
         return state
 
     def copy(self) -> "State":
+        """An independent copy: every field, declared ones included, its time and last step."""
         return State.from_arrays(self.arrays(), self.t, self.h, self.declared)
 
     def __getstate__(self) -> dict:
@@ -412,4 +420,5 @@ class State:
             object.__setattr__(self, a.name, getattr(restored, a.name))
 
     def is_finite(self) -> bool:
+        """Whether every position and velocity is finite."""
         return bool(np.isfinite(self.x).all() and np.isfinite(self.v).all())

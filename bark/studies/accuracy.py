@@ -52,9 +52,12 @@ class Method:
 
     @property
     def label(self) -> str:
+        """How the method is named in tables and figures, e.g. ``euler-cromer adaptive (dt ≤ 0.5)``."""
         return f"{self.integrator} {self.stepping}" + (f" (dt ≤ {self.dt:g})" if self.stepping == "adaptive" else "")
 
     def run_settings(self, param: float) -> dict:
+        """The numerics of a run at the method's accuracy setting ``param``: the overshoot tolerance for adaptive
+        stepping, the step for fixed stepping."""
         if self.stepping == "adaptive":
             return {"dt": self.dt, "stepping": "adaptive", "overshoot_tol": param}
         return {"dt": param, "stepping": self.stepping}

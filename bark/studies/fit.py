@@ -100,6 +100,7 @@ class Prior:
         return pyabc.RV("loguniform", self.low, self.high) if self.log else pyabc.RV("uniform", self.low, self.high - self.low)
 
     def as_dict(self) -> dict:
+        """The prior as plain data (key, bounds, whether uniform in the logarithm), for fit.json."""
         return {"key": self.key, "low": self.low, "high": self.high, "log": self.log}
 
     def scaled(self, values):
@@ -186,6 +187,7 @@ class Observed:
         return cls(name=stats.name or Path(path).name, values=measured(stats, network), source=stats.source or str(path))
 
     def available(self) -> tuple[str, ...]:
+        """The statistics the observed pattern has a value for, in ``STATISTICS`` order."""
         return tuple(k for k in STATISTICS if self.values.get(k) is not None)
 
 
@@ -240,6 +242,7 @@ class Fit:
 
     @property
     def keys(self) -> tuple[str, ...]:
+        """The fitted scene keys, in the priors' order."""
         return tuple(p.key for p in self.priors)
 
     def scene(self, settings: dict, seed: int) -> dict:
@@ -271,6 +274,7 @@ class Fit:
                 "population": self.population, "seed": self.seed}
 
     def model(self) -> "RunModel":
+        """The model pyabc samples: one run of the scene at a drawn setting, giving its statistics."""
         return RunModel(fit=self)
 
 
@@ -417,6 +421,7 @@ class Generation:
 
     @property
     def acceptance(self) -> float:
+        """The share of runs accepted in this generation (NaN before any run)."""
         return self.accepted / self.runs if self.runs else math.nan
 
 

@@ -42,12 +42,14 @@ class LocalPool:
                        "process limit (ulimit -u) or memory is reached; try fewer --workers")
 
     def submit(self, fn, *args):
+        """Run ``fn(*args)`` in a worker process; a future of its result."""
         try:
             return self.pool.submit(fn, *args)
         except OSError as err:
             raise self._cannot_start(err) from None
 
     def wait_any(self, futures) -> set:
+        """The futures among ``futures`` that are done, waiting until at least one is."""
         from concurrent.futures import FIRST_COMPLETED, wait
 
         return wait(futures, return_when=FIRST_COMPLETED)[0]
@@ -75,18 +77,23 @@ class DaskPool:
         self.slots = max(1, sum(client.nthreads().values()))
 
     def submit(self, fn, *args):
+        """Run ``fn(*args)`` on the cluster (never cached: each call is a run); a future of its result."""
         return self.client.submit(fn, *args, pure=False)
 
     def wait_any(self, futures) -> set:
+        """The futures among ``futures`` that are done, waiting until at least one is."""
         from distributed import wait
 
         return set(wait(list(futures), return_when="FIRST_COMPLETED").done)
 
     @staticmethod
     def died(error: BaseException | None) -> bool:
+        """Whether ``error`` means the worker died: never here, since Dask runs a lost task again on another
+        worker."""
         return False  # Dask runs a task again on another worker
 
     def close(self) -> None:
+        """Nothing to close: the cluster is the caller's."""
         pass
 
 

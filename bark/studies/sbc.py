@@ -62,6 +62,7 @@ class Calibration:
 
     @property
     def keys(self) -> tuple[str, ...]:
+        """The calibrated scene keys, in the priors' order."""
         return tuple(p.key for p in self.priors)
 
     def truth(self, i: int) -> tuple[dict[str, float], int]:

@@ -91,10 +91,12 @@ class Axis:
 
     @property
     def section(self) -> str:
+        """The scene section the axis sets (``mechanics`` of ``mechanics.c``)."""
         return self.key.partition(".")[0]
 
     @property
     def name(self) -> str:
+        """The key within that section (``c`` of ``mechanics.c``)."""
         return self.key.partition(".")[2]
 
 
@@ -322,6 +324,7 @@ class SweepTable:
             raise _table_error(self.path, err) from None
 
     def close(self) -> None:
+        """Close the table's database."""
         self.con.close()
 
     def __enter__(self) -> "SweepTable":
@@ -331,6 +334,7 @@ class SweepTable:
         self.close()
 
     def columns(self) -> list[str]:
+        """The columns of the runs table, in order."""
         return [r[1] for r in self._read("PRAGMA table_info(runs)")]
 
     def add_axes(self, axes: Iterable[Axis]) -> None:
@@ -346,6 +350,7 @@ class SweepTable:
                 self.con.execute(f'ALTER TABLE runs ADD COLUMN "{name}" {kind}')
 
     def done(self) -> set[str]:
+        """The keys of the runs already in the table (a resumed sweep skips them)."""
         return {k for (k,) in self._read("SELECT key FROM runs")}
 
     def commit(self, point: Point, result: dict) -> None:

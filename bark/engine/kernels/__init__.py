@@ -187,12 +187,19 @@ class Backend:
         return take_steps(self.call(state, mech, plan, tension), plan)
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> Call:
+        """One call's steps (:class:`Call`) as ``plan`` asks, from ``state`` with the mechanics ``mech``: forces,
+        the integrator's update, the surface at the growth law's radius, the resin's tensions into ``tension``
+        and the breakers' rule and load, each from the strategies' parts."""
         raise NotImplementedError
 
     def spring_forces(self, state, mech, x: np.ndarray) -> np.ndarray:
+        """The force of every intact spring on every base at positions ``x`` (eq. 1, by the resin law), summed
+        per base: an array shaped like ``x`` (force units)."""
         raise NotImplementedError
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
+        """Every spring's tension by the resin law (``k(|d| − l)`` for the paper's spring; force units) at the
+        state's positions, into ``out``; whether all of them are finite."""
         raise NotImplementedError
 
     def geometry(self, state, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -202,9 +209,13 @@ class Backend:
         return spring_geometry(x, state._rows("pairs"))
 
     def constrain(self, state, r_x, r_anchor) -> None:
+        """Eq. 9: each base put back on the trunk's surface at radius ``r_x`` (a number or one per base) with its
+        radial velocity removed, and each anchor at radius ``r_anchor`` along its fixed direction."""
         raise NotImplementedError
 
     def patch_labels(self, state) -> np.ndarray:
+        """The connected components of the intact springs: one label per base, numbered in order of each
+        component's smallest base (int32)."""
         raise NotImplementedError
 
     def ready(self, kernel: KernelParts) -> bool:

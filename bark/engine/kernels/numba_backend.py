@@ -1278,6 +1278,10 @@ def _same(a: tuple, b: tuple) -> bool:
 
 
 class NumbaBackend(Backend):
+    """The hot loop compiled (numba): one kernel per composition of parts, generated, compiled once
+    and cached on disk, running many steps a call over blocks of bases and springs (threaded on
+    large lattices); the same bits as :class:`~bark.engine.kernels.numpy_backend.NumpyBackend`."""
+
     name = NAME
 
     def __init__(self) -> None:

@@ -18,6 +18,11 @@ NAME = "numpy"
 
 
 class NumpyBackend(Backend):
+    """The hot loop on whole arrays (numpy): the springs' forces summed per base in the compiled
+    kernel's order (runs of springs as shifted slices; a sparse product where there are none), the
+    strategies' parts called on arrays, a refused step taken back by replaying its call.  Always
+    available."""
+
     name = NAME
 
     def __init__(self) -> None:
