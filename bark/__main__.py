@@ -8,6 +8,8 @@ from importlib.metadata import entry_points
 
 
 def main() -> None:
+    """``python -m bark``: the ``bark`` command, when bark's command line is installed (one line saying how to
+    install it when not)."""
     scripts = [ep for ep in entry_points(group="console_scripts", name="bark") if ep.value.startswith("bark_cli")]
     if not scripts:
         sys.exit("bark: the command line is not installed (pip install bark-grasstree installs it)")

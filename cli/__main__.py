@@ -19,6 +19,7 @@ from bark_cli import REASONS, Interrupted
 
 
 def main() -> None:
+    """The ``bark`` command: a signal while the program loads ends it in one line, then the command line runs."""
     def stop(signum, frame):
         raise Interrupted(signum)
 

@@ -43,6 +43,8 @@ class BarkGroup(click.Group):
     """A click group whose failures are one line on stderr, never a traceback or a usage dump."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        """Run the command with bark's warnings shown as one line each, once, whatever the caller's warning
+        filters."""
         with warnings.catch_warnings():  # the command shows the library's warnings its way, whatever the
             warnings.simplefilter("default", BarkWarning)  # caller's filters (-W error): one line each, once
             warnings.showwarning = _show_warning

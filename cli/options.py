@@ -43,6 +43,7 @@ class OffsetsType(click.ParamType):
     name = "INT,INT,..."
 
     def convert(self, value, param, ctx):
+        """``21,34`` → ``(21, 34)``; anything else is click's one-line usage error."""
         if isinstance(value, tuple):
             return value
         try:

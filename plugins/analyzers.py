@@ -23,6 +23,8 @@ class PatchAnalyzer(Analyzer):
     """Patches with fewer bases are dropped (the paper: 7)."""
 
     def analyze(self, points: np.ndarray, patches: np.ndarray) -> Analysis:
+        """One row per patch of at least ``min_size`` points (size, centroid, orientation, anisotropy) and the
+        paper's pattern statistics of them."""
         rows = patch_statistics(points, patches, self.min_size)
         return Analysis(summary=pattern_summary(rows), patches=rows)
 
@@ -41,6 +43,8 @@ class NetworkAnalyzer(Analyzer):
     reads_springs = True
 
     def analyze(self, points, patches, springs) -> Analysis:
+        """The patch-size law and, with springs, the crack network's statistics, its table ``lattice_bias`` one
+        row per spring offset."""
         given = () if springs is None else (springs.pairs, springs.intact, springs.offsets)
         summary = measure(points, patches, self.min_size, *given)
         bias = summary.pop("lattice_bias", None) or {}

@@ -54,6 +54,8 @@ class Thresholds(Breaker):
                             Ref(None, "weibull_scale", self.weibull_scale), Ref(None, "weibull_shape", None))
 
     def thresholds(self, made: Made, fmax: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Each new spring's threshold: ``fmax`` spread log-normally or drawn from the Weibull law, then moved
+        towards its region's own value by the region's weight."""
         if self.weibull_shape is not None:
             m = self.weibull_shape
             w = rng.weibull(m, len(made))
@@ -76,6 +78,7 @@ class ThresholdBreaker(Thresholds):
     stepping keeps from passing 1 by more than the overshoot tolerance."""
 
     def part(self) -> BreakerPart:
+        """The paper's rule, compiled: tension over ``fmax``, its load ``tension / fmax``."""
         return BreakerPart(rule=physics.over_threshold, reads=("tension", "fmax"),
                            load=physics.threshold_load, load_reads=("tension", "inv_fmax"))
 
@@ -105,9 +108,12 @@ class ProbabilisticBreaker(Thresholds):
     """Exponent of the load: how sharply the rate rises through the threshold."""
 
     def part(self) -> BreakerPart:
+        """Compiled: every stretched spring a candidate, judged by :meth:`select` in Python."""
         return BreakerPart(rule=stretched, reads=("tension",), decides=False)
 
     def select(self, state, tension: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The stretched intact springs that break in this step, each with probability ``1 − exp(−h·nu·L**eta)``
+        (one uniform number each, in spring order)."""
         candidates = np.flatnonzero(state.intact & (tension > 0.0))
         load = tension[candidates] / state.fmax[candidates]
         p = -np.expm1(-state.h * self.nu * load**self.eta)

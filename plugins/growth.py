@@ -42,6 +42,7 @@ class SqrtGrowth(Growth):
     """Growth constant, length / time^½ (Table 2: 0.014 vertical, 0.011 reticulate, 0.007 diamond)."""
 
     def part(self) -> GrowthPart:
+        """Compiled: ``r0 + G·√t``, the same at every height."""
         return GrowthPart(radius=sqrt_radius, params=(self.r0, self.G), uniform=True)
 
 
@@ -55,6 +56,7 @@ class LinearGrowth(SqrtGrowth):
     """Growth rate, length / time."""
 
     def part(self) -> GrowthPart:
+        """Compiled: ``r0 + G·t``, the same at every height."""
         return GrowthPart(radius=linear_radius, params=(self.r0, self.G), uniform=True)
 
 
@@ -339,6 +341,8 @@ class BulgeGrowth(Growth):
                           radii=bulge_radii, inner=base)
 
     def radius(self, t: float, z: np.ndarray) -> np.ndarray:
+        """The base law's radius plus each bulge's at heights ``z`` (from the part where the base law has one,
+        the same bits)."""
         z = np.asarray(z, dtype=float)
         part = self.part_
         if part is not None:  # the part, as every law that has one is evaluated

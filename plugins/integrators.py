@@ -41,9 +41,12 @@ class EulerCromer(Integrator):
     little less conservative)."""
 
     def part(self) -> IntegratorPart:
+        """Compiled: ``v += h·f/m``, then ``x += h·v``."""
         return IntegratorPart(update=euler_cromer_update)
 
     def stability_limit(self, state, forces) -> float:
+        """The largest stable step for this state: the damped explicit bound, from the stiffness's largest
+        eigenvalue as ``bound`` bounds it."""
         return euler_cromer_h_max(state, forces, self.bound)
 
 
@@ -89,6 +92,8 @@ class ImplicitOverdamped(Integrator):
         return forces.mechanics.b / lambda_max(state, forces, "gershgorin")
 
     def step(self, state, dt: float, forces) -> None:
+        """One backward-Euler step ``dt`` of the overdamped motion ``b·dx/dt = f``: its linear system ``(b·I +
+        dt·K)`` on the trunk's tangent planes solved by conjugate gradients."""
         from scipy.sparse.linalg import LinearOperator, cg  # here, not at import: a run without it never pays for it
 
         mech = forces.mechanics

@@ -49,6 +49,7 @@ class Hookean(Resin):
     """The paper's spring (eq. 1): tension ``k(|d| − l)``, its rest length fixed when it is made."""
 
     def part(self) -> ResinPart:
+        """Compiled: ``k(|d| − l)``, no flow."""
         return ResinPart(tension=physics.hookean)
 
 
@@ -61,6 +62,7 @@ class Maxwell(Resin):
     """Relaxation time (time units; 1 = 88.5 days)."""
 
     def part(self) -> ResinPart:
+        """Compiled: Hooke's tension; the rest length relaxes (:func:`relaxed`) every step."""
         return ResinPart(tension=physics.hookean, evolve=relaxed, writes=("rest",), params=[self.tau])
 
 
@@ -75,6 +77,7 @@ class Plastic(Resin):
     """0: perfectly plastic (the strain stays at the yield); larger: less of the excess flows."""
 
     def part(self) -> ResinPart:
+        """Compiled: Hooke's tension; the rest length yields (:func:`yielded`) every step."""
         return ResinPart(tension=physics.hookean, evolve=yielded, writes=("rest",),
                          params=[self.yield_strain, self.hardening])
 
@@ -89,4 +92,6 @@ class Nonlinear(Resin):
 
     def part(self) -> ResinPart:
         # the largest tangent stiffness up to strain 1, for the stability bound
+        """Compiled: the cubic law (:func:`cubic`), its stiffness bound the largest tangent stiffness up to
+        strain 1."""
         return ResinPart(tension=cubic, params=[self.beta], stiffness=1.0 + 3.0 * max(self.beta, 0.0))

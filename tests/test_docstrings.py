@@ -1,6 +1,6 @@
 """The public API documents itself: every public module, class, function, method and property of
-``bark``, ``bark_plugins`` and ``bark_cli`` has a docstring (its own or the one it overrides, as
-``help()`` and the API reference show it), and the examples in them run as doctests."""
+``bark``, ``bark_plugins`` and ``bark_cli`` has its own docstring (an override too: it says what it
+does differently), and the examples in them run as doctests."""
 
 from __future__ import annotations
 
@@ -55,11 +55,10 @@ def _undocumented(module) -> list[str]:
         for member, raw in vars(value).items():
             if member.startswith("_"):
                 continue
-            if isinstance(raw, property):  # a property's docstring, or the one it overrides
-                doc = next((vars(c)[member].__doc__ for c in value.__mro__
-                            if isinstance(vars(c).get(member), property) and vars(c)[member].__doc__), None)
-            elif inspect.isfunction(getattr(raw, "__func__", raw)) or callable(raw) and hasattr(raw, "__wrapped__"):
-                doc = inspect.getdoc(getattr(value, member))
+            if isinstance(raw, property):
+                doc = raw.__doc__  # its getter's, or the one given to property()
+            elif inspect.isfunction(function := getattr(raw, "__func__", getattr(raw, "func", raw))):
+                doc = function.__doc__  # its own: an override says what it does differently
             else:
                 continue  # data: attrs fields and constants are documented where they are declared
             if not (doc or "").strip():
@@ -89,12 +88,17 @@ def test_an_undocumented_method_or_class_is_found(monkeypatch):
             def quiet(self):
                 pass
 
-        class Inheriting(Quiet):  # a class says what it is itself; an override may inherit its docstring
+        class Inheriting(Quiet):  # a class and an override each say what they are themselves
             def loud(self):
                 pass
+
+            @property
+            def size(self):
+                return 1
     '''), module.__dict__)
     monkeypatch.setitem(sys.modules, "fake_api", module)
-    assert _undocumented(module) == ["fake_api.Quiet.quiet", "fake_api.Inheriting"]
+    assert _undocumented(module) == ["fake_api.Quiet.quiet", "fake_api.Inheriting", "fake_api.Inheriting.loud",
+                                     "fake_api.Inheriting.size"]
 
 
 @pytest.mark.parametrize("name", MODULES)

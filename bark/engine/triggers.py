@@ -71,12 +71,15 @@ class Periodic(Trigger):
     phase: int = attrs.field(default=0, validator=non_negative)
 
     def watches_breaks(self) -> bool:
+        """No: it counts steps, not breaks."""
         return False
 
     def fires(self, sim) -> bool:
+        """Whether this step's count is ``phase`` modulo ``steps``."""
         return sim.step_count % self.steps == self.phase % self.steps
 
     def next_step(self, sim) -> int:
+        """The next step count that is ``phase`` modulo ``steps``."""
         n = sim.step_count + 1
         return n + (self.phase - n) % self.steps
 
@@ -94,9 +97,11 @@ class Every(Trigger):
         return self.start + self._next_k * self.time
 
     def watches_breaks(self) -> bool:
+        """No: it watches the time."""
         return False
 
     def fires(self, sim) -> bool:
+        """Whether the time has reached the next due time; it then counts every due time passed, firing once."""
         eps = 1e-9 * sim.clock.h
         if sim.state.t < self._due() - eps:
             return False
@@ -105,6 +110,7 @@ class Every(Trigger):
         return True
 
     def next_time(self, sim) -> float:
+        """The next due time, ``start + k·time``."""
         return self._due()
 
 
@@ -116,9 +122,11 @@ class At(Trigger):
     _i: int = attrs.field(default=0, init=False)
 
     def watches_breaks(self) -> bool:
+        """No: it watches the time."""
         return False
 
     def fires(self, sim) -> bool:
+        """Whether the time has reached the next of ``times``; it then passes every one reached, firing once."""
         eps = 1e-9 * sim.clock.h
         fired = False
         while self._i < len(self.times) and sim.state.t >= self.times[self._i] - eps:
@@ -127,6 +135,7 @@ class At(Trigger):
         return fired
 
     def next_time(self, sim) -> float | None:
+        """The next of ``times`` not yet reached; ``None`` when all are."""
         return self.times[self._i] if self._i < len(self.times) else None
 
 
@@ -141,6 +150,7 @@ class OnEvent(Trigger):
     _done: bool = attrs.field(default=False, init=False)
 
     def fires(self, sim) -> bool:
+        """Whether the step just taken had the event (the breaks and degenerate events since it last asked)."""
         if self.event == "degenerate":
             n = sum(e["kind"] == "degenerate" for e in sim.events)
             fired, self._seen_events = n > self._seen_events, n
@@ -168,16 +178,20 @@ class And(Trigger):
     b: Trigger
 
     def fires(self, sim) -> bool:
+        """Whether both fire (both asked)."""
         fa, fb = self.a.fires(sim), self.b.fires(sim)  # both asked: triggers with memory stay in step
         return fa and fb
 
     def next_step(self, sim):
+        """The earlier of the two bounds by steps."""
         return _min(self.a.next_step(sim), self.b.next_step(sim))
 
     def next_time(self, sim):
+        """The earlier of the two bounds by time."""
         return _min(self.a.next_time(sim), self.b.next_time(sim))
 
     def watches_breaks(self) -> bool:
+        """Whether either watches breaks."""
         return self.a.watches_breaks() or self.b.watches_breaks()
 
 
@@ -186,6 +200,7 @@ class Or(And):
     """Fires when ``a`` or ``b`` fires (``a | b``; both asked)."""
 
     def fires(self, sim) -> bool:
+        """Whether either fires (both asked)."""
         fa, fb = self.a.fires(sim), self.b.fires(sim)
         return fa or fb
 
@@ -197,10 +212,13 @@ class Not(Trigger):
     a: Trigger
 
     def fires(self, sim) -> bool:
+        """Whether ``a`` does not fire."""
         return not self.a.fires(sim)
 
     def watches_breaks(self) -> bool:
+        """Whether ``a`` watches breaks."""
         return self.a.watches_breaks()
 
     def next_step(self, sim):
+        """The next step: a negation may be due at any step."""
         return sim.step_count + 1  # a negation may be due at any step

@@ -68,6 +68,7 @@ class History(Recorder):
         self._min_size = 7
 
     def record(self, sim) -> None:
+        """Keep the time, positions, patch labels, intact flags and pattern statistics now (once per time)."""
         t = sim.state.t
         if self.frames and self.frames[-1]["t"] == t:
             return
@@ -80,6 +81,8 @@ class History(Recorder):
                             "stats": np.array([np.nan if stats.get(k) is None else stats[k] for k in STATISTICS], float)})
 
     def arrays(self) -> dict[str, np.ndarray]:
+        """The frames packed as arrays (positions and labels concatenated, intact flags as bits), for a
+        checkpoint."""
         f = self.frames
         if not f:
             return {"t": np.empty(0), "count": np.empty(0, np.int64), "springs": np.empty(0, np.int64),
@@ -92,6 +95,7 @@ class History(Recorder):
                 "intact": np.concatenate([r["intact"] for r in f]), "stats": np.stack([r["stats"] for r in f])}
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Unpack the frames of a checkpoint's ``arrays``."""
         ends = np.cumsum(arrays["count"])
         packed = -(-arrays["springs"] // 8)
         bit_ends = np.cumsum(packed)
@@ -101,6 +105,7 @@ class History(Recorder):
                                                           arrays["broken"], packed, bit_ends, arrays["stats"])]
 
     def finish(self, sim, min_size: int) -> None:
+        """Keep the simulation and the least patch size for :meth:`write`."""
         self._sim, self._min_size = sim, min_size
 
     def write(self, path: str | Path) -> Path:

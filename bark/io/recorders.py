@@ -67,6 +67,7 @@ class StatisticsSeries(Recorder):
         self.rows: list[dict[str, Any]] = []
 
     def record(self, sim) -> None:
+        """Keep a row: time, radius, step, springs broken and the pattern statistics now (once per step)."""
         if self.rows and self.rows[-1]["step"] == sim.step_count:
             return
         measured = pattern_of(sim.analyze().values())
@@ -75,15 +76,18 @@ class StatisticsSeries(Recorder):
                           **{k: stats.get(k) for k in SERIES_COLUMNS[4:]}})
 
     def arrays(self) -> dict[str, np.ndarray]:
+        """The rows as one array per column (NaN where a statistic had no value)."""
         return {c: np.array([np.nan if r[c] is None else r[c] for r in self.rows], dtype=float) for c in SERIES_COLUMNS}
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Take back the rows of a checkpoint's ``arrays``."""
         ints = ("step", "n_broken", "n_patches")
         cols = [[int(v) if c in ints and np.isfinite(v) else (None if not np.isfinite(v) else float(v))
                  for v in arrays[c].tolist()] for c in SERIES_COLUMNS]
         self.rows = [dict(zip(SERIES_COLUMNS, vals)) for vals in zip(*cols)]
 
     def write(self, path: str | Path) -> Path:
+        """The rows as a CSV with units in its header (``statistics.csv``)."""
         return write_csv(path, self.rows, SERIES_COLUMNS, headed(SERIES_COLUMNS))
 
     def to_pandas(self):
@@ -128,12 +132,14 @@ class Frames(_Coloured):
         self.colours: list[np.ndarray] = []
 
     def record(self, sim) -> None:
+        """Keep the time, the mean radius, the unwrapped positions and the patch labels now (once per time)."""
         if self.frames and self.frames[-1][0] == sim.state.t:
             return
         r = sim.radius
         self.frames.append((sim.state.t, r, unwrap(sim.state.x, r).astype(np.float32), sim.patch_labels().astype(np.int32)))
 
     def arrays(self) -> dict[str, np.ndarray]:
+        """The frames as arrays, positions and labels concatenated with a count per frame."""
         f = self.frames
         return {
             "t": np.array([x[0] for x in f], dtype=float), "r": np.array([x[1] for x in f], dtype=float),
@@ -143,6 +149,7 @@ class Frames(_Coloured):
         }
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Take back the frames of a checkpoint's ``arrays``."""
         ends = np.cumsum(arrays["count"])
         starts = ends - arrays["count"]
         self.frames = [(float(t), float(r), arrays["uv"][a:b], arrays["labels"][a:b])
@@ -161,11 +168,13 @@ class TreeFrames(_Coloured):
         self.colours: list[np.ndarray] = []
 
     def record(self, sim) -> None:
+        """Keep the time, the positions and the patch labels now (once per time)."""
         if self.frames and self.frames[-1][0] == sim.state.t:
             return
         self.frames.append((sim.state.t, sim.state.x.astype(np.float32), sim.patch_labels().astype(np.int32)))
 
     def arrays(self) -> dict[str, np.ndarray]:
+        """The frames as arrays, positions and labels concatenated with a count per frame."""
         f = self.frames
         return {
             "t": np.array([x[0] for x in f], dtype=float), "count": np.array([x[1].shape[0] for x in f], dtype=np.int64),
@@ -174,6 +183,7 @@ class TreeFrames(_Coloured):
         }
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Take back the frames of a checkpoint's ``arrays``."""
         ends = np.cumsum(arrays["count"])
         starts = ends - arrays["count"]
         self.frames = [(float(t), arrays["x"][a:b], arrays["labels"][a:b]) for t, a, b in zip(arrays["t"], starts, ends)]
@@ -193,6 +203,7 @@ class Dissipation(Recorder):
         """The history, once ``analyse`` has made it (at the end of the run)."""
 
     def record(self, sim) -> None:
+        """Keep the time and the damping's power per base now, ``b·Σ|v|² / n`` (once per time)."""
         t = sim.state.t
         if self.t and self.t[-1] == t:
             return
@@ -201,15 +212,19 @@ class Dissipation(Recorder):
         self.power.append(float(sim.mechanics.b * np.einsum("ij,ij->", v, v) / max(sim.state.n_bases, 1)))
 
     def arrays(self) -> dict[str, np.ndarray]:
+        """The times and powers, for a checkpoint."""
         return {"t": np.array(self.t, dtype=float), "power": np.array(self.power, dtype=float)}
 
     def load(self, arrays: dict[str, np.ndarray]) -> None:
+        """Take back the times and powers of a checkpoint's ``arrays``."""
         self.t, self.power = arrays["t"].tolist(), arrays["power"].tolist()
 
     def finish(self, sim, min_size: int) -> None:
+        """Make the run's fracture history (:meth:`analyse`)."""
         self.analyse(sim, min_size)
 
     def summary(self) -> dict:
+        """The fracture history's figures under ``fracture`` (nothing before :meth:`finish`)."""
         return {"fracture": self.result.summary()} if self.result is not None else {}
 
     def analyse(self, sim, min_size: int) -> FractureHistory:

@@ -160,6 +160,7 @@ class LeafBaseGraph(nx.Graph):
         return (ids >= 0) & (ids < self.state.n_bases)
 
     def number_of_edges(self, u=None, v=None) -> int:
+        """The intact springs (between ``u`` and ``v`` when given, as networkx counts them)."""
         if u is None:
             return int(np.count_nonzero(self.state.intact))
         return super().number_of_edges(u, v)

@@ -1452,6 +1452,7 @@ class NumbaBackend(Backend):
         return w.table.ravel(), w.table.shape[1]
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
+        """Compiled for the paper's spring; another resin law's forces on whole arrays (the kernel's bits)."""
         if self.resin.key != HOOKEAN.key:  # outside the kernel, another law's forces on whole arrays (the same bits)
             from bark.engine.kernels.numpy_backend import NumpyBackend
 
@@ -1464,6 +1465,7 @@ class NumbaBackend(Backend):
         return f
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
+        """Compiled for the paper's spring; another resin law's tensions on whole arrays (the kernel's bits)."""
         if self.resin.key != HOOKEAN.key:  # another law's tensions on whole arrays: the kernel's bits
             from bark.model.forces import spring_geometry
 
@@ -1473,6 +1475,7 @@ class NumbaBackend(Backend):
         return bool(_measure(state._rows("x"), state._rows("pairs")[:, 0], state._rows("pairs")[:, 1], state._rows("rest"), mech.k, out))
 
     def constrain(self, state, r_x, r_anchor) -> None:
+        """Compiled, base by base."""
         _constrain(state._rows("x"), state._rows("v"), state._rows("anchor"), state._rows("anchor_dir"), _radii(r_x), _radii(r_anchor))
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "_NumbaCall":
@@ -1495,6 +1498,7 @@ class NumbaBackend(Backend):
                         kernel.columns, kernel.resin)
 
     def patch_labels(self, state) -> np.ndarray:
+        """Compiled union–find over the intact springs, labels in order of each patch's smallest base."""
         labels = np.empty(state.n_bases, dtype=np.int32)
         _components(state.n_bases, state._rows("pairs")[:, 0], state._rows("pairs")[:, 1], state._rows("intact"), labels)
         return labels

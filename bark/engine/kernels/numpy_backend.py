@@ -86,14 +86,17 @@ class NumpyBackend(Backend):
         return f
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
+        """On whole arrays, the intact springs' forces summed in the kernel's order."""
         return self._spring_forces(state, mech, x, state._rows("intact"))
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
+        """On whole arrays, the resin law's tension of every spring."""
         _, length = self.geometry(state, state._rows("x"))
         out[:] = resin_tension(self.resin, state, length, mech.k)
         return bool(np.isfinite(out).all())
 
     def constrain(self, state, r_x, r_anchor) -> None:
+        """On whole arrays: positions scaled to the radius, radial velocity removed, anchors placed."""
         x, v = state._rows("x"), state._rows("v")
         r = np.asarray(r_x, dtype=float)
         scale = physics.surface_scale(x[:, 0], x[:, 1], r)
@@ -105,6 +108,7 @@ class NumpyBackend(Backend):
         state._rows("anchor")[:, :2] = np.reshape(r_anchor, (-1, 1)) * state._rows("anchor_dir")
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "ArrayCall":
+        """An :class:`ArrayCall`: the call's steps on whole arrays, one after another."""
         return ArrayCall(self, state, mech, plan, tension)
 
     def patch_labels(self, state) -> np.ndarray:
@@ -134,6 +138,8 @@ class ArrayCall(Call):
         self.log: list[tuple[np.ndarray, int, np.ndarray]] = []
 
     def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+        """:meth:`Call.take` on whole arrays, one step after another (with strategies' Python verbs,
+        one step a call)."""
         state, mech, plan, verbs = self.state, self.mech, self.plan, self.verbs
         part, breaking = plan.breaker, plan.breaks == "kernel"
         judged = verbs.parts if verbs is not None and plan.breaks == "python" else (part,)  # whose loads steer
@@ -184,6 +190,8 @@ class ArrayCall(Call):
         return done, load, candidate
 
     def undo(self) -> None:
+        """Back to the copies kept at the call's start: positions, velocities, anchors and the fields
+        the resin changes; the break log emptied."""
         for keep, arr in zip(self.start, (self.state._rows("x"), self.state._rows("v"), self.state._rows("anchor"))):
             arr[...] = keep
         for name, keep in self.flowed.items():
@@ -191,6 +199,7 @@ class ArrayCall(Call):
         self.log = []
 
     def result(self, done: int, load: float, picked: bool) -> Steps:
+        """:meth:`Call.result`: the springs broken at each step kept, with their tensions."""
         log = self.log
         return Steps(done=done, load=load, picked=picked,
                      broken=np.concatenate([b for b, _, _ in log]) if log else np.empty(0, np.int64),
