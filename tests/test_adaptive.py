@@ -107,6 +107,40 @@ def test_adaptive_numpy_and_numba_agree(make_sim):
     np.testing.assert_allclose(runs["numpy"].state.x, runs["numba"].state.x, rtol=0, atol=1e-12)
 
 
+def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monkeypatch):
+    """A call allowed only a few steps (bases joining every 0.1 time units end many) is replayed up to
+    a refused step, its bases never copied every step (``IN_PLACE_STEPS``): the same bits as the numpy
+    backend."""
+    from bark.engine import kernels
+    from bark.engine.kernels.numba_backend import IN_PLACE_STEPS
+    from bark.model.lattice import Lattice
+
+    calls, replays = [], []
+    take_steps = kernels.take_steps
+
+    def recording(call, plan):
+        undo = call.undo
+        call.undo = lambda: (replays.append(len(plan.times)), undo())[1]
+        result = take_steps(call, plan)
+        calls.append((len(plan.times), call.undone))
+        return result
+
+    monkeypatch.setattr(kernels, "take_steps", recording)
+    lattice = Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
+    runs = {}
+    for backend in ("numpy", "numba"):
+        calls.clear()
+        replays.clear()
+        runs[backend] = make_sim(backend=backend, lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive")
+        runs[backend].run(Stop(until_time=5.0))
+    assert all(not undone for n, undone in calls if n <= IN_PLACE_STEPS)
+    assert any(n <= IN_PLACE_STEPS for n in replays)  # refused steps of short calls there were, replayed
+    a, b = runs["numpy"], runs["numba"]
+    assert a.n_broken > 20 and a.step_count == b.step_count
+    for name in ("x", "v", "anchor", "intact"):
+        assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name
+
+
 @pytest.mark.parametrize("bulged", [False, True])
 def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, monkeypatch, bulged):
     """Under adaptive stepping the numba kernel takes a refused step back from its copy of the bases

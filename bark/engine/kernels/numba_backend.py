@@ -96,6 +96,13 @@ def _no_flow(length, rest, own, q, h, params):
     return None
 
 
+IN_PLACE_STEPS = 8
+"""Steps a call must be allowed to take before a step adaptive stepping refuses is taken back from a
+copy (kept of every step's bases) rather than by replaying the call to it.  A replay costs the
+steps before the refused one, at most ``len(times) − 1``, and only when a step is refused; the copy
+costs a pass over the bases every step.  Calls of a few steps (the whole tree's, ended by every
+join) replay; long calls (a trunk segment's, up to 128 steps) copy.  The bits are the same."""
+
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
 block's loops in SIMD lanes); in a parallel kernel the blocks are shared among threads.  Every base's
@@ -440,8 +447,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
     step is replayed from them), and, when the last step is accepted, receives the positions it ends
     with (for the next call's comparison); its last nine vectors, where adaptive stepping may refuse
-    a step (and the resin does not flow), the bases before each step, so that a refused step is
-    taken back here at the cost of a copy a step instead of a replay of the call (its breaks
+    a step, the resin does not flow and the call may take more than ``IN_PLACE_STEPS`` steps, the
+    bases before each step, so that a refused step is taken back here at the cost of a copy a step
+    instead of a replay of the call (its breaks
     undone, the call's steps those before it; the forces in ``f`` are then the refused step's, and
     the next call makes them again)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
@@ -453,7 +461,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     hm = h / m
     # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
     # that flows changes its springs too: that call is replayed from its start by the caller instead)
-    in_place = accept_load < np.inf and not evolve
+    in_place = accept_load < np.inf and not evolve and times.shape[0] > IN_PLACE_STEPS
     prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
@@ -866,7 +874,24 @@ def update_on_axis(part):
     return evaluate
 
 
+_BY_PARTS: dict[tuple, tuple] = {}
+"""The kernel of each combination of part objects seen, by their identities (a strategy makes its part
+once): a call finds its kernel without building the combination's key again (:func:`_combination`
+walks every part's helpers)."""
+
+
 def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None):
+    """:func:`_specialized`, found by the parts' identities after the first time."""
+    ids = (id(integrator), id(breaker), id(growth), id(resin), bool(parallel), tuple(columns))
+    seen = _BY_PARTS.get(ids)
+    if seen is not None and all(a is b for a, b in zip(seen[:4], (integrator, breaker, growth, resin))):
+        return seen[4]
+    kernel = _specialized(integrator, breaker, growth, parallel, columns, resin)
+    _BY_PARTS[ids] = (integrator, breaker, growth, resin, kernel)  # the parts kept: their ids stay theirs
+    return kernel
+
+
+def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None):
     """The stepping kernel with the integrator part's ``update`` (``integrator``, an
     :class:`~bark.contract.parts.IntegratorPart`), the breaker part's rule and load (``breaker``, a
     :class:`~bark.contract.parts.BreakerPart`) and the growth part's functions (``growth``, a
