@@ -15,12 +15,15 @@ takes a matplotlib axes first and draws there, never a figure of its own::
 
 ``draw_tree(ax, TreeData.of(sim, 7, scene.dome, scene.leaves))`` draws the tree from the side
 (``bark_cli.tree_picture``; its extent and the leaves' width on the page from the tree and the axes
-unless given).  This module imports matplotlib; ``bark`` itself never does.
+unless given); ``draw_quartet(ax, comparison, "orientation")`` and ``draw_pairing`` draw Fig. 8's
+quartet analysis of four patterns (``bark.analysis.compare.compare``).  This module imports
+matplotlib; ``bark`` itself never does.
 """
 
-from bark_cli.figures import draw_histogram, draw_radial
+from bark_cli.figures import draw_histogram, draw_pairing, draw_quartet, draw_radial
 from bark_cli.pictures import PatternData, TreeData
 from bark_cli.plot import draw_pattern
 from bark_cli.tree_picture import draw_tree
 
-__all__ = ["PatternData", "TreeData", "draw_histogram", "draw_pattern", "draw_radial", "draw_tree"]
+__all__ = ["PatternData", "TreeData", "draw_histogram", "draw_pairing", "draw_pattern", "draw_quartet", "draw_radial",
+           "draw_tree"]

@@ -154,7 +154,11 @@ def _boxes(ax, names) -> None:
     ax.set_axis_off()
 
 
-def _quartet_panel(ax, comparison: Comparison, quantity: str) -> None:
+def draw_quartet(ax, comparison: Comparison, quantity: str) -> None:
+    """Fig. 8D or E into ``ax``: the quartet of four patterns by the Hellinger distances of
+    ``quantity`` (``orientation`` or ``anisotropy``): the two shortest edges, the third, the three
+    longest, and whether the pairing they infer is valid.  ``comparison``: of four patterns
+    (``bark.analysis.compare.compare``)."""
     q = comparison.quartets[quantity]
     _boxes(ax, comparison.names)
     if q is None:
@@ -171,7 +175,9 @@ def _quartet_panel(ax, comparison: Comparison, quantity: str) -> None:
     ax.set_title(f"{quantity}, Hellinger distance: quartet {verdict}" + (" (tie)" if q.tied else ""), fontsize=8)
 
 
-def _pairing_panel(ax, comparison: Comparison, quantity: str) -> None:
+def draw_pairing(ax, comparison: Comparison, quantity: str) -> None:
+    """Fig. 8F or G into ``ax``: each of four patterns' nearest by ``d_P`` of ``quantity`` (the
+    difference of means in standard errors of the arrow's tail), and whether they pair up."""
     dp, p = comparison.d_p[quantity], comparison.pairings[quantity]
     _boxes(ax, comparison.names)
     if p is None:
@@ -199,8 +205,8 @@ def plot_quartets(comparison: Comparison, path: str | Path) -> Path:
     fig = new_figure(figsize=(10.0, 4.5 * len(shown) + 0.5), dpi=120, layout="constrained")
     axes = np.atleast_2d(fig.subplots(len(shown), 2, squeeze=False))
     for row, quantity in zip(axes, shown):
-        _quartet_panel(row[0], comparison, quantity)
-        _pairing_panel(row[1], comparison, quantity)
+        draw_quartet(row[0], comparison, quantity)
+        draw_pairing(row[1], comparison, quantity)
     missing = [q for q in QUANTITIES if q not in shown]
     fig.suptitle("quartet analysis (blue, solid: the two shortest edges / each pattern's nearest, bold; orange, "
                  "dashed: the third; grey, dotted: the three longest)"

@@ -26,7 +26,7 @@ def test_the_site_builds_with_no_warning_and_runs_its_gallery(tmp_path):
     for page in ("index", "running", "numerics", "patterns", "studies", "model", "departures", "plugins", "api"):
         assert (out / f"{page}.html").is_file(), page
     api = (out / "api.html").read_text()
-    assert "bark.run" in api and "draw_pattern" in api and "Declared" in api  # from the docstrings
-    for example in ("plot_regimes", "plot_small_tree"):  # executed: their figures are in the site
+    assert "bark.run" in api and "draw_pattern" in api and "draw_quartet" in api and "Declared" in api  # docstrings
+    for example in ("plot_regimes", "plot_small_tree", "plot_quartets", "plot_montage", "plot_resin_law"):  # executed
         html = (out / "auto_examples" / f"{example}.html").read_text()
         assert "sphx_glr_" in html and list((out / "_images").glob(f"sphx_glr_{example}_*.png")), example
