@@ -303,3 +303,26 @@ def test_a_calls_load_is_its_last_steps_largest_load(budget):
         sim.advance(stop, most=5)
     assert sim.n_broken > 20 and with_breaks > 5
     assert ended_on_a_break > 5 or budget == math.inf
+
+
+@settings(max_examples=200, deadline=None)
+@given(loads=st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), st.just(math.nan)),
+                      min_size=1, max_size=30),
+       alive=st.lists(st.booleans(), min_size=30, max_size=30))
+def test_the_largest_load_is_the_live_springs_largest_nan_and_all(loads, alive):
+    """``largest_load`` takes every spring's load and leaves the dead ones out: the same number as the
+    largest of the live springs' loads alone — NaN when a live one is NaN, a dead one's never counts,
+    ``-inf`` when none is live."""
+    from bark.contract.parts import BreakerPart, largest_load
+
+    values = np.array(loads)
+    live = np.array(alive[:len(values)])
+    part = BreakerPart(rule=lambda tension, params: tension > 1.0, reads=("tension",),
+                       load=lambda tension, params: tension * 1.0)
+    got = largest_load(part, None, values, live)
+    if not live.any():
+        assert got == -math.inf
+    elif np.isnan(values[live]).any():
+        assert math.isnan(got)
+    else:
+        assert got == float(np.max(values[live]))
