@@ -566,3 +566,17 @@ def test_a_sweep_over_its_bound_is_refused_before_anything_is_built(argv, runs, 
     assert result.exit_code == 2, result.output
     assert f"a sweep of {runs} runs, more than --max-runs 100000" in result.stderr and "raise --max-runs" in result.stderr
     assert len(result.stderr.splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.parametrize("quiet", [True, False])
+def test_the_resource_tracker_says_nothing_of_what_a_dead_worker_left(quiet):
+    """A killed worker leaves its semaphores to multiprocessing's resource tracker, which warns of
+    each on the command's stderr as it removes it; a pool's tracker runs with those warnings off
+    (the control, without, shows the lines the user would otherwise see)."""
+    script = ("from multiprocessing import resource_tracker\n"
+              "from bark.studies.pool import quiet_resource_tracker\n"
+              f"quiet_resource_tracker() if {quiet} else resource_tracker.ensure_running()\n"
+              "resource_tracker.register('/mp-bark-test-gone', 'semaphore')  # left, and already gone\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0
+    assert ("resource_tracker" in done.stderr) is not quiet, done.stderr

@@ -15,6 +15,27 @@ class WorkerDied(RuntimeError):
     before is kept."""
 
 
+TRACKER_WARNINGS = "ignore::UserWarning:multiprocessing.resource_tracker"
+"""The warning filter multiprocessing's resource tracker runs with (:func:`quiet_resource_tracker`)."""
+
+
+def quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker — the process that removes what a dead worker left
+    behind (its semaphores) — with its own warnings off.  After a worker is killed it warns, on the
+    command's stderr and after the command's own one-line message, of each semaphore it finds gone
+    (``resource_tracker: '/mp-…': No such file or directory``): four lines of Python the user did
+    not ask for.  The filter is given to the tracker alone (its command line is made from
+    ``sys.warnoptions`` when it starts); a tracker already running is left as it is."""
+    import sys
+    from multiprocessing import resource_tracker
+
+    sys.warnoptions.append(TRACKER_WARNINGS)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        sys.warnoptions.remove(TRACKER_WARNINGS)
+
+
 class LocalPool:
     """``workers`` local processes, spawned (a clean interpreter: no threads or locks inherited from
     the caller) and started once for the whole study; each takes its share of the cores for its
@@ -29,6 +50,7 @@ class LocalPool:
 
         numba_env.thread_count()  # a value numba would fail on is dropped here, once, not in every worker
         self.slots, self.what = workers, what
+        quiet_resource_tracker()
         try:
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                             initializer=worker_start, initargs=(max(1, cores() // workers),))
