@@ -75,6 +75,23 @@ def test_a_kernel_compiled_in_this_process_is_ready_and_another_combination_is_n
     assert not compiled(parts[0], breaker, parts[2], parallel=True)  # never made here, nothing on disk
 
 
+def test_a_kernel_is_found_again_by_its_parts_and_the_parts_seen_are_bounded():
+    """The same part objects find the same kernel without building its key; equal parts made anew
+    (a fit's worker, every run) find it by the key, and the parts kept for the lookup stay few."""
+    import attrs
+
+    from bark.engine.kernels import numba_backend
+    from bark.engine.stepping import breaking_part
+
+    sim = runner.run(Scene.from_dict({**SHORT, "run": {**SHORT["run"], "until_time": 5.0, "backend": "numba"}}), None).sim
+    integrator, growth, breaker = sim.integrator.part_, sim.growth.part_, breaking_part(sim.breakers)
+    kernel = specialized(integrator, breaker, growth)
+    assert specialized(integrator, breaker, growth) is kernel
+    for _ in range(3 * numba_backend.BY_PARTS_KEPT):
+        assert specialized(attrs.evolve(integrator), attrs.evolve(breaker), attrs.evolve(growth)) is kernel
+    assert len(numba_backend._BY_PARTS) <= numba_backend.BY_PARTS_KEPT
+
+
 def test_a_first_run_on_empty_caches_starts_at_once_with_the_same_results(tmp_path):
     """A whole process on new, empty caches, of a run long enough that ``auto`` would take numba had
     it its kernel (``AUTO_WORK``): it runs on numpy, says so on stderr in one line, and writes the same

@@ -875,9 +875,11 @@ def update_on_axis(part):
 
 
 _BY_PARTS: dict[tuple, tuple] = {}
-"""The kernel of each combination of part objects seen, by their identities (a strategy makes its part
-once): a call finds its kernel without building the combination's key again (:func:`_combination`
-walks every part's helpers)."""
+"""The kernel of the last combinations of part objects seen (at most ``BY_PARTS_KEPT``), by their
+identities (a strategy makes its part once): a call finds its kernel without building the
+combination's key again (:func:`_combination` walks every part's helpers).  Bounded: a fit's worker
+makes new parts for every run, and each entry keeps its parts alive."""
+BY_PARTS_KEPT = 16
 
 
 def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None):
@@ -887,6 +889,8 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
     if seen is not None and all(a is b for a, b in zip(seen[:4], (integrator, breaker, growth, resin))):
         return seen[4]
     kernel = _specialized(integrator, breaker, growth, parallel, columns, resin)
+    while len(_BY_PARTS) >= BY_PARTS_KEPT:  # the oldest goes
+        del _BY_PARTS[next(iter(_BY_PARTS))]
     _BY_PARTS[ids] = (integrator, breaker, growth, resin, kernel)  # the parts kept: their ids stay theirs
     return kernel
 
