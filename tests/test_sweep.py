@@ -580,3 +580,26 @@ def test_the_resource_tracker_says_nothing_of_what_a_dead_worker_left(quiet):
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0
     assert ("resource_tracker" in done.stderr) is not quiet, done.stderr
+
+
+def _sleep_for(seconds: float) -> float:
+    import time as clock
+
+    clock.sleep(seconds)  # a run in flight when the pool is closed; the test waits on no clock
+    return seconds
+
+
+@pytest.mark.slow  # spawns a worker process: a second or more of start-up
+def test_a_closed_pool_leaves_no_thread_to_race_python_s_exit():
+    """Closing a local pool mid-run (a signal, a dead worker) ends the executor's manager thread
+    before close returns: left running, it closes its wake-up pipe while Python's exit hook writes
+    to it, and an ``OSError: [Errno 9] Bad file descriptor`` traceback followed bark's one line
+    (CPython gh-125451, on 3.11; seen once in CI on a SIGTERM-stopped sweep)."""
+    from bark.studies.pool import LocalPool
+
+    pool = LocalPool(1, "test")
+    future = pool.submit(_sleep_for, 600.0)
+    manager = pool.pool._executor_manager_thread
+    assert manager is not None and manager.is_alive()
+    pool.close()
+    assert not manager.is_alive() and future.done()

@@ -36,6 +36,12 @@ def quiet_resource_tracker() -> None:
         sys.warnoptions.remove(TRACKER_WARNINGS)
 
 
+CLOSE_S = 30.0
+"""At most how long closing a local pool waits for its executor's manager thread to end once the
+workers are ended (it ends as soon as it sees them gone; the bound is for a worker the system has
+not yet let die)."""
+
+
 class LocalPool:
     """``workers`` local processes, spawned (a clean interpreter: no threads or locks inherited from
     the caller) and started once for the whole study; each takes its share of the cores for its
@@ -84,10 +90,18 @@ class LocalPool:
         return isinstance(error, BrokenProcessPool)
 
     def close(self) -> None:
-        """Stop at once: the runs in flight are lost either way, not waited for."""
+        """Stop at once: the runs in flight are lost either way, not waited for.  The workers are
+        ended first, then the executor's manager thread (which notices them gone and closes its
+        pipes) is given ``CLOSE_S`` to finish: a process that leaves while that thread is still
+        closing races Python's own exit hook, which writes to the pipe being closed and prints an
+        ``OSError: [Errno 9] Bad file descriptor`` traceback after bark's one line (CPython
+        gh-125451, fixed in 3.12.8 and 3.13.1, not in 3.11)."""
+        manager = getattr(self.pool, "_executor_manager_thread", None)
         for worker in list((getattr(self.pool, "_processes", None) or {}).values()):
             worker.terminate()
         self.pool.shutdown(wait=False, cancel_futures=True)
+        if manager is not None:
+            manager.join(CLOSE_S)
 
 
 class DaskPool:
