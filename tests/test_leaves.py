@@ -151,14 +151,14 @@ def test_the_small_tree_with_leaves_a_series_and_a_mesh_resumed_ends_bit_for_bit
     with Image.open(whole / "tree-series.png") as image:
         assert image.size[0] > 2 * image.size[1]  # five trees side by side
     trees = checkpoint.load(whole)[4]["trees"]
-    assert trees["t"].tolist() == pytest.approx([0.0, 6.2, 12.4, 18.6, 24.8])
+    assert trees["t"].tolist() == pytest.approx([0.0, 18.5625, 37.125, 55.6875, 74.25])
     mesh = meshio.read(whole / "tree.vtu")
     leaf = mesh.cell_data["leaf"][0] == 1
     assert leaf.any() and (mesh.cell_data["patch"][0][leaf] == -1).all()
     assert (~leaf).sum() == json.loads((whole / "summary.json").read_text())["n_bases"]
     seen = []
     stopped = runner.run(scene, part, checkpoint_every=1e-9, observe=lambda s, stop: seen.append(s.state.t),
-                         interrupted=lambda: "interrupted" if seen and seen[-1] >= 9.0 else None)
+                         interrupted=lambda: "interrupted" if seen and seen[-1] >= 27.0 else None)
     assert stopped.stop_reason == "interrupted"
     runner.resume(part)
     for name in ("tree.vtu", "tree.ply", "patches.csv"):

@@ -660,8 +660,9 @@ def test_a_patch_whose_points_are_all_at_one_place_has_no_orientation(on_trunk):
                                                                        max_size=20), st.integers(1, 3))
 def test_patch_colours_are_networkx_greedy_colouring_of_touching_patches(labels, pairs, min_size):
     """Patches that touch (a broken spring between them) get different colours — networkx's greedy
-    colouring of the patches' graph — and, where none touch, every patch the first colour (what that
-    colouring gives an edgeless graph, without importing networkx)."""
+    colouring of the patches' graph, its colours renamed so that the one covering the most bases is
+    the palette's first — and, where none touch, every patch the first colour (what that colouring
+    gives an edgeless graph, without importing networkx)."""
     import networkx as nx
 
     from bark.analysis.pattern import PALETTE, _colour_of_label, _neighbouring
@@ -674,6 +675,9 @@ def test_patch_colours_are_networkx_greedy_colouring_of_touching_patches(labels,
     graph = nx.Graph()
     graph.add_nodes_from(np.flatnonzero(sizes >= min_size).tolist())
     graph.add_edges_from(_neighbouring(labels, sizes, pairs, min_size).tolist())
-    for label, colour in nx.greedy_color(graph, strategy="smallest_last").items():
-        assert got[label] == colour % len(PALETTE)
+    greedy = nx.greedy_color(graph, strategy="smallest_last")
+    for label, colour in greedy.items():  # the same colouring, its colours renamed (one to one)
+        assert all((got[label] == got[other]) == (colour == greedy[other]) for other in greedy)
+    shares = [sizes[[k for k in greedy if got[k] == c]].sum() for c in range(len(PALETTE))]
+    assert shares == sorted(shares, reverse=True)  # the colour covering the most bases first
     assert (got[sizes < min_size] == len(PALETTE)).all()

@@ -629,8 +629,8 @@ def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = 
     """An RGB colour (uint8) per base: its patch's, :data:`FRAGMENT_GREY` for fragments of fewer
     than ``min_size`` bases.  With the springs (``pairs`` and their ``intact`` mask) no two
     neighbouring patches share a colour: the patches that a broken spring joins are neighbours, and
-    the graph of neighbours is coloured greedily (``networkx.greedy_color``, largest first; a map
-    needs few colours).  Without them a patch's colour follows its label, stable from frame to frame
+    the graph of neighbours is coloured greedily (``networkx.greedy_color``, smallest last; a map
+    needs few colours), and the colour that covers the most bases is the palette's first.  Without them a patch's colour follows its label, stable from frame to frame
     of an animation."""
     return rgb(_colour_of_label(labels, min_size, pairs, intact)[np.asarray(labels, dtype=np.int64)])
 
@@ -667,8 +667,20 @@ def _colour_of_label(labels: np.ndarray, min_size: int, pairs: np.ndarray | None
             graph.add_edges_from(edges.tolist())
             for label, colour in nx.greedy_color(graph, strategy="smallest_last").items():  # planar: <= 6
                 index[label] = colour % len(PALETTE)
+            index[nodes] = _by_share(index[nodes], sizes[nodes])
     index[sizes < min_size] = len(PALETTE)
     return index
+
+
+def _by_share(colour: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The colours ``colour`` of patches of ``sizes`` bases renamed so that the colour covering the
+    most bases is ``PALETTE[0]``, the next ``PALETTE[1]``, … (ties: the lower colour first): the same
+    colouring (a renaming keeps neighbours apart), the trunk's bulk in the first colour, not in
+    whatever the greedy order left it (a green trunk among green leaves)."""
+    share = np.bincount(colour, weights=sizes, minlength=len(PALETTE))
+    rank = np.empty(len(share), np.uint8)
+    rank[np.lexsort((np.arange(len(share)), -share))] = np.arange(len(share), dtype=np.uint8)
+    return rank[colour]
 
 
 def lineage_colours(labels_along: list[np.ndarray], min_size: int, pairs: np.ndarray,
