@@ -99,12 +99,9 @@ class NumpyBackend(Backend):
         """On whole arrays: positions scaled to the radius, radial velocity removed, anchors placed."""
         x, v = state._rows("x"), state._rows("v")
         r = np.asarray(r_x, dtype=float)
-        scale = physics.surface_scale(x[:, 0], x[:, 1], r)
-        x[:, 0] *= scale
-        x[:, 1] *= scale
+        x[:, :2] *= physics.surface_scale(x[:, 0], x[:, 1], r)[:, None]
         vr = physics.radial_speed(v[:, 0], v[:, 1], x[:, 0], x[:, 1], 1.0 / (r * r))
-        v[:, 0] -= vr * x[:, 0]
-        v[:, 1] -= vr * x[:, 1]
+        v[:, :2] -= vr[:, None] * x[:, :2]
         state._rows("anchor")[:, :2] = np.reshape(r_anchor, (-1, 1)) * state._rows("anchor_dir")
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "ArrayCall":
@@ -157,10 +154,9 @@ class ArrayCall(Call):
             if verbs is not None:
                 verbs.move(state, plan.h)
                 r_x, r_a = verbs.radii(t, state)
-            else:
-                for axis in range(3):
-                    g = physics.base_force(fs[:, axis], x[:, axis], a[:, axis], v[:, axis], mech.c, mech.b)
-                    x[:, axis], v[:, axis] = update(x[:, axis], v[:, axis], g, hm, plan.h, ip)
+            else:  # every coordinate at once: the part's update is element-wise (one coordinate of one base)
+                g = physics.base_force(fs, x, a, v, mech.c, mech.b)
+                x[...], v[...] = update(x, v, g, hm, plan.h, ip)
                 q = growth.at(t)
                 r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
                 r_a = r_x if growth.uniform else growth.radius(t, z0, q)
