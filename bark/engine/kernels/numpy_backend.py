@@ -73,9 +73,11 @@ class NumpyBackend(Backend):
         return self.forces_of(state, d, length, resin_tension(self.resin, state, length, mech.k), intact)
 
     def forces_of(self, state, d, length, t, intact) -> np.ndarray:
-        """The springs' forces on the bases from their vectors ``d``, lengths and tensions ``t``."""
-        g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf)) * intact
-        pull = d * g[:, None]
+        """The springs' forces on the bases from their vectors ``d`` (used up: each becomes its spring's
+        force vector, in place), lengths and tensions ``t``."""
+        g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf))
+        g *= intact
+        pull = np.multiply(d, g[:, None], out=d)
         runs = self.runs(state)
         if runs is None:
             return np.asarray(self.incidence(state) @ pull)
