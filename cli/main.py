@@ -241,7 +241,7 @@ def _painter(scene=None):
     from bark_cli.pictures import PICTURES, Painter
 
     drawn = None if scene is None else [PICTURES[name][1] for name in PICTURES if scene.has(name)]
-    return Painter(workers=None if drawn is None or len(drawn) > 1 else 1, kinds=drawn)  # one picture: one process
+    return Painter(kinds=drawn)
 
 
 class _Lazy:

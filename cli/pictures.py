@@ -357,7 +357,8 @@ _LOST = object()
 class Painter:
     """Drawing processes started now (see the module's docstring), or drawing in this process.
 
-    ``workers`` processes draw (default: two where this process may use two cores or more, else one):
+    ``workers`` processes draw (default: two where this process may use two cores or more and there are
+    two pictures or more to draw, else one):
     the first imports matplotlib and forks the others, and the pictures a run hands over are shared
     among them as each becomes free (the whole tree's three pictures took 1.1 s one after another).
     The first imports ahead the modules that draw ``kinds`` (default: every kind; ``PICTURES``).
@@ -372,7 +373,7 @@ class Painter:
         self._ends: list = []
         matplotlib_folder()  # here: the drawing processes inherit it, and the warning is said once, here
         if "fork" in multiprocessing.get_all_start_methods() and sys.platform.startswith("linux"):
-            count = max(1, workers if workers is not None else min(2, cores()))
+            count = max(1, workers if workers is not None else min(2, cores(), len(DRAWN_BY if kinds is None else kinds)))
             ctx = multiprocessing.get_context("fork")
             pipes = []
             for _ in range(count):

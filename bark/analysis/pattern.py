@@ -630,8 +630,8 @@ def patch_colours(labels: np.ndarray, min_size: int, pairs: np.ndarray | None = 
     than ``min_size`` bases.  With the springs (``pairs`` and their ``intact`` mask) no two
     neighbouring patches share a colour: the patches that a broken spring joins are neighbours, and
     the graph of neighbours is coloured greedily (``networkx.greedy_color``, smallest last; a map
-    needs few colours), and the colour that covers the most bases is the palette's first.  Without them a patch's colour follows its label, stable from frame to frame
-    of an animation."""
+    needs few colours), and the colour that covers the most bases is the palette's first.  Without
+    them a patch's colour follows its label, stable from frame to frame of an animation."""
     return rgb(_colour_of_label(labels, min_size, pairs, intact)[np.asarray(labels, dtype=np.int64)])
 
 
