@@ -568,7 +568,8 @@ def test_the_frames_of_a_run_keep_their_colours_and_end_on_the_pattern_s(seed, f
         if not differ:  # only where a patch's neighbours hold every colour
             broken = pairs[inside & ~intact_along[k]]
             sizes, across = np.bincount(labels), labels[broken]
-            clash = across[(across[:, 0] != across[:, 1]) & (index[broken[:, 0]] == index[broken[:, 1]])]
+            counted = (sizes[across] >= min_size).all(axis=1)  # two fragments, both grey, are no clash
+            clash = across[(across[:, 0] != across[:, 1]) & counted & (index[broken[:, 0]] == index[broken[:, 1]])]
             for a in (min(pair, key=lambda q: (sizes[q], q)) for pair in clash.tolist()):  # the one recoloured
                 around = np.concatenate([across[across[:, 0] == a, 1], across[across[:, 1] == a, 0]])
                 assert len({int(index[labels == q][0]) for q in around if sizes[q] >= min_size}) == len(PALETTE)

@@ -720,20 +720,26 @@ def lineage_colours(labels_along: list[np.ndarray], min_size: int, pairs: np.nda
 def _separate_neighbours(index: np.ndarray, labels: np.ndarray, sizes: np.ndarray, pairs: np.ndarray,
                          min_size: int) -> None:
     """Recolour (in ``index``, a colour per label) the smaller of any two neighbouring patches of
-    ``labels`` sharing a colour with the first colour none of its neighbours has."""
+    ``labels`` sharing a colour with the first colour none of its neighbours has, smaller patches
+    first, and again while a pass recoloured one: a patch whose neighbours held every colour may
+    find one free once a neighbour has changed.  A recolouring ends a clash and makes none, so the
+    clashes only fall and the passes end."""
     import networkx as nx
 
     across = _neighbouring(labels, sizes, pairs, min_size)
     if not across.size:
         return
     graph = nx.Graph(across.tolist())
-    clashes = sorted({min(a, b, key=lambda q: (sizes[q], q)) for a, b in graph.edges if index[a] == index[b]},
-                     key=lambda q: (sizes[q], q))
-    for label in clashes:
-        taken = {int(index[q]) for q in graph[label]}
-        if int(index[label]) in taken:
+    changed = True
+    while changed:
+        changed = False
+        clashes = sorted({min(a, b, key=lambda q: (sizes[q], q)) for a, b in graph.edges if index[a] == index[b]},
+                         key=lambda q: (sizes[q], q))
+        for label in clashes:
+            taken = {int(index[q]) for q in graph[label]}
             free = [c for c in range(len(PALETTE)) if c not in taken]
-            index[label] = free[0] if free else index[label]
+            if int(index[label]) in taken and free:
+                index[label], changed = free[0], True
 
 
 def _neighbouring(labels: np.ndarray, sizes: np.ndarray, pairs: np.ndarray, min_size: int) -> np.ndarray:
