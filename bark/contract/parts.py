@@ -284,39 +284,70 @@ NO_BREAKING = BreakerPart(rule=physics.no_breaking, reads=("tension",))
 """The part of a layer without fracture: nothing breaks, nothing steers the step."""
 
 
-def spring_inputs(state, tension: np.ndarray, reads: tuple[str, ...], length: np.ndarray | None = None) -> list:
-    """The per-spring arrays ``reads`` names, for ``state`` with ``tension`` (every spring's); the
-    length is measured from the positions when not given (``bark.model.physics.length``, as the kernels)."""
-    if "length" in reads and length is None:
-        from bark.model.forces import spring_geometry
-
-        _, length = spring_geometry(state._rows("x"), state._rows("pairs"))
-    out = []
-    for name in reads:  # the state's fields as plain read-only views: a part reads them, as in the kernel
+def _fields_of(state, reads: tuple[str, ...]) -> dict:
+    """The state's per-spring fields ``reads`` names, as plain read-only views (a part reads them, as
+    in the kernel), ``inv_fmax`` made from ``fmax``; ``tension`` and ``length`` are given per step."""
+    out = {}
+    for name in reads:
         if name in ("tension", "length"):
-            out.append(tension if name == "tension" else length)
             continue
         rows = state._rows("fmax" if name == "inv_fmax" else name).view()
         rows.flags.writeable = False
-        out.append(1.0 / rows if name == "inv_fmax" else rows)
+        out[name] = 1.0 / rows if name == "inv_fmax" else rows
     return out
+
+
+def _inputs(fields: dict, reads: tuple[str, ...], tension: np.ndarray, length, state) -> list:
+    if "length" in reads and length is None:  # measured from the positions, as the kernels do
+        from bark.model.forces import spring_geometry
+
+        length = spring_geometry(state._rows("x"), state._rows("pairs"))[1]
+    return [tension if name == "tension" else length if name == "length" else fields[name] for name in reads]
+
+
+def spring_inputs(state, tension: np.ndarray, reads: tuple[str, ...], length: np.ndarray | None = None) -> list:
+    """The per-spring arrays ``reads`` names, for ``state`` with ``tension`` (every spring's); the
+    length is measured from the positions when not given (``bark.model.physics.length``, as the kernels)."""
+    return _inputs(_fields_of(state, reads), reads, tension, length, state)
+
+
+class Judge:
+    """A breaker part bound to a state for the steps of one call: the fields its rule and load read
+    taken from the state once (inside a call a field changes only in place, and ``fmax`` not at
+    all), then :meth:`picks` and :meth:`largest_load` per step."""
+
+    def __init__(self, part: BreakerPart, state) -> None:
+        self.part, self.state = part, state
+        self.fields = _fields_of(state, part.reads + (part.load_reads if part.load is not None else ()))
+
+    def picks(self, tension: np.ndarray, live: np.ndarray, length: np.ndarray | None = None) -> np.ndarray:
+        """Ids of the ``live`` springs the part's rule picks, given every spring's ``tension`` (and length)."""
+        part = self.part
+        return np.flatnonzero(live & part.rule(*_inputs(self.fields, part.reads, tension, length, self.state),
+                                               part.params))
+
+    def largest_load(self, tension: np.ndarray, live: np.ndarray, length: np.ndarray | None = None) -> float:
+        """The largest load of the ``live`` springs (``-inf`` if none, or if the part has no load; NaN
+        if a load is NaN)."""
+        part = self.part
+        if part.load is None or not live.any():
+            return -np.inf
+        # every spring's load, the dead ones' put below any: the same largest number as gathering the
+        # live springs first (a maximum is exact; a live NaN stays NaN), without the gather's copies
+        load = part.load(*_inputs(self.fields, part.load_reads, tension, length, self.state), part.params)
+        return float(np.max(np.where(live, load, -np.inf)))
 
 
 def picks(part: BreakerPart, state, tension: np.ndarray, live: np.ndarray, length: np.ndarray | None = None) -> np.ndarray:
     """Ids of the ``live`` springs the part's rule picks, given every spring's ``tension`` (and length)."""
-    return np.flatnonzero(live & part.rule(*spring_inputs(state, tension, part.reads, length), part.params))
+    return Judge(part, state).picks(tension, live, length)
 
 
 def largest_load(part: BreakerPart, state, tension: np.ndarray, live: np.ndarray,
                  length: np.ndarray | None = None) -> float:
     """The largest load of the ``live`` springs (``-inf`` if none, or if the part has no load; NaN
     if a load is NaN)."""
-    if part.load is None or not live.any():
-        return -np.inf
-    # every spring's load, the dead ones' put below any: the same largest number as gathering the
-    # live springs first (a maximum is exact; a live NaN stays NaN), without the gather's copies
-    load = part.load(*spring_inputs(state, tension, part.load_reads, length), part.params)
-    return float(np.max(np.where(live, load, -np.inf)))
+    return Judge(part, state).largest_load(tension, live, length)
 
 
 def how_it_runs(strategy) -> str:

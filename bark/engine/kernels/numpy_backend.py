@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from bark.model import physics
 from bark.model.forces import SpringOrder, incidence, spring_geometry
 from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
-from bark.contract.parts import largest_load, picks, resin_evolve, resin_tension
+from bark.contract.parts import Judge, resin_evolve, resin_tension
 
 NAME = "numpy"
 
@@ -117,6 +117,11 @@ class NumpyBackend(Backend):
         return components(state.n_bases, state._rows("pairs"), state._rows("intact"))
 
 
+def _largest(loads: list[float]) -> float:
+    """The largest of the breakers' loads; NaN if one is NaN."""
+    return math.nan if any(map(math.isnan, loads)) else max(loads, default=-math.inf)
+
+
 class ArrayCall(Call):
     """One call's steps on whole arrays: the parts' functions over every base and spring at once.
 
@@ -140,22 +145,27 @@ class ArrayCall(Call):
         """:meth:`Call.take` on whole arrays, one step after another (with strategies' Python verbs,
         one step a call)."""
         state, mech, plan, verbs = self.state, self.mech, self.plan, self.verbs
-        part, breaking = plan.breaker, plan.breaks == "kernel"
-        judged = verbs.parts if verbs is not None and plan.breaks == "python" else (part,)  # whose loads steer
-        resin = self.backend.resin
+        breaking, resin = plan.breaks == "kernel", self.backend.resin
+        rule = Judge(plan.breaker, state)
+        judges = [Judge(p, state) for p in verbs.parts] if verbs is not None and plan.breaks == "python" else [rule]
+        # every step's load is needed (to refuse, report or relax on it, or a resin that flows changes
+        # it after the step); else only the last step's, judged once after the loop, as the kernel does
+        tops = verbs is not None or plan.accept_load < math.inf or plan.report_load < math.inf or bool(relax.any()) \
+            or resin.evolves
         live = state._rows("intact").copy()
         self.log = log = []
         fs = None if verbs is not None else self.backend._spring_forces(state, mech, state._rows("x"), live)
         hm = plan.h / mech.m
         update, ip, growth = (None, None, None) if verbs is not None else (plan.integrator.update, plan.integrator.params,
                                                                           plan.growth)
-        z0 = state._rows("anchor")[:, 2]
-        done, load, candidate, broken = 0, -math.inf, False, 0
+        x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")  # rows changed in place only
+        z0 = a[:, 2]
+        done, load, candidate, broken, picked, t_all = 0, -math.inf, False, 0, None, None
         for step, t in enumerate(times.tolist()[:1] if verbs is not None else times.tolist(), start=1):
-            x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")
             if verbs is not None:
                 verbs.move(state, plan.h)
                 r_x, r_a = verbs.radii(t, state)
+                x = state._rows("x")  # as the Python step left it
             else:  # every coordinate at once: the part's update is element-wise (one coordinate of one base)
                 g = physics.base_force(fs, x, a, v, mech.c, mech.b)
                 x[...], v[...] = update(x, v, g, hm, plan.h, ip)
@@ -165,11 +175,10 @@ class ArrayCall(Call):
             self.backend.constrain(state, r_x, r_a)
             d, length = self.backend.geometry(state, x)
             t_all = resin_tension(resin, state, length, mech.k)
-            loads = [largest_load(p, state, t_all, live, length) for p in judged]
-            load = math.nan if any(map(math.isnan, loads)) else max(loads, default=-math.inf)
+            load = _largest([j.largest_load(t_all, live, length) for j in judges]) if tops else -math.inf
             finite = bool(np.isfinite(x).all() and (np.isfinite(t_all).all() or np.isfinite(t_all[live]).all())) and not math.isnan(load)
             load, done = (load if finite else math.nan), step
-            picked = picks(part, state, t_all, live, length) if finite else np.empty(0, np.int64)
+            picked = rule.picks(t_all, live, length) if finite else np.empty(0, np.int64)
             candidate, broke = bool(picked.size) and not breaking, picked.size if breaking else 0
             if not plan.undoes(load):
                 self.tension[:] = t_all
@@ -185,6 +194,10 @@ class ArrayCall(Call):
             if ends_call(finite, load, plan.accept_load, plan.report_load, candidate, broke, broken, plan.break_budget,
                          plan.max_batch, relax[step - 1]):
                 break
+        if not tops and done and not math.isnan(load):  # the last step's load, over the springs live before it
+            if broke:
+                live[picked] = True
+            load = _largest([j.largest_load(t_all, live, length) for j in judges])
         return done, load, candidate
 
     def undo(self) -> None:
