@@ -122,13 +122,15 @@ def crack_network(points: np.ndarray, labels: np.ndarray, pairs: np.ndarray, int
     sizes = np.bincount(labels, minlength=int(labels.max(initial=-1)) + 1)
     out["n_junctions"] = 0
     if len(cells):
-        # cells that share a base are one junction (where three patches meet, two cells may hold it)
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
+        # cells that share a base are one junction (where three patches meet, two cells may hold it):
+        # the components of cells joined to their bases, the cells numbered first, so their
+        # components are numbered first, in order of each one's first cell
+        from bark.model.components import components
 
-        incidence = coo_matrix((np.ones(cells.size), (np.repeat(np.arange(len(cells)), 4), cells.ravel())),
-                               shape=(len(cells), n)).tocsr()
-        count, which = connected_components(incidence @ incidence.T, directed=False)
+        m = len(cells)
+        ties = np.column_stack([np.repeat(np.arange(m), 4), m + cells.ravel()])
+        which = components(m + n, ties, np.ones(len(ties), bool))[:m].astype(np.int64)
+        count = int(which.max()) + 1
         who = np.unique(np.column_stack([np.repeat(which, 4), labels[cells].ravel()]), axis=0)  # (junction, patch)
         per_junction = np.bincount(who[:, 0], minlength=count)
         touched = np.bincount(who[:, 1], minlength=sizes.size)

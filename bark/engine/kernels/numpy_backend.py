@@ -5,14 +5,17 @@ arrays at once; no compiled code.  The reference, and the baseline every speed-u
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, incidence, spring_geometry
 from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
 from bark.contract.parts import Judge, resin_evolve, resin_tension
+
+if TYPE_CHECKING:  # scipy.sparse only where the springs are no lattice's runs (``incidence``)
+    import scipy.sparse as sp
 
 NAME = "numpy"
 
@@ -111,7 +114,7 @@ class NumpyBackend(Backend):
         return ArrayCall(self, state, mech, plan, tension)
 
     def patch_labels(self, state) -> np.ndarray:
-        """Connected components of the intact springs (scipy.sparse.csgraph)."""
+        """Connected components of the intact springs (``bark.model.components``)."""
         from bark.model.components import components
 
         return components(state.n_bases, state._rows("pairs"), state._rows("intact"))
