@@ -120,9 +120,9 @@ def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monk
 
     def recording(call, plan):
         undo = call.undo
-        call.undo = lambda: (replays.append(len(plan.times)), undo())[1]
+        call.undo = lambda: (replays.append(plan.n), undo())[1]
         result = take_steps(call, plan)
-        calls.append((len(plan.times), call.undone))
+        calls.append((plan.n, call.undone))
         return result
 
     monkeypatch.setattr(kernels, "take_steps", recording)
@@ -213,21 +213,23 @@ class _Recorded(Call):
     def __init__(self, ends_at: int, load: float, in_place: bool = False) -> None:
         self.ends_at, self.load, self.asked, self.in_place = ends_at, load, [], in_place
 
-    def take(self, times, relax):
-        self.asked.append(("take", len(times)))
-        done = min(self.ends_at, len(times))
+    def take(self, n):
+        self.asked.append(("take", n))
+        done = min(self.ends_at, n)
         load = self.load if done == self.ends_at else 0.5
-        self.undone = self.in_place and not load <= 1.002
+        self.refused = not load <= 1.002
+        self.undone = self.in_place and self.refused
         return done, load, done == 2 and not self.undone
 
     def undo(self):
         self.asked.append(("undo",))
 
-    def result(self, done, load, picked):
+    def result(self, done, load, picked, refused):
         from bark.engine.kernels import Steps
 
         empty = np.empty(0, np.int64)
-        return Steps(done=done, load=load, picked=picked, broken=empty, step=empty, tension=np.empty(0))
+        return Steps(done=done, load=load, picked=picked, broken=empty, step=empty, tension=np.empty(0),
+                     refused=refused)
 
 
 @pytest.mark.parametrize("load, ends_at, in_place, asked, done", [
@@ -243,10 +245,11 @@ def test_every_backend_undoes_a_step_by_one_algorithm(load, ends_at, in_place, a
     by the call itself where it kept a copy of the state before that step (``Call.undone``)."""
     from bark.engine.kernels import Plan, take_steps
 
-    plan = Plan(h=0.1, times=np.arange(1, 6) * 0.1, integrator=None, growth=None, accept_load=1.002)
+    plan = Plan(h_min=0.05, ticks=0, n=5, integrator=None, growth=None, levels=1, over=1.002)
+    assert plan.accept_load == 1.002 and plan.h == 0.1
     call = _Recorded(ends_at, load, in_place)
     result = take_steps(call, plan)
-    assert call.asked == asked and result.done == done
+    assert call.asked == asked and result.done == done and result.refused == (not load <= 1.002)
     assert math.isnan(result.load) if math.isnan(load) else result.load == load
     assert result.picked == (done == 2 and not in_place)  # a step taken back named no candidate
 
@@ -254,7 +257,7 @@ def test_every_backend_undoes_a_step_by_one_algorithm(load, ends_at, in_place, a
 INF = math.inf
 
 
-@pytest.mark.parametrize("finite, load, candidate, broke, broken, budget, max_batch, relax, ends", [
+@pytest.mark.parametrize("finite, load, candidate, broke, broken, budget, max_batch, stop_here, ends", [
     (True, 0.9, False, 0, 0, INF, 10, False, False),
     (False, 0.9, False, 0, 0, INF, 10, False, True),     # non-finite
     (True, 1.01, False, 0, 0, INF, 10, False, True),     # over accept_load (1.002)
@@ -265,12 +268,52 @@ INF = math.inf
     (True, 1.001, False, 2, 6, 5, 10, False, True),      # broke, the call's breaks past the budget
     (True, 1.001, False, 0, 6, 5, 10, False, False),     # past the budget, but broke nothing this step
     (True, 1.001, False, 11, 11, INF, 10, False, True),  # a degenerate batch
-    (True, 1.0, False, 0, 0, INF, 10, True, True),       # quiet on the coarser grid
-    (True, 1.001, False, 1, 1, INF, 10, True, False),    # not quiet: the clock keeps the halved step
+    (True, 1.0, False, 0, 0, INF, 10, True, True),       # at the time limit, or doubled where it may not go on
 ])
-def test_one_rule_ends_a_call(finite, load, candidate, broke, broken, budget, max_batch, relax, ends):
+def test_one_rule_ends_a_call(finite, load, candidate, broke, broken, budget, max_batch, stop_here, ends):
     from bark.engine.kernels import ends_call
 
-    assert ends_call(finite, load, 1.002, INF, candidate, broke, broken, budget, max_batch, relax) == ends
-    assert ends_call(finite, load, INF, 1.002, candidate, broke, broken, budget, max_batch, relax) == (
+    assert ends_call(finite, load, 1.002, INF, candidate, broke, broken, budget, max_batch, stop_here) == ends
+    assert ends_call(finite, load, INF, 1.002, candidate, broke, broken, budget, max_batch, stop_here) == (
         ends or finite and load > 1.002)  # at the smallest step: kept, and the call ends to record it
+
+
+@pytest.mark.parametrize("halvings, load, end_tick, size, doubled", [
+    (1, 1.0, 8, 4, True),      # quiet, on the grid of the step twice as long
+    (1, 1.0, 4, 4, False),     # quiet, between two of its steps
+    (1, 1.001, 8, 4, False),   # not quiet
+    (0, 0.5, 8, 4, False),     # the full step already
+    (3, -INF, 16, 1, True),    # a breaker without a load is always quiet
+])
+def test_one_rule_doubles_the_step(halvings, load, end_tick, size, doubled):
+    from bark.engine.kernels import doubles, limits
+
+    assert doubles(halvings, load, end_tick, size) == doubled
+    assert limits(1.002, 0, 2) == (1.002, INF) and limits(1.002, 2, 2) == (INF, 1.002) and limits(INF, 0, 2) == (INF, INF)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_calls_that_double_the_step_inside_give_the_bits_of_one_step_calls(make_sim, backend):
+    """The clock doubles a halved step inside a call and the call goes on (no call ends for it): the
+    steps, their times and sizes, and so every bit, are those of a run whose calls take one step each
+    (where the simulation's clock does everything)."""
+    kw = dict(n_bases=400, G=0.05, dt=0.3, seed=3, stepping="adaptive", overshoot_tol=0.002, backend=backend)
+    whole, single = make_sim(**kw).build(), make_sim(**kw)
+    sizes, steps = [], whole.backend.steps
+
+    def watching(state, mech, plan, tension):
+        result = steps(state, mech, plan, tension)
+        sizes.append(np.unique(np.diff(np.r_[plan.ticks, result.ends])))  # the step sizes inside one call
+        return result
+
+    whole.backend.steps = watching
+    whole.run(Stop(until_time=6.0))
+    while single.state.t < whole.state.t - 1e-12:
+        single.step()
+    assert whole.step_count == single.step_count and whole.clock.ticks == single.clock.ticks
+    assert whole.n_broken > 20 and whole.events == single.events
+    for a, b in [(whole.state.x, single.state.x), (whole.state.v, single.state.v), (whole.state.intact, single.state.intact)]:
+        assert np.array_equal(a, b)
+    for key, a in whole.breaks.arrays().items():
+        assert np.array_equal(a, single.breaks.arrays()[key]), key
+    assert sum(len(s) > 1 for s in sizes) > 3  # calls that doubled the step and went on

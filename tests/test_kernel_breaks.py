@@ -291,7 +291,7 @@ def test_a_calls_load_is_its_last_steps_largest_load(budget):
         for name, bound in (("numba", math.inf), ("numba", 1e300), ("numpy", math.inf)):
             state = copy.deepcopy(sim.state)
             tension = np.empty(state.n_springs)
-            r = backends[name].steps(state, sim.mechanics, attrs.evolve(plan, accept_load=bound), tension)
+            r = backends[name].steps(state, sim.mechanics, attrs.evolve(plan, over=bound), tension)
             results.append((r, state))
         (first, s0), *rest = results
         for r, s in rest:

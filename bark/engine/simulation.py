@@ -325,21 +325,21 @@ class Simulation:
         backend's kernel, n = 1 unless the fast path applies, see ``bark.engine.stepping.plan``)::
 
             while stop.reason(sim) is None:
-                plan = stepping.plan(sim, stop)     # n steps of h, and what may happen inside them
+                plan = stepping.plan(sim, stop)     # up to n steps from the clock, what may happen inside
                 result = backend.steps(plan)        # each step: forces (eq. 4) -> velocities (eq. 7)
                                                     #   -> positions (eq. 8) -> surface r(t, z) (eq. 9,
                                                     #   radial velocity removed) -> tensions (the resin
                                                     #   law; eq. 1: k(|d| - l)) -> the breakers' part:
                                                     #   its rule, its load -> the resin's flow (springs
-                                                    #   intact then) -> the next step's forces
-                clock.advance(result.done); t = clock.t     # integer ticks: exact time
+                                                    #   intact then) -> the next step's forces; if quiet
+                                                    #   again (adaptive): double h, staying on its grid
+                clock = result's ticks and halvings; t = clock.t   # integer ticks: exact time
                 break_springs(what the rule broke)  # the intact flags (the graph sees them); logged
                 if the last step went NaN or a load overshot (adaptive): it was undone;
                     halve h and go on, or (at the smallest step) raise NonFiniteStateError
                 if the breakers act in Python (no one part, or its rule named candidates):
                     break_springs(union of breaker.select(state, tension, rng))
                 if a step broke more than degenerate_fraction of the springs: record a degenerate event
-                if quiet again (adaptive): double h, staying on its grid
                 join(the bases due by now)          # new bases and springs at rest
                 call the actions whose triggers fire; observe(sim)
 
@@ -384,15 +384,20 @@ class Simulation:
         plan = stepping.plan(self, stop, most)
         take = self.backend.steps if plan.compiled else (lambda *a: stepping.python_step(self, *a))
         result = take(self.state, self.mechanics, plan, self._tension)
-        first_step, first_tick, size = self.step_count, self.clock.ticks, self.clock.size
-        self.clock.advance(result.done)
+        first_step, ends = self.step_count, result.ends
+        if result.done:  # the clock as the call left it: it may have doubled the step
+            last = int(ends[-1]) - (int(ends[-2]) if result.done > 1 else plan.ticks)
+            self.clock.ticks, self.clock.halvings = int(ends[-1]), result.halvings
+            self.state.h = last * self.clock.h_min
+        else:
+            self.state.h = plan.h
         self.step_count += result.done
-        self.state.t, self.state.h = self.clock.t, plan.h
+        self.state.t = self.clock.t
         if result.broken.size:
             self.break_springs(result.broken, result.tension, step=first_step + result.step,
-                               t=(first_tick + result.step * size) * self.clock.h_min, tension_of_ids=True)
+                               t=ends[result.step - 1] * self.clock.h_min, tension_of_ids=True)
             self._check_degenerate(np.count_nonzero(result.step == result.step[-1]))
-        if plan.undoes(result.load):
+        if result.refused:
             if self.clock.can_halve():
                 self.clock.halve()  # the step was undone: take it again, smaller
                 return result.done
@@ -403,7 +408,6 @@ class Simulation:
             self.events.append({"kind": "overshoot", "t": self.state.t, "step": self.step_count, "load": result.load})
         if plan.breaks == "python" or plan.breaks == "candidates" and result.picked:
             self._break_selected()
-        self.clock.relax(result.load)
         due = self.packing.bases_at(self.state.t) - self.state.n_bases
         if due > 0:  # primary growth has raised the dome past the next leaves: they join where they crossed
             top = float(np.broadcast_to(self.growth.radius(self.state.t, float(self.packing.top(self.state.t))), 1)[0])

@@ -125,11 +125,6 @@ class Clock:
         """Halve the current step."""
         self.halvings += 1
 
-    def relax(self, load: float) -> None:
-        """Quiet again (no spring over its threshold): double the step, staying on the coarser grid."""
-        if self.halvings and load <= 1.0 and self.ticks % (self.size << 1) == 0:
-            self.halvings -= 1
-
     def fit(self, until_time: float) -> None:
         """Shrink ``h`` a little so that ``until_time`` is a whole number of steps (a fresh run with
         automatic or adaptive stepping then ends exactly there)."""
@@ -223,8 +218,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     Many steps go in one call when the integrator and the growth law have compiled forms and the
     breakers share one part (``Breaker.part``); the call then ends where a stop condition can next
     hold (a patch count: after as many breaks as patches are missing), a trigger is next due or
-    bases next join, and — at a halved step — after a quiet step that
-    ends on the grid of the next larger step, where the clock doubles the step (``Plan.relax``).
+    bases next join, or after a step it refuses; it doubles a halved step itself where the clock
+    would (``Plan``).
     Springs the part's rule picks break inside the call when the part decides (a step that adaptive
     stepping undoes is taken back, its breaks with it: ``take_steps``); when it names candidates,
     the call ends after the first step in which it names one, and the breakers select in Python.
@@ -239,19 +234,16 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     compiled = integrator is not None and growth is not None and (part is not None or not steers)
     breaks = "python" if part is None else "kernel" if part.decides else "candidates"  # the Python path's too
     n = 1
-    if compiled and breaks != "python":  # halved steps too: the call ends where the clock may double the step
+    if compiled and breaks != "python":
         n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases + sim.state.n_springs, 1), most or CHUNK))
-    times = clock.times(n)
-    n = _bounded(sim, stop, times, n) if n > 1 else n
-    ends = clock.ticks + (np.arange(n) + 1) * clock.size  # ticks at the end of each step
-    relax = (ends % (clock.size << 1) == 0) if clock.halvings else None
+    n, t_limit, may_double = _bounded(sim, stop, n) if n > 1 else (n, math.inf, True)
     return Plan(
-        h=clock.step, times=times[:n], integrator=integrator if compiled else None, growth=growth if compiled else None,
+        h_min=clock.h_min, ticks=clock.ticks, n=n, levels=clock.levels, halvings=clock.halvings,
+        integrator=integrator if compiled else None, growth=growth if compiled else None,
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
-        accept_load=1.0 + sim.numerics.overshoot_tol if steers and clock.can_halve() else math.inf,
-        report_load=1.0 + sim.numerics.overshoot_tol if steers and not clock.can_halve() else math.inf,
+        over=1.0 + sim.numerics.overshoot_tol if steers else math.inf, t_limit=t_limit, may_double=may_double,
         break_budget=_break_budget(sim, stop), max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
-        relax=relax, threads=sim.numerics.threads,
+        threads=sim.numerics.threads,
     )
 
 
@@ -286,32 +278,37 @@ def breaking_part(breakers) -> BreakerPart | None:
     return parts.pop() if len(parts) == 1 else None
 
 
-def _bounded(sim, stop, times: np.ndarray, n: int) -> int:
-    """``n`` cut to end where bases next join, a trigger is next due, or a time or radius stop can
-    next hold."""
-    join = sim.packing.next_join(sim.state.t, sim.state.n_bases)
-    if join is not None:
-        n = min(n, _first(times >= join - 1e-9 * sim.clock.h) + 1)
+def _bounded(sim, stop, n: int) -> tuple[int, float, bool]:
+    """``(n, t_limit, may_double)``: the call ends after the first step that reaches ``t_limit``,
+    where bases next join, a trigger is next due or a time stop can next hold, and after ``n``
+    steps: cut where a trigger counting steps is next due, and where the present step would reach
+    ``t_limit`` (or a radius stop: the call then may not go on at a doubled step).  A doubled step
+    only reaches them sooner, so the cut is the most steps the call can take, which is what decides
+    how a refused step is taken back (``IN_PLACE_STEPS``)."""
+    eps = 1e-9 * sim.clock.h
+    limits = [sim.packing.next_join(sim.state.t, sim.state.n_bases)]
     for trigger, _ in sim.actions:
         step, due = trigger.next_step(sim), trigger.next_time(sim)
         if step is not None:
             n = min(n, max(1, step - sim.step_count))
-        if due is not None:
-            n = min(n, _first(times >= due - 1e-9 * sim.clock.h) + 1)
-    if stop is not None and stop.until_time is not None:
-        n = min(n, _first(times >= stop.until_time - 1e-9 * sim.clock.h) + 1)
+        limits.append(due)
+    if stop is not None:
+        limits.append(stop.until_time)
+    t_limit = min((t - eps for t in limits if t is not None), default=math.inf)
+    times = sim.clock.times(n)
+    n = min(n, _first(times >= t_limit) + 1)
     if stop is not None and stop.until_radius is not None:
         z = sim.state.anchor[:, 2]
         radii = np.array([sim.growth.mean_radius(t, z) for t in times[:n].tolist()])
-        n = min(n, _first(radii >= stop.until_radius) + 1)
-    return max(n, 1)
+        return max(1, min(n, _first(radii >= stop.until_radius) + 1)), t_limit, False
+    return max(n, 1), t_limit, True
 
 
 def python_step(sim, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
     """One step for parts without compiled forms: the array step of the numpy backend
     (``ArrayCall``) with the integrator's ``step`` and the growth law's ``radius`` in place of their
     parts, by the backends' step algorithm (:func:`~bark.engine.kernels.take_steps`): a step that
-    goes non-finite or over ``plan.accept_load`` undone."""
+    goes non-finite or over the load the clock accepts undone."""
     from bark.engine.kernels.numpy_backend import ArrayCall
 
     return take_steps(ArrayCall(sim.backend, state, mech, plan, tension, verbs=_Verbs(sim)), plan)

@@ -47,19 +47,27 @@ import numpy as np
 from bark.errors import BarkError, BarkWarning, Ref
 from bark.contract.parts import HOOKEAN, NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
 
-__all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "ends_call", "take_steps", "available", "resolve", "load"]
+__all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "doubles", "ends_call", "limits", "take_steps", "available", "resolve", "load"]
 
 BACKENDS = ("auto", "numpy", "numba")
 
 
 @attrs.frozen(kw_only=True)
 class Plan:
-    """What one call of :meth:`Backend.steps` may do."""
+    """What one call of :meth:`Backend.steps` may do.
 
-    h: float
-    """Length of every step of the call."""
-    times: np.ndarray
-    """Time at the end of each step (from the integer clock: exact, whatever the split into calls)."""
+    The call keeps adaptive stepping's clock itself: time in integer ticks of the smallest step
+    ``h_min``, the step ``2**(levels − halvings)`` ticks long.  After a kept step that ends quiet
+    (load at most 1) at a halved step, on the grid of the next larger step, it doubles the step and
+    goes on (:func:`doubles`); a refused step ends the call, and the caller halves it (``Clock.halve``).  Every time is ``ticks · h_min`` and every step ``size · h_min``: the same numbers however
+    the run is split into calls."""
+
+    h_min: float
+    """The smallest step: one tick (``Clock.h_min``)."""
+    ticks: int
+    """The clock where the call begins, in ticks."""
+    n: int
+    """The most steps the call may take."""
     integrator: IntegratorPart | None
     """The integrator's part (``bark.contract.parts``): its update of one coordinate of one base
     (``None``: one step in Python)."""
@@ -73,11 +81,20 @@ class Plan:
     nothing breaks inside; the call ends after the first step in which the rule picks a spring, for
     the breakers to judge in Python.  ``python``: the breakers judge in Python after every step (the
     part is ``NO_BREAKING``)."""
-    accept_load: float = math.inf
-    """A step whose load exceeds this is undone and the call ends (adaptive stepping halves it)."""
-    report_load: float = math.inf
-    """The call ends after a step kept with a load over this: at the smallest step, where nothing is
-    undone, an overshoot the simulation records as an event, one per step."""
+    levels: int = 0
+    """Halvings adaptive stepping allows (``Clock.levels``)."""
+    halvings: int = 0
+    """The step's halvings where the call begins (``Clock.halvings``)."""
+    over: float = math.inf
+    """``1 + overshoot_tol`` where the breakers' load steers the step, else ``inf``: a step whose load
+    exceeds it is refused while the step may still be halved (``accept_load``), and ends the call,
+    kept, at the smallest step (``report_load``: an overshoot the simulation records)."""
+    t_limit: float = math.inf
+    """The call ends after the first step that reaches this time (bases join, a trigger is due, a
+    time stop may hold)."""
+    may_double: bool = True
+    """Whether the call goes on at a doubled step; else it ends where it doubles (a radius stop,
+    whose bound on the steps was found at the step's size)."""
     break_budget: float = math.inf
     """End the call after the step at which the springs the rule broke in it reach this many: 1 when
     Python must see every break (a trigger that watches breaks), the breaks that may first reach a
@@ -86,33 +103,54 @@ class Plan:
     """End the call after a step that breaks more springs than this (a degenerate event)."""
     compiled: bool = True
     """Whether the integrator and the growth law have compiled work (else one step in Python)."""
-    relax: np.ndarray | None = None
-    """Per step, whether it ends on the grid of the next larger step (adaptive stepping at a halved
-    step): the call ends after such a step whose load is at most 1, so the clock can double the step
-    there, as it would after a call of one step (default: never)."""
 
     threads: int = 1
     """Threads the call may share its work among (``Numerics.threads``: 0 = the backend decides);
     the result does not depend on it."""
 
-    def relax_flags(self) -> np.ndarray:
-        """``relax`` as one bool per step."""
-        return np.zeros(len(self.times), bool) if self.relax is None else np.ascontiguousarray(self.relax, dtype=bool)
+    @property
+    def h(self) -> float:
+        """The step where the call begins."""
+        return (1 << (self.levels - self.halvings)) * self.h_min
 
-    def undoes(self, load: float) -> bool:
-        """Whether a step that ends with ``load`` is undone: it went non-finite (NaN) or overshot."""
-        return math.isnan(load) or load > self.accept_load
+    @property
+    def accept_load(self) -> float:
+        """Where the call begins: a step whose load exceeds this is refused (:func:`limits`)."""
+        return limits(self.over, self.halvings, self.levels)[0]
+
+    @property
+    def report_load(self) -> float:
+        """Where the call begins: a kept step whose load exceeds this ends the call (:func:`limits`)."""
+        return limits(self.over, self.halvings, self.levels)[1]
+
+    def clock(self) -> np.ndarray:
+        """The call's clock as the backends take it, ``[ticks, halvings, levels, may_double]`` (int64);
+        a call leaves in it the ticks and halvings it ends with."""
+        return np.array([self.ticks, self.halvings, self.levels, int(self.may_double)], dtype=np.int64)
 
 
-def ends_call(finite, load, accept_load, report_load, candidate, broke, broken, break_budget, max_batch, relax_here):
+def limits(over: float, halvings: int, levels: int) -> tuple[float, float]:
+    """``(accept_load, report_load)`` at ``halvings`` of ``levels``: a load over ``over`` is refused
+    while the step may still be halved, and reported (kept, the call ended) at the smallest step."""
+    return (over if halvings < levels else math.inf), (over if halvings >= levels else math.inf)
+
+
+def ends_call(finite, load, accept_load, report_load, candidate, broke, broken, break_budget, max_batch, stop_here):
     """Whether a call ends after a step: the step went non-finite or its load passed ``accept_load``
-    (it is undone) or ``report_load`` (it is kept, and recorded), the rule named a ``candidate`` for the breakers to judge in Python, it ``broke``
-    springs and the call's breaks so far (``broken``) reach ``break_budget``, or it broke more than
-    ``max_batch``, or it ends quiet (load at most 1) where the clock may double the step
-    (``relax_here``).  Scalars only: the numba backend compiles this into its kernel, the others
-    call it."""
+    (it is undone) or ``report_load`` (it is kept, and recorded), the rule named a ``candidate`` for
+    the breakers to judge in Python, it ``broke`` springs and the call's breaks so far (``broken``)
+    reach ``break_budget``, or it broke more than ``max_batch``, or it reached the call's time limit
+    or doubled where the call may not go on (``stop_here``).  Scalars only: the numba backend
+    compiles this into its kernel, the others call it."""
     return (not finite or load > accept_load or load > report_load or candidate or broke > 0 and (broken >= break_budget or broke > max_batch)
-            or relax_here and load <= 1.0)
+            or stop_here)
+
+
+def doubles(halvings, load, end_tick, size) -> bool:
+    """Whether the clock doubles the step after a kept step of ``size`` ticks that ends at
+    ``end_tick`` with ``load``: at a halved step, quiet (load at most 1), on the grid of the next
+    larger step, staying on its grid.  Scalars only, as :func:`ends_call`."""
+    return halvings > 0 and load <= 1.0 and end_tick % (size * 2) == 0
 
 
 @attrs.frozen
@@ -132,6 +170,12 @@ class Steps:
     """Each one's tension when it broke."""
     picked: bool = False
     """Whether the rule named a candidate in the last step kept (``Plan.breaks == "candidates"``)."""
+    ends: np.ndarray = attrs.field(factory=lambda: np.empty(0, np.int64))
+    """The clock, in ticks, at the end of each step kept."""
+    halvings: int = 0
+    """The step's halvings after the last step kept (the clock may have doubled it in the call)."""
+    refused: bool = False
+    """Whether the last step tried was refused (and undone): its load over the accepted or NaN."""
 
 
 class Call:
@@ -140,38 +184,42 @@ class Call:
     undone = False
     """Whether the last :meth:`take` took its last step back itself (from a copy of the state before
     it), so that no replay is needed."""
+    refused = False
+    """Whether the last :meth:`take`'s last step was refused (``Plan.over`` at the clock's halvings
+    then, or non-finite)."""
 
-    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
-        """Steps at ``times`` from the state the call began with, each followed by :func:`ends_call`;
-        returns ``(steps taken, the last one's load, whether the rule named a candidate in it)``, the
-        last step counted even if it is to be undone (the state holds it), its load NaN if it went
-        non-finite."""
+    def take(self, n: int) -> tuple[int, float, bool]:
+        """Up to ``n`` steps from the state and the clock the call began with (``Plan``), each
+        followed by :func:`ends_call`; returns ``(steps taken, the last one's load, whether the
+        rule named a candidate in it)``, the last step counted even if it is to be undone (the state
+        holds it), its load NaN if it went non-finite.  The clock it ends with: :meth:`result`."""
         raise NotImplementedError
 
     def undo(self) -> None:
         """The state, and what the call broke, back to where the call began."""
         raise NotImplementedError
 
-    def result(self, done: int, load: float, picked: bool) -> Steps:
-        """What the call did, its last :meth:`take` kept."""
+    def result(self, done: int, load: float, picked: bool, refused: bool) -> Steps:
+        """What the call did, its last :meth:`take` kept (``refused``: whether the step after them
+        was tried and refused)."""
         raise NotImplementedError
 
 
 def take_steps(call: Call, plan: Plan) -> Steps:
-    """The one step algorithm: the call's steps; a last step that is undone (``Plan.undoes``) is
-    taken back — by the call itself, from a copy of the state before it (``Call.undone``), or by
-    replaying the call up to it from its start — exact either way, because a step's arithmetic does
-    not depend on where calls begin and end."""
-    times, relax = np.ascontiguousarray(plan.times, dtype=float), plan.relax_flags()
-    done, load, picked = call.take(times, relax)
-    if plan.undoes(load):
+    """The one step algorithm: the call's steps; a last step that is refused (over the load the
+    clock accepts where it was taken, or non-finite) is taken back — by the call itself, from a copy
+    of the state before it (``Call.undone``), or by replaying the call up to it from its start —
+    exact either way, because a step's arithmetic does not depend on where calls begin and end."""
+    done, load, picked = call.take(plan.n)
+    refused = call.refused
+    if refused:
         if call.undone:
             picked = False
         else:
             call.undo()
-            picked = done > 1 and call.take(times[:done - 1], relax[:done - 1])[2]
+            picked = done > 1 and call.take(done - 1)[2]
         done -= 1
-    return call.result(done, load, picked)
+    return call.result(done, load, picked, refused)
 
 
 class Backend:
@@ -183,7 +231,7 @@ class Backend:
     this backend's follows: set once, by the simulation that loads it."""
 
     def steps(self, state, mech, plan: Plan, tension: np.ndarray) -> Steps:
-        """Up to ``len(plan.times)`` whole steps (:func:`take_steps` of :meth:`call`)."""
+        """Up to ``plan.n`` whole steps (:func:`take_steps` of :meth:`call`)."""
         return take_steps(self.call(state, mech, plan, tension), plan)
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> Call:

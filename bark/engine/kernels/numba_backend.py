@@ -50,7 +50,7 @@ from numba import prange
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, order_keys
-from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
+from bark.engine.kernels import Backend, Call, Plan, Steps, doubles, ends_call, limits
 from bark.errors import BarkError, BarkWarning
 from bark.model.state import grown
 from bark.model.physics import weighted_radius
@@ -70,6 +70,8 @@ _base_force = inline(physics.base_force)
 _surface_scale = inline(physics.surface_scale)
 _radial_speed = inline(physics.radial_speed)
 _ends_call = inline(ends_call)
+_doubles = inline(doubles)
+_limits = inline(limits)
 
 
 @inline
@@ -99,7 +101,7 @@ def _no_flow(length, rest, own, q, h, params):
 IN_PLACE_STEPS = 8
 """Steps a call must be allowed to take before a step adaptive stepping refuses is taken back from a
 copy (kept of every step's bases) rather than by replaying the call to it.  A replay costs the
-steps before the refused one, at most ``len(times) − 1``, and only when a step is refused; the copy
+steps before the refused one, at most ``Plan.n − 1``, and only when a step is refused; the copy
 costs a pass over the bases every step.  Calls of a few steps (the whole tree's, ended by every
 join) replay; long calls (a trunk segment's, up to 128 steps) copy.  The bits are the same."""
 
@@ -427,9 +429,11 @@ def _refresh(x, runs, rest, own, k, live, f, work, first, law, rp):
 
 
 @inline
-def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, rp, flags,
+def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
                   log, heights, start, update, rule, load, radius, prepare, radii, law, flow):
-    """Up to ``len(times)`` whole steps in one call (see ``Plan``).  Returns ``(steps taken, largest
+    """Up to ``len(ends)`` whole steps in one call (see ``Plan``), on the clock ``clock`` (``Plan.clock``:
+    it doubles a halved step where ``kernels.doubles`` says, and leaves in ``clock`` the ticks and
+    halvings it ends with; ``ends`` receives each kept step's end in ticks).  Returns ``(steps taken, largest
     load of the last step, length of the break log, whether the rule named a candidate in the last
     step, whether that step was refused and taken back here)``, the load NaN if that step went
     non-finite.  ``rule`` and ``load`` are the breaker
@@ -454,14 +458,18 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     the next call makes them again)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
-    k, c, b, m, h, accept_load, report_load, max_batch, break_budget = constants
+    k, c, b, m, h_min, over, t_limit, max_batch, break_budget = constants
     uniform, breaking, fresh, block, kept, evolve = flags
+    ticks, halvings, levels, may_double = clock[0], clock[1], clock[2], clock[3] != 0
+    size = 1 << (levels - halvings)
+    h = size * h_min
+    accept_load, report_load = _limits(over, halvings, levels)
     resin = (rp, h, evolve)
     log_id, log_step, log_t = log
     hm = h / m
     # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
     # that flows changes its springs too: that call is replayed from its start by the caller instead)
-    in_place = accept_load < np.inf and not evolve and times.shape[0] > IN_PLACE_STEPS
+    in_place = over < np.inf and levels > 0 and not evolve and ends.shape[0] > IN_PLACE_STEPS
     prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
@@ -473,12 +481,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                      load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
     elif fresh < x0.shape[0]:
         _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh, law, rp)
-    may_relax = False
-    for step in range(relax.shape[0]):
-        may_relax = may_relax or relax[step]
-    # every step's load is needed; else only the last one's (below: taken after the call, which a resin
-    # that flows has changed since)
-    tops = accept_load < np.inf or report_load < np.inf or may_relax or evolve
+    # every step's load is needed (to refuse, report or double on it); else only the last one's
+    # (below: taken after the call, which a resin that flows has changed since)
+    tops = over < np.inf or halvings > 0 or evolve
     top = -np.inf
     finite = True
     done = 0
@@ -488,8 +493,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     r_kept = 0.0
     picked = False
     undone = False
-    for step in range(times.shape[0]):
-        t = times[step]
+    kept_step = False
+    for step in range(ends.shape[0]):
+        t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
         finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
@@ -502,9 +508,16 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                                                           log_step, log_t, n_log, step + 1, block, law, flow, resin)
         finite = finite and springs_finite
         done = step + 1
+        kept_step = finite and top <= accept_load
+        double = kept_step and _doubles(halvings, top, ticks + size, size)
+        if kept_step:
+            ticks += size
+            ends[step] = ticks
         if _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget, max_batch,
-                      relax[step]):
-            if in_place and not (finite and top <= accept_load):  # refused: the step taken back
+                      t >= t_limit or double and not may_double):
+            if double:
+                halvings -= 1
+            if in_place and not kept_step:  # refused: the step taken back
                 if uniform:
                     _take_back(prev[:6], (x0, x1, x2, v0, v1, v2), live, log_id[before:n_log])
                 else:
@@ -514,6 +527,14 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                 done = step
                 undone = True
             break
+        if double:  # the clock doubles the step and the call goes on
+            halvings -= 1
+            size *= 2
+            h = size * h_min
+            hm = h / m
+            accept_load, report_load = _limits(over, halvings, levels)
+            resin = (rp, h, evolve)
+    clock[0], clock[1] = ticks, halvings
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
             ax[q] = r_before * dx[q]
@@ -521,9 +542,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     if finite and not tops and done > 0:
         top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work, log_id[before:n_log], load, bp,
                          law, rp)
-    if finite and top <= accept_load and done > 0:  # accepted: the positions the next call compares
+        kept_step = kept_step and not np.isnan(top)  # a NaN load refuses the step, as where it is taken every step
+    if kept_step:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
-    return done, (top if finite else np.nan), n_log, picked and finite and not undone, undone
+    return done, (top if finite else np.nan), n_log, picked and finite and not undone, undone, not kept_step
 
 
 @inline
@@ -618,9 +640,9 @@ _flow_part = {flow}
 {resin}
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, rp, flags, log,
+def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags, log,
           heights, start):
-    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip,
+    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip,
                          rp, flags, log, heights, start, _update, _rule, _load, _radius, _prepare, _radii, _law, _flow)
 '''
 
@@ -918,9 +940,9 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
         law, flow = resin_adapted(resin, columns)
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
-        def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp, ip, rp, flags,
+        def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
                   log, heights, start):
-            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, times, relax, params, bp,
+            return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp,
                                  ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow)
 
         _SPECIALIZED[key] = steps
@@ -1547,22 +1569,22 @@ class _NumbaCall(Call):
         self.fresh = min(fr.refresh_from, state.n_bases)  # forces made again from this base on (all, if those moved)
         self.start = fr.start_columns
         fr.forces = None
-        self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h),
-                          float(plan.accept_load), float(plan.report_load), float(plan.max_batch),
-                          float(plan.break_budget))
+        self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h_min),
+                          float(plan.over), float(plan.t_limit), float(plan.max_batch), float(plan.break_budget))
         self.heights = backend._heights(state, plan, fr)
         self.resin = backend.resin
         # a resin that flows changes the frame's rest lengths or own fields: kept to replay from, written back after
         self.flowed = (fr.springs[0].copy(), fr.springs[3].copy()) if self.resin.evolves else None
         self.n_log, self.valid = 0, True  # valid: the forces in f are of the positions the last call ended with
 
-    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+    def take(self, n: int) -> tuple[int, float, bool]:
         plan, fr = self.plan, self.frame
         rest, fmax, inv_fmax, own = fr.springs
         flags = (bool(plan.growth.uniform), plan.breaks == "kernel", int(self.fresh),
                  self.backend.block, int(self.kept), self.resin.evolves)
-        done, load, self.n_log, picked, self.undone = self.kernel(
-            fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, times, relax,
+        self.ends, self.clock = np.empty(n, np.int64), plan.clock()
+        done, load, self.n_log, picked, self.undone, self.refused = self.kernel(
+            fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, self.ends, self.clock,
             plan.growth.params, plan.breaker.params, plan.integrator.params, self.resin.params, flags, fr.log,
             self.heights, self.start)
         return done + self.undone, load, picked
@@ -1578,7 +1600,7 @@ class _NumbaCall(Call):
         self.n_log, self.fresh, self.kept = 0, 0, -1  # a replay makes every force again
         self.valid = False
 
-    def result(self, done: int, load: float, picked: bool) -> Steps:
+    def result(self, done: int, load: float, picked: bool, refused: bool) -> Steps:
         state, fr, n_log = self.state, self.frame, self.n_log
         if (self.valid or done > 0) and not self.undone:  # for the next call (the kernel has put the positions
             # it ended with in start; a step it took back leaves forces of the positions it refused)
@@ -1599,7 +1621,7 @@ class _NumbaCall(Call):
         fr.n_live -= n_log  # the simulation breaks these in the state next (Simulation.break_springs)
         fr.pending = ids
         return Steps(done=int(done), load=float(load), broken=ids.copy(), step=step.copy(), tension=t.copy(),
-                     picked=bool(picked))
+                     picked=bool(picked), ends=self.ends[:done].copy(), halvings=int(self.clock[1]), refused=refused)
 
 
 BACKEND_CLASS = NumbaBackend

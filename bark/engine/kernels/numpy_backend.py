@@ -11,7 +11,7 @@ import numpy as np
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, incidence, spring_geometry
-from bark.engine.kernels import Backend, Call, Plan, Steps, ends_call
+from bark.engine.kernels import Backend, Call, Plan, Steps, doubles, ends_call, limits
 from bark.contract.parts import Judge, resin_evolve, resin_tension
 
 if TYPE_CHECKING:  # scipy.sparse only where the springs are no lattice's runs (``incidence``)
@@ -144,34 +144,38 @@ class ArrayCall(Call):
         self.flowed = {name: state._rows(name).copy() for name in backend.resin.writes}  # what the resin changes
         self.log: list[tuple[np.ndarray, int, np.ndarray]] = []
 
-    def take(self, times: np.ndarray, relax: np.ndarray) -> tuple[int, float, bool]:
+    def take(self, n: int) -> tuple[int, float, bool]:
         """:meth:`Call.take` on whole arrays, one step after another (with strategies' Python verbs,
         one step a call)."""
         state, mech, plan, verbs = self.state, self.mech, self.plan, self.verbs
         breaking, resin = plan.breaks == "kernel", self.backend.resin
         rule = Judge(plan.breaker, state)
         judges = [Judge(p, state) for p in verbs.parts] if verbs is not None and plan.breaks == "python" else [rule]
-        # every step's load is needed (to refuse, report or relax on it, or a resin that flows changes
+        ticks, halvings, levels, h_min = plan.ticks, plan.halvings, plan.levels, plan.h_min
+        size = 1 << (levels - halvings)
+        h, (accept, report) = size * h_min, limits(plan.over, halvings, levels)
+        # every step's load is needed (to refuse, report or double on it, or a resin that flows changes
         # it after the step); else only the last step's, judged once after the loop, as the kernel does
-        tops = verbs is not None or plan.accept_load < math.inf or plan.report_load < math.inf or bool(relax.any()) \
-            or resin.evolves
+        tops = verbs is not None or plan.over < math.inf or halvings > 0 or resin.evolves
         live = state._rows("intact").copy()
         self.log = log = []
+        self.ends = ends = np.empty(n if verbs is None else 1, np.int64)
         fs = None if verbs is not None else self.backend._spring_forces(state, mech, state._rows("x"), live)
-        hm = plan.h / mech.m
         update, ip, growth = (None, None, None) if verbs is not None else (plan.integrator.update, plan.integrator.params,
                                                                           plan.growth)
         x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")  # rows changed in place only
         z0 = a[:, 2]
-        done, load, candidate, broken, picked, t_all = 0, -math.inf, False, 0, None, None
-        for step, t in enumerate(times.tolist()[:1] if verbs is not None else times.tolist(), start=1):
+        done, load, candidate, broken, picked, t_all, broke = 0, -math.inf, False, 0, None, None, 0
+        refused = False
+        for step in range(1, len(ends) + 1):
+            t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
             if verbs is not None:
-                verbs.move(state, plan.h)
+                verbs.move(state, h)
                 r_x, r_a = verbs.radii(t, state)
                 x = state._rows("x")  # as the Python step left it
             else:  # every coordinate at once: the part's update is element-wise (one coordinate of one base)
                 g = physics.base_force(fs, x, a, v, mech.c, mech.b)
-                x[...], v[...] = update(x, v, g, hm, plan.h, ip)
+                x[...], v[...] = update(x, v, g, h / mech.m, h, ip)
                 q = growth.at(t)
                 r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
                 r_a = r_x if growth.uniform else growth.radius(t, z0, q)
@@ -183,10 +187,12 @@ class ArrayCall(Call):
             load, done = (load if finite else math.nan), step
             picked = rule.picks(t_all, live, length) if finite else np.empty(0, np.int64)
             candidate, broke = bool(picked.size) and not breaking, picked.size if breaking else 0
-            if not plan.undoes(load):
+            refused = math.isnan(load) or load > accept
+            double = not refused and doubles(halvings, load, ticks + size, size)
+            if not refused:
                 self.tension[:] = t_all
                 if resin.evolves:  # the springs intact this step flow; the next forces, and the tensions
-                    resin_evolve(resin, state, length, plan.h, live)  # Python's breakers see, follow them
+                    resin_evolve(resin, state, length, h, live)  # Python's breakers see, follow them
                     self.tension[:] = resin_tension(resin, state, length, mech.k)
                 if broke:
                     live[picked] = False
@@ -194,13 +200,22 @@ class ArrayCall(Call):
                     log.append((picked, step, t_all[picked]))
                 if verbs is None:  # the next step's forces: the springs as they are now, tensions as just taken
                     fs = self.backend.forces_of(state, d, length, self.tension, live)
-            if ends_call(finite, load, plan.accept_load, plan.report_load, candidate, broke, broken, plan.break_budget,
-                         plan.max_batch, relax[step - 1]):
+                ticks += size
+                ends[step - 1] = ticks
+            if ends_call(finite, load, accept, report, candidate, broke, broken, plan.break_budget, plan.max_batch,
+                         t >= plan.t_limit or double and not plan.may_double):
+                if double:
+                    halvings -= 1
                 break
+            if double:  # the clock doubles the step (``kernels.doubles``) and the call goes on
+                halvings, size = halvings - 1, size * 2
+                h, (accept, report) = size * h_min, limits(plan.over, halvings, levels)
         if not tops and done and not math.isnan(load):  # the last step's load, over the springs live before it
             if broke:
                 live[picked] = True
             load = _largest([j.largest_load(t_all, live, length) for j in judges])
+            refused = math.isnan(load)  # as where it is judged every step
+        self.halvings, self.refused = halvings, refused
         return done, load, candidate
 
     def undo(self) -> None:
@@ -212,10 +227,11 @@ class ArrayCall(Call):
             self.state._rows(name)[...] = keep
         self.log = []
 
-    def result(self, done: int, load: float, picked: bool) -> Steps:
+    def result(self, done: int, load: float, picked: bool, refused: bool) -> Steps:
         """:meth:`Call.result`: the springs broken at each step kept, with their tensions."""
         log = self.log
-        return Steps(done=done, load=load, picked=picked,
+        return Steps(done=done, load=load, picked=picked, ends=self.ends[:done].copy(), halvings=self.halvings,
+                     refused=refused,
                      broken=np.concatenate([b for b, _, _ in log]) if log else np.empty(0, np.int64),
                      step=np.concatenate([np.full(b.size, s, np.int64) for b, s, _ in log]) if log else np.empty(0, np.int64),
                      tension=np.concatenate([t for _, _, t in log]) if log else np.empty(0))
