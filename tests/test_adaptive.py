@@ -144,8 +144,9 @@ def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monk
 @pytest.mark.parametrize("bulged", [False, True])
 def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, monkeypatch, bulged):
     """Under adaptive stepping the numba kernel takes a refused step back from its copy of the bases
-    before it (the anchors too, where the radius depends on height): the same bits, steps and breaks
-    as the numpy backend, which replays the call up to that step."""
+    before it (the anchors too, where the radius depends on height), halves it and goes on: the
+    same bits, steps and breaks as the numpy backend, which ends the call there and replays it up
+    to that step."""
     from bark.engine import kernels
     from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 
@@ -154,7 +155,8 @@ def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, mon
 
     def recording(call, plan):
         result = take_steps(call, plan)
-        taken_back.append(call.undone)
+        sizes = np.diff(np.r_[plan.ticks, result.ends])
+        taken_back.append(call.undone or bool((np.diff(sizes) < 0).any()))  # ended there, or halved and went on
         return result
 
     monkeypatch.setattr(kernels, "take_steps", recording)
@@ -294,16 +296,17 @@ def test_one_rule_doubles_the_step(halvings, load, end_tick, size, doubled):
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
 def test_calls_that_double_the_step_inside_give_the_bits_of_one_step_calls(make_sim, backend):
-    """The clock doubles a halved step inside a call and the call goes on (no call ends for it): the
-    steps, their times and sizes, and so every bit, are those of a run whose calls take one step each
-    (where the simulation's clock does everything)."""
+    """The clock doubles a halved step inside a call and the call goes on (no call ends for it), and
+    where the call takes a refused step back itself (numba's long calls) it halves it and goes on:
+    the steps, their times and sizes, and so every bit, are those of a run whose calls take one step
+    each (where the simulation's clock does everything)."""
     kw = dict(n_bases=400, G=0.05, dt=0.3, seed=3, stepping="adaptive", overshoot_tol=0.002, backend=backend)
     whole, single = make_sim(**kw).build(), make_sim(**kw)
     sizes, steps = [], whole.backend.steps
 
     def watching(state, mech, plan, tension):
         result = steps(state, mech, plan, tension)
-        sizes.append(np.unique(np.diff(np.r_[plan.ticks, result.ends])))  # the step sizes inside one call
+        sizes.append(np.diff(np.r_[plan.ticks, result.ends]))  # the step sizes inside one call
         return result
 
     whole.backend.steps = watching
@@ -316,4 +319,6 @@ def test_calls_that_double_the_step_inside_give_the_bits_of_one_step_calls(make_
         assert np.array_equal(a, b)
     for key, a in whole.breaks.arrays().items():
         assert np.array_equal(a, single.breaks.arrays()[key]), key
-    assert sum(len(s) > 1 for s in sizes) > 3  # calls that doubled the step and went on
+    assert sum((np.diff(s) > 0).any() for s in sizes) > 3  # calls that doubled the step and went on
+    halved_inside = sum((np.diff(s) < 0).any() for s in sizes)  # and that halved it and went on
+    assert halved_inside > 3 if backend == "numba" else halved_inside == 0

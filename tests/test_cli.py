@@ -348,7 +348,8 @@ def test_bark_compile_readies_a_scenes_kernels_and_writes_nothing_else(tmp_path,
     monkeypatch.chdir(tmp_path)
     result = CliRunner().invoke(cli, ["compile", "vertical", "diamond"])
     assert result.exit_code == 0, result.output
-    lines = result.output.splitlines()
+    # on a cold cache each kernel first says that it compiles, and that it does so once
+    lines = [line for line in result.output.splitlines() if not line.startswith("bark: compiling the stepping kernel")]
     assert lines[0].startswith("bark: vertical: ready (") and lines[1].startswith("bark: diamond: ready (")
     assert "later runs load them" in lines[-1]
     assert list(tmp_path.iterdir()) == []

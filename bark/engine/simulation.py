@@ -332,7 +332,8 @@ class Simulation:
                                                     #   law; eq. 1: k(|d| - l)) -> the breakers' part:
                                                     #   its rule, its load -> the resin's flow (springs
                                                     #   intact then) -> the next step's forces; if quiet
-                                                    #   again (adaptive): double h, staying on its grid
+                                                    #   again (adaptive): double h, staying on its grid;
+                                                    #   a refused step it takes back itself: halve h
                 clock = result's ticks and halvings; t = clock.t   # integer ticks: exact time
                 break_springs(what the rule broke)  # the intact flags (the graph sees them); logged
                 if the last step went NaN or a load overshot (adaptive): it was undone;

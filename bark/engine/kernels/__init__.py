@@ -59,7 +59,9 @@ class Plan:
     The call keeps adaptive stepping's clock itself: time in integer ticks of the smallest step
     ``h_min``, the step ``2**(levels − halvings)`` ticks long.  After a kept step that ends quiet
     (load at most 1) at a halved step, on the grid of the next larger step, it doubles the step and
-    goes on (:func:`doubles`); a refused step ends the call, and the caller halves it (``Clock.halve``).  Every time is ``ticks · h_min`` and every step ``size · h_min``: the same numbers however
+    goes on (:func:`doubles`).  A refused step ends the call, and the caller halves it
+    (``Clock.halve``), unless the call takes it back itself (``Call.undone``): it may then halve it
+    and go on.  Every time is ``ticks · h_min`` and every step ``size · h_min``: the same numbers however
     the run is split into calls."""
 
     h_min: float

@@ -435,8 +435,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     it doubles a halved step where ``kernels.doubles`` says, and leaves in ``clock`` the ticks and
     halvings it ends with; ``ends`` receives each kept step's end in ticks).  Returns ``(steps taken, largest
     load of the last step, length of the break log, whether the rule named a candidate in the last
-    step, whether that step was refused and taken back here)``, the load NaN if that step went
-    non-finite.  ``rule`` and ``load`` are the breaker
+    step, whether that step was refused and taken back here, whether it was refused)``, the load
+    NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
     part's (its numbers ``bp``), ``update`` the integrator part's (its numbers ``ip``), ``radius``,
     ``prepare`` and ``radii`` the growth part's (its numbers ``params``).
 
@@ -453,9 +453,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     with (for the next call's comparison); its last nine vectors, where adaptive stepping may refuse
     a step, the resin does not flow and the call may take more than ``IN_PLACE_STEPS`` steps, the
     bases before each step, so that a refused step is taken back here at the cost of a copy a step
-    instead of a replay of the call (its breaks
-    undone, the call's steps those before it; the forces in ``f`` are then the refused step's, and
-    the next call makes them again)."""
+    instead of a replay of the call (its breaks undone).  Where the step may still be halved it is
+    halved and the call goes on, the forces of the bases made again by the pass that begins a
+    call; else the call ends, its steps those before it (the forces in ``f`` are then the refused
+    step's, and the next call makes them again)."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
     k, c, b, m, h_min, over, t_limit, max_batch, break_budget = constants
@@ -494,38 +495,54 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     picked = False
     undone = False
     kept_step = False
-    for step in range(ends.shape[0]):
+    tried = 0
+    while done < ends.shape[0]:
         t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
         finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
-                            uniform and step > 0, heights, block, prev, in_place)
+                            uniform and done > 0, heights, block, prev, in_place)
         r_kept = r_before
         r_before = r_now
         before = n_log
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f,
                                                           work, True, tops, breaking, rule, load, bp, log_id,
-                                                          log_step, log_t, n_log, step + 1, block, law, flow, resin)
+                                                          log_step, log_t, n_log, done + 1, block, law, flow, resin)
         finite = finite and springs_finite
-        done = step + 1
+        tried = 1
         kept_step = finite and top <= accept_load
         double = kept_step and _doubles(halvings, top, ticks + size, size)
         if kept_step:
             ticks += size
-            ends[step] = ticks
+            ends[done] = ticks
+            done += 1
+            tried = 0
+        elif in_place:  # refused: the step taken back, from the copy of the bases before it
+            if uniform:
+                _take_back(prev[:6], (x0, x1, x2, v0, v1, v2), live, log_id[before:n_log])
+            else:
+                _take_back(prev, (x0, x1, x2, v0, v1, v2, ax, ay, az), live, log_id[before:n_log])
+            n_log = before
+            r_before = r_kept
+            undone, tried = True, 0
+            if halvings < levels:  # halved and taken again in this call (``Clock.halve``): its forces made again
+                halvings += 1
+                size //= 2
+                h = size * h_min
+                hm = h / m
+                accept_load, report_load = _limits(over, halvings, levels)
+                resin = (rp, h, evolve)
+                f0[:] = 0.0
+                f1[:] = 0.0
+                f2[:] = 0.0
+                _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
+                             load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
+                undone = False
+                continue
         if _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget, max_batch,
                       t >= t_limit or double and not may_double):
             if double:
                 halvings -= 1
-            if in_place and not kept_step:  # refused: the step taken back
-                if uniform:
-                    _take_back(prev[:6], (x0, x1, x2, v0, v1, v2), live, log_id[before:n_log])
-                else:
-                    _take_back(prev, (x0, x1, x2, v0, v1, v2, ax, ay, az), live, log_id[before:n_log])
-                n_log = before
-                r_before = r_kept
-                done = step
-                undone = True
             break
         if double:  # the clock doubles the step and the call goes on
             halvings -= 1
@@ -534,6 +551,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             hm = h / m
             accept_load, report_load = _limits(over, halvings, levels)
             resin = (rp, h, evolve)
+    done += tried  # a refused last step the state still holds counts (the caller replays the call to it)
     clock[0], clock[1] = ticks, halvings
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
