@@ -474,13 +474,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
-    if fresh == 0:
-        f0[:] = 0.0
-        f1[:] = 0.0
-        f2[:] = 0.0
-        _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
-                     load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
-    elif fresh < x0.shape[0]:
+    remake = fresh == 0  # every force made again, in the loop (one place: compiled once)
+    if not remake and fresh < x0.shape[0]:
         _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh, law, rp)
     # every step's load is needed (to refuse, report or double on it); else only the last one's
     # (below: taken after the call, which a resin that flows has changed since)
@@ -497,6 +492,13 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     kept_step = False
     tried = 0
     while done < ends.shape[0]:
+        if remake:  # the forces of the bases as they are: at the call's start, or after a step taken back
+            f0[:] = 0.0
+            f1[:] = 0.0
+            f2[:] = 0.0
+            _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
+                         load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
+            remake = False
         t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
@@ -532,12 +534,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                 hm = h / m
                 accept_load, report_load = _limits(over, halvings, levels)
                 resin = (rp, h, evolve)
-                f0[:] = 0.0
-                f1[:] = 0.0
-                f2[:] = 0.0
-                _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
-                             load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
-                undone = False
+                remake, undone = True, False
                 continue
         if _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget, max_batch,
                       t >= t_limit or double and not may_double):
