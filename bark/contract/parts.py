@@ -289,7 +289,7 @@ def _fields_of(state, reads: tuple[str, ...]) -> dict:
     in the kernel), ``inv_fmax`` made from ``fmax``; ``tension`` and ``length`` are given per step."""
     out = {}
     for name in reads:
-        if name in ("tension", "length"):
+        if name in ("tension", "length") or name in out:  # a name the rule and the load both read: made once
             continue
         rows = state._rows("fmax" if name == "inv_fmax" else name).view()
         rows.flags.writeable = False

@@ -465,7 +465,6 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     size = 1 << (levels - halvings)
     h = size * h_min
     accept_load, report_load = _limits(over, halvings, levels)
-    resin = (rp, h, evolve)
     log_id, log_step, log_t = log
     hm = h / m
     # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
@@ -491,25 +490,30 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     undone = False
     kept_step = False
     tried = 0
+    t = 0.0
     while done < ends.shape[0]:
-        if remake:  # the forces of the bases as they are: at the call's start, or after a step taken back
-            f0[:] = 0.0
+        step = not remake
+        if remake:  # the forces of the bases as they are (at the call's start, or after a step taken back): the
+            f0[:] = 0.0  # spring pass below without a step, its loads or its breaks
             f1[:] = 0.0
             f2[:] = 0.0
-            _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, False, False, False, rule,
-                         load, bp, log_id, log_step, log_t, 0, 0, block, law, flow, (rp, h, False))
-            remake = False
-        t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
-        q = prepare(t, params)  # the growth law's time-only part, once a step
-        r_now = radius(t, 0.0, q) if uniform else 0.0
-        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
-                            uniform and done > 0, heights, block, prev, in_place)
-        r_kept = r_before
-        r_before = r_now
-        before = n_log
+        else:
+            t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
+            q = prepare(t, params)  # the growth law's time-only part, once a step
+            r_now = radius(t, 0.0, q) if uniform else 0.0
+            finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
+                                uniform and done > 0, heights, block, prev, in_place)
+            r_kept = r_before
+            r_before = r_now
+            before = n_log
+        # one place for the spring pass, so that it is compiled once
         top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f,
-                                                          work, True, tops, breaking, rule, load, bp, log_id,
-                                                          log_step, log_t, n_log, done + 1, block, law, flow, resin)
+                                                          work, step, tops and step, breaking and step, rule, load, bp,
+                                                          log_id, log_step, log_t, n_log, done + 1, block, law, flow,
+                                                          (rp, h, evolve and step))
+        if remake:
+            remake = False
+            continue
         finite = finite and springs_finite
         tried = 1
         kept_step = finite and top <= accept_load
@@ -533,21 +537,18 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                 h = size * h_min
                 hm = h / m
                 accept_load, report_load = _limits(over, halvings, levels)
-                resin = (rp, h, evolve)
                 remake, undone = True, False
                 continue
-        if _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget, max_batch,
-                      t >= t_limit or double and not may_double):
-            if double:
-                halvings -= 1
-            break
-        if double:  # the clock doubles the step and the call goes on
+        stop = _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget,
+                          max_batch, t >= t_limit or double and not may_double)
+        if double:  # the clock doubles the step, for this call or the next
             halvings -= 1
             size *= 2
             h = size * h_min
             hm = h / m
             accept_load, report_load = _limits(over, halvings, levels)
-            resin = (rp, h, evolve)
+        if stop:
+            break
     done += tried  # a refused last step the state still holds counts (the caller replays the call to it)
     clock[0], clock[1] = ticks, halvings
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)

@@ -202,14 +202,13 @@ class ArrayCall(Call):
                     fs = self.backend.forces_of(state, d, length, self.tension, live)
                 ticks += size
                 ends[step - 1] = ticks
-            if ends_call(finite, load, accept, report, candidate, broke, broken, plan.break_budget, plan.max_batch,
-                         t >= plan.t_limit or double and not plan.may_double):
-                if double:
-                    halvings -= 1
-                break
-            if double:  # the clock doubles the step (``kernels.doubles``) and the call goes on
+            stop = ends_call(finite, load, accept, report, candidate, broke, broken, plan.break_budget,
+                             plan.max_batch, t >= plan.t_limit or double and not plan.may_double)
+            if double:  # the clock doubles the step (``kernels.doubles``), for this call or the next
                 halvings, size = halvings - 1, size * 2
                 h, (accept, report) = size * h_min, limits(plan.over, halvings, levels)
+            if stop:
+                break
         if not tops and done and not math.isnan(load):  # the last step's load, over the springs live before it
             if broke:
                 live[picked] = True
