@@ -34,6 +34,13 @@ class NumpyBackend(Backend):
         self._runs_key = None
         self._runs = None
         self._order = SpringOrder()
+        self._work = None
+
+    def work(self, state) -> "_Work":
+        """The work arrays for a state of this many bases and springs (made again when it grows)."""
+        if self._work is None or self._work.size != (state.n_bases, state.n_springs):
+            self._work = _Work(state.n_bases, state.n_springs)
+        return self._work
 
     def incidence(self, state) -> sp.csr_matrix:
         """Spring-to-base incidence of the state's springs (derived; rebuilt when the topology grows).
@@ -66,10 +73,11 @@ class NumpyBackend(Backend):
         runs = self.runs(state)
         if runs is None:
             return spring_geometry(x, state._rows("pairs"))
-        d = np.empty((state.n_springs, 3), order="F")  # the positions' layout: each axis contiguous
+        w = self.work(state)
+        d = w.d  # the positions' layout: each axis contiguous
         for at, n, i, o in runs:
             np.subtract(x[i + o:i + o + n], x[i:i + n], out=d[at:at + n])
-        return d, physics.length(d[:, 0], d[:, 1], d[:, 2])
+        return d, w.length_of(d)
 
     def _spring_forces(self, state, mech, x, intact) -> np.ndarray:
         d, length = self.geometry(state, x)
@@ -78,13 +86,17 @@ class NumpyBackend(Backend):
     def forces_of(self, state, d, length, t, intact) -> np.ndarray:
         """The springs' forces on the bases from their vectors ``d`` (used up: each becomes its spring's
         force vector, in place), lengths and tensions ``t``."""
-        g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf))
-        g *= intact
-        pull = np.multiply(d, g[:, None], out=d)
         runs = self.runs(state)
         if runs is None:
-            return np.asarray(self.incidence(state) @ pull)
-        f = np.zeros((state.n_bases, 3), order="F")
+            g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf))
+            g *= intact
+            return np.asarray(self.incidence(state) @ np.multiply(d, g[:, None], out=d))
+        w = self.work(state)
+        g = w.scale(t, length)
+        g *= intact
+        pull = np.multiply(d, g[:, None], out=d)
+        f = w.f
+        f.fill(0.0)
         for at, n, i, o in runs:  # a base's springs in summation order: as j of a run's spring, then as its i
             f[i + o:i + o + n] -= pull[at:at + n]
             f[i:i + n] += pull[at:at + n]
@@ -92,7 +104,7 @@ class NumpyBackend(Backend):
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         """On whole arrays, the intact springs' forces summed in the kernel's order."""
-        return self._spring_forces(state, mech, x, state._rows("intact"))
+        return self._spring_forces(state, mech, x, state._rows("intact")).copy()  # not the work array
 
     def measure(self, state, mech, out: np.ndarray) -> bool:
         """On whole arrays, the resin law's tension of every spring."""
@@ -102,12 +114,13 @@ class NumpyBackend(Backend):
 
     def constrain(self, state, r_x, r_anchor) -> None:
         """On whole arrays: positions scaled to the radius, radial velocity removed, anchors placed."""
-        x, v = state._rows("x"), state._rows("v")
+        x, v, w = state._rows("x"), state._rows("v"), self.work(state)
         r = np.asarray(r_x, dtype=float)
-        x[:, :2] *= physics.surface_scale(x[:, 0], x[:, 1], r)[:, None]
-        vr = physics.radial_speed(v[:, 0], v[:, 1], x[:, 0], x[:, 1], 1.0 / (r * r))
-        v[:, :2] -= vr[:, None] * x[:, :2]
-        state._rows("anchor")[:, :2] = np.reshape(r_anchor, (-1, 1)) * state._rows("anchor_dir")
+        x[:, :2] *= w.surface_scale(x[:, 0], x[:, 1], r)[:, None]
+        vr = w.radial_speed(v[:, 0], v[:, 1], x[:, 0], x[:, 1], 1.0 / (r * r))
+        for axis in (0, 1):
+            v[:, axis] -= np.multiply(vr, x[:, axis], out=w.by_base_2)
+        np.multiply(np.reshape(r_anchor, (-1, 1)), state._rows("anchor_dir"), out=state._rows("anchor")[:, :2])
 
     def call(self, state, mech, plan: Plan, tension: np.ndarray) -> "ArrayCall":
         """An :class:`ArrayCall`: the call's steps on whole arrays, one after another."""
@@ -118,6 +131,60 @@ class NumpyBackend(Backend):
         from bark.model.components import components
 
         return components(state.n_bases, state._rows("pairs"), state._rows("intact"))
+
+
+class _Work:
+    """Work arrays of one size of state, written by every step in place of the arrays a formula
+    would allocate: at 70,000 bases an array allocated and freed each step costs more than the
+    arithmetic on it (its memory is mapped in again).  Each method evaluates a formula of
+    :mod:`bark.model.physics` operation by operation, in its order (the same bits; the backends'
+    tests hold it to the kernel's), into these arrays: a result is good until the next call."""
+
+    def __init__(self, n_bases: int, n_springs: int) -> None:
+        self.size = (n_bases, n_springs)
+        self.f = np.empty((n_bases, 3), order="F")  # the springs' forces on the bases
+        self.force, self.damping = np.empty((n_bases, 3), order="F"), np.empty((n_bases, 3), order="F")
+        self.by_base, self.by_base_2 = np.empty(n_bases), np.empty(n_bases)
+        self.d = np.empty((n_springs, 3), order="F")
+        self.length, self.by_spring = np.empty(n_springs), np.empty(n_springs)
+        self.mask = np.empty(n_springs, bool)
+
+    def length_of(self, d: np.ndarray) -> np.ndarray:
+        """``physics.length`` of the springs' vectors ``d``."""
+        out, tmp = self.length, self.by_spring
+        np.multiply(d[:, 0], d[:, 0], out=out)
+        out += np.multiply(d[:, 1], d[:, 1], out=tmp)
+        out += np.multiply(d[:, 2], d[:, 2], out=tmp)
+        return np.sqrt(out, out=out)
+
+    def scale(self, t: np.ndarray, length: np.ndarray) -> np.ndarray:
+        """``physics.spring_force_scale`` of tensions ``t`` and ``length`` where it is positive; a
+        spring of no length (or NaN) divided by infinity: no force."""
+        safe, short = self.by_spring, self.mask
+        np.copyto(safe, length)
+        np.greater(length, 0.0, out=short)
+        np.logical_not(short, out=short)
+        safe[short] = np.inf
+        return np.divide(t, safe, out=safe)
+
+    def base_force(self, spring_force, x, anchor, v, c, b) -> np.ndarray:
+        """``physics.base_force`` of every coordinate of every base."""
+        out = np.subtract(x, anchor, out=self.force)
+        np.multiply(c, out, out=out)
+        np.subtract(spring_force, out, out=out)
+        return np.subtract(out, np.multiply(b, v, out=self.damping), out=out)
+
+    def surface_scale(self, px, py, r) -> np.ndarray:
+        """``physics.surface_scale`` of every base."""
+        out = np.multiply(px, px, out=self.by_base)
+        out += np.multiply(py, py, out=self.by_base_2)
+        return np.divide(r, np.sqrt(out, out=out), out=out)
+
+    def radial_speed(self, vx, vy, px, py, inv_r2) -> np.ndarray:
+        """``physics.radial_speed`` of every base."""
+        out = np.multiply(vx, px, out=self.by_base)
+        out += np.multiply(vy, py, out=self.by_base_2)
+        return np.multiply(out, inv_r2, out=out)
 
 
 def _largest(loads: list[float]) -> float:
@@ -164,7 +231,7 @@ class ArrayCall(Call):
         update, ip, growth = (None, None, None) if verbs is not None else (plan.integrator.update, plan.integrator.params,
                                                                           plan.growth)
         x, v, a = state._rows("x"), state._rows("v"), state._rows("anchor")  # rows changed in place only
-        z0 = a[:, 2]
+        z0, work = a[:, 2], (self.backend.work(state) if verbs is None else None)  # verbs: any backend's
         done, load, candidate, broken, picked, t_all, broke = 0, -math.inf, False, 0, None, None, 0
         refused = False
         for step in range(1, len(ends) + 1):
@@ -174,7 +241,7 @@ class ArrayCall(Call):
                 r_x, r_a = verbs.radii(t, state)
                 x = state._rows("x")  # as the Python step left it
             else:  # every coordinate at once: the part's update is element-wise (one coordinate of one base)
-                g = physics.base_force(fs, x, a, v, mech.c, mech.b)
+                g = work.base_force(fs, x, a, v, mech.c, mech.b)
                 x[...], v[...] = update(x, v, g, h / mech.m, h, ip)
                 q = growth.at(t)
                 r_x = growth.radius(t, 0.0, q) if growth.uniform else growth.radius(t, x[:, 2], q)
