@@ -1,10 +1,11 @@
 """The numba backend: the physics of :mod:`bark.model.physics` and the strategies' parts, compiled.
 
 **One stepping kernel.**  ``_steps_kernel`` is written once, with the integrator's update, the
-breaking rule and the growth law's radius as parameters.  Each combination gets a tiny wrapper,
-generated into a file of its own (``specialized``), that passes those functions in: numba inlines
-them into the loop (as fast as writing them out, measured) and caches the wrapper on disk like any
-other function, so a plugin's part costs a compilation once, not per run.  The per-step and
+breaking rule and the growth law's radius as parameters.  Each combination gets a file of its own
+(``specialized``): the kernel's source, those parameters bound by name to the part's functions as
+the file's globals, so that numba inlines them into the loop (as fast as writing them out,
+measured) and compiles and caches the kernel on disk like any other function: a plugin's part
+costs a compilation once, not per run.  The per-step and
 the many-step paths are calls of this one kernel, so their bits agree by construction.
 
 Each piece of physics is :mod:`bark.model.physics`'s function, inlined (``inline="always"``).  No
@@ -655,11 +656,14 @@ _flow_part = {flow}
 {adapters}
 {resin}
 
+# the kernel's source, its parts' functions bound by name (compiled as written, not inlined into a wrapper)
+import numpy as np
+from bark.engine.kernels.numba_backend import {kernel_names}
+update, rule, load, radius, prepare, radii, law, flow = _update, _rule, _load, _radius, _prepare, _radii, _law, _flow
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
-def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags, log,
-          heights, start):
-    return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip,
-                         rp, flags, log, heights, start, _update, _rule, _load, _radius, _prepare, _radii, _law, _flow)
+KERNEL
 '''
 
 _ADAPTERS = '''
@@ -1018,9 +1022,32 @@ def _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpe
                            load=f"inline({refs['load']})" if "load" in refs else "None",
                            radii="each_height(_radius)" if "radii" not in refs else f"inline({refs['radii']})",
                            adapters=adapters, parallel=bool(parallel), law=refs["law"],
-                           flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text)
+                           flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text,
+                           kernel_names=_kernel_names())
     name = f"bark_steps_{digest.hexdigest()[:20]}"
-    return name, text
+    return name, text.replace("KERNEL", _kernel_source())
+
+
+_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow")
+"""The kernel's last parameters: the parts' functions, which a generated module binds by name."""
+
+
+def _kernel_source() -> str:
+    """``_steps_kernel``'s source as the generated module's ``steps``: its parameters before the parts'
+    functions (:data:`_PARTS`), which that module binds as globals.  numba then compiles the kernel
+    itself, not a copy of its whole body inlined into a wrapper (a quarter of its compile time)."""
+    code = _steps_kernel.py_func.__code__
+    args = code.co_varnames[:code.co_argcount]
+    assert args[-len(_PARTS):] == _PARTS
+    source = inspect.getsource(_steps_kernel.py_func)
+    body = source[source.index("):\n", source.index("def _steps_kernel(")) + 3:]
+    return f"def steps({', '.join(args[:-len(_PARTS)])}):\n" + body
+
+
+def _kernel_names() -> str:
+    """The module's names the kernel's source uses (the generated module imports them)."""
+    names = _steps_kernel.py_func.__code__.co_names
+    return ", ".join(n for n in names if n in globals() and n != "np" and not n.startswith("__"))
 
 
 def compiled(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None) -> bool:
