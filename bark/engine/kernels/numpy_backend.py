@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bark.model import physics
 from bark.model.forces import SpringOrder, incidence, spring_geometry
 from bark.engine.kernels import Backend, Call, Plan, Steps, doubles, ends_call, limits
 from bark.contract.parts import Judge, resin_evolve, resin_tension
@@ -86,15 +85,13 @@ class NumpyBackend(Backend):
     def forces_of(self, state, d, length, t, intact) -> np.ndarray:
         """The springs' forces on the bases from their vectors ``d`` (used up: each becomes its spring's
         force vector, in place), lengths and tensions ``t``."""
-        runs = self.runs(state)
-        if runs is None:
-            g = physics.spring_force_scale(t, np.where(length > 0.0, length, np.inf))
-            g *= intact
-            return np.asarray(self.incidence(state) @ np.multiply(d, g[:, None], out=d))
         w = self.work(state)
         g = w.scale(t, length)
         g *= intact
         pull = np.multiply(d, g[:, None], out=d)
+        runs = self.runs(state)
+        if runs is None:
+            return np.asarray(self.incidence(state) @ pull)
         f = w.f
         f.fill(0.0)
         for at, n, i, o in runs:  # a base's springs in summation order: as j of a run's spring, then as its i
