@@ -18,8 +18,10 @@ adaptive stepping needs it, else once at the end of a call.
 time, and a spring's force reaches its bases by a *gather* over blocks of bases (each base takes its
 springs' forces in the order of the serial sum), so no two blocks write the same entry.  Every
 kernel is compiled twice from the same source: serial, and with the blocks shared among threads
-(``prange``, ``Numerics.threads``); per base and per spring the arithmetic, and its order, are the
-same, so the two give the same bits (tested).  Threads pay on large lattices only (a parallel loop
+(``prange``, ``Numerics.threads``); the serial kernel gathers each block of springs' forces as soon
+as it is made (``_run_serial``), the threaded one after all blocks (``_run_threaded``).  Per
+base and per spring the arithmetic, and its order, are the same, so the two give the same bits
+(tested).  Threads pay on large lattices only (a parallel loop
 costs a few microseconds to start: ``PARALLEL_BASES``).
 """
 
@@ -193,8 +195,31 @@ def _largest_load(wl, live):
 
 
 @inline
+def _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_t, n_log, step):
+    """The springs ``lo .. hi`` of a run (from spring ``s0``, ``lv`` its working ``live``) that the
+    breaker's rule picked (``wp``; ``wp``, ``wt`` and the force vectors ``w`` a block's work buffers,
+    from spring ``lo``): with ``breaking``, each marked broken, logged (id, ``step``, tension) and its
+    force left out (zeroed); without, only noted.  Returns ``(log length, whether one was noted)``."""
+    picked = False
+    for q in range(hi - lo):
+        if wp[q]:
+            if breaking:
+                lv[lo + q] = False
+                log_id[n_log] = s0 + lo + q
+                log_step[n_log] = step
+                log_t[n_log] = wt[q]
+                n_log += 1
+                w0[q] = 0.0
+                w1[q] = 0.0
+                w2[q] = 0.0
+            else:
+                picked = True
+    return n_log, picked
+
+
+@inline
 def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, tops, breaking, rule, load, bp,
-                 log_id, log_step, log_t, n_log, step, block, law, flow, resin):
+                 log_id, log_step, log_t, n_log, step, block, law, flow, resin, run_pass):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
     finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
     ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
@@ -203,65 +228,103 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
     picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
-    ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes, a block of
-    springs at a time: the springs' tensions, force vectors, finiteness and the rule in one loop;
-    their largest load in a second; a spring by itself only where the rule picks one (after all
-    blocks); then the forces, gathered a block of bases at a time, each base taking its force as a
-    second end before its force as a first end (``_gather_forces``), so that every base receives its
-    springs' forces in the order of the runs (:class:`bark.model.forces.SpringOrder`, in which the springs
+    ``SpringOrder.runs``), each done by ``run_pass`` (``_run_threaded`` or ``_run_serial``, the same
+    bits) on contiguous slices, so the loops run in SIMD lanes, a block of springs at a time: the
+    springs' tensions, force vectors, finiteness and the rule in one loop, into work buffers; their
+    largest load in a second; a spring by itself only where the rule picks one (``_picked``); then
+    the forces, gathered a block of bases at a time, each base taking its force as a second end
+    before its force as a first end (``_gather_forces``), so that every base receives its springs'
+    forces in the order of the runs (:class:`bark.model.forces.SpringOrder`, in which the springs
     come here) — the order, and the bits, of a pass one spring at a time, and of the numpy
     backend's sum."""
-    x0, x1, x2 = x
-    f0, f1, f2 = f
-    w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
     top = -np.inf
     finite = True
     picked = False
     for r in range(r_start.shape[0]):
-        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
-        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
-        fm, inv, ow = fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n]
-        nb = _blocks(n, block)
-        block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
-        for blk in prange(nb):  # the springs' forces, a block at a time
-            lo, hi = blk * block, min(n, (blk + 1) * block)
-            a, e = i0 + lo, i0 + hi
-            block_finite[blk], block_hit[blk] = _run_forces(
-                x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
-                fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
-                loads, rule, load, bp, law, flow, resin)
-            if loads and tops:
-                block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
-        hit = False
-        for blk in range(nb):
-            finite = finite & block_finite[blk]
-            hit = hit | block_hit[blk]
-            top = max(top, block_top[blk])
+        s0, n = r_start[r], r_len[r]
+        spring = (rest[s0:s0 + n], live[s0:s0 + n], fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n])
+        run_top, run_finite, n_log, run_picked = run_pass(
+            x, spring, s0, n, r_i[r], r_o[r], k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step,
+            log_t, n_log, step, block, law, flow, resin)
+        top = max(top, run_top)
+        finite = finite & run_finite
+        picked = picked | run_picked
+    return top, finite, n_log, picked
+
+
+@inline
+def _run_threaded(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step, log_t,
+                  n_log, step, block, law, flow, resin):
+    """One run of ``_spring_pass`` (springs ``s0 .. s0 + n``, from base ``i0`` to ``i0 + o``; ``spring``
+    their fields), its blocks shared among threads: every block's forces made into the run's work
+    buffers, then gathered.  Returns what ``_spring_pass`` does, for this run."""
+    x0, x1, x2 = x
+    w0, w1, w2, wt, wl, wp = work
+    rr, lv, fm, inv, ow = spring
+    picked = False
+    nb = _blocks(n, block)
+    block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
+    for blk in prange(nb):  # the springs' forces, a block at a time
+        lo, hi = blk * block, min(n, (blk + 1) * block)
+        a, e = i0 + lo, i0 + hi
+        block_finite[blk], block_hit[blk] = _run_forces(
+            x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
+            fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
+            loads, rule, load, bp, law, flow, resin)
+        if loads and tops:
+            block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
+    if loads and block_hit.any():
+        for blk in range(nb):  # only the blocks the rule picked springs in, in order
+            if block_hit[blk]:
+                lo, hi = blk * block, min(n, (blk + 1) * block)
+                n_log, noted = _picked(lv, s0, lo, hi, wp[lo:hi], wt[lo:hi], w0[lo:hi], w1[lo:hi], w2[lo:hi],
+                                       breaking, log_id, log_step, log_t, n_log, step)
+                picked = picked | noted
+    low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
+    span = n + abs(o)
+    for blk in prange(_blocks(span, block)):  # then added to the bases they reach, a block of bases at a time
+        lo, hi = low + blk * block, low + min(span, (blk + 1) * block)
+        _gather_forces(f[0], w0, i0, o, n, lo, hi)
+        _gather_forces(f[1], w1, i0, o, n, lo, hi)
+        _gather_forces(f[2], w2, i0, o, n, lo, hi)
+    return block_top.max() if nb else -np.inf, block_finite.all(), n_log, picked
+
+
+@inline
+def _run_serial(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step, log_t,
+                n_log, step, block, law, flow, resin):
+    """``_run_threaded`` on one thread, the same bits: each block of springs' forces added to the
+    bases as soon as it is made, so that its work buffers (the first ``block`` entries of the run's,
+    the same for every block) stay in cache — on a large lattice the round trip of a whole run's
+    buffers through main memory costs as much as the arithmetic.  A base still takes its force as a
+    second end before its force as a first end: a run of more than one spring has ``o > 0``, so a
+    base's second-end spring (``b − i − o``) comes in the same block as its first-end spring
+    (``b − i``, where ``_gather_forces`` takes second ends first) or in an earlier one."""
+    x0, x1, x2 = x
+    w0, w1, w2, wt, wl, wp = work
+    rr, lv, fm, inv, ow = spring
+    top = -np.inf
+    finite = True
+    picked = False
+    for lo in range(0, n, block):
+        hi = min(n, lo + block)
+        m, a, e = hi - lo, i0 + lo, i0 + hi
+        block_finite, hit = _run_forces(
+            x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
+            fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[:m], w1[:m], w2[:m], wt[:m], wl[:m], wp[:m], loads, rule,
+            load, bp, law, flow, resin)
+        finite = finite & block_finite
+        if loads and tops:
+            top = max(top, _largest_load(wl[:m], lv[lo:hi]))
         if loads and hit:
-            for blk in range(nb):  # only the blocks the rule picked springs in, in order
-                if not block_hit[blk]:
-                    continue
-                for q in range(blk * block, min(n, (blk + 1) * block)):
-                    if wp[q]:
-                        if breaking:
-                            lv[q] = False
-                            log_id[n_log] = s0 + q
-                            log_step[n_log] = step
-                            log_t[n_log] = wt[q]
-                            n_log += 1
-                            w0[q] = 0.0
-                            w1[q] = 0.0
-                            w2[q] = 0.0
-                        else:
-                            picked = True
-        low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
-        span = n + abs(o)
-        for blk in prange(_blocks(span, block)):  # then added to the bases they reach, a block of bases at a time
-            lo, hi = low + blk * block, low + min(span, (blk + 1) * block)
-            _gather_forces(f0, w0, i0, o, n, lo, hi)
-            _gather_forces(f1, w1, i0, o, n, lo, hi)
-            _gather_forces(f2, w2, i0, o, n, lo, hi)
+            n_log, noted = _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_t, n_log,
+                                   step)
+            picked = picked | noted
+        low = a + min(o, 0)  # the bases this block reaches: low .. low + m + |o|
+        _gather_forces(f[0], w0, a, o, m, low, low + m + abs(o))
+        _gather_forces(f[1], w1, a, o, m, low, low + m + abs(o))
+        _gather_forces(f[2], w2, a, o, m, low, low + m + abs(o))
     return top, finite, n_log, picked
 
 
@@ -430,8 +493,17 @@ def _refresh(x, runs, rest, own, k, live, f, work, first, law, rp):
 
 
 @inline
+def _step_of(size, h_min, m, over, halvings, levels):
+    """The step of ``size`` ticks of ``h_min``: ``(h, h / m``, the largest load it accepts and the
+    largest it reports at: ``limits``)."""
+    h = size * h_min
+    accept_load, report_load = _limits(over, halvings, levels)
+    return h, h / m, accept_load, report_load
+
+
+@inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
-                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow):
+                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow, run_pass):
     """Up to ``len(ends)`` whole steps in one call (see ``Plan``), on the clock ``clock`` (``Plan.clock``:
     it doubles a halved step where ``kernels.doubles`` says, and leaves in ``clock`` the ticks and
     halvings it ends with; ``ends`` receives each kept step's end in ticks).  Returns ``(steps taken, largest
@@ -439,7 +511,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     step, whether that step was refused and taken back here, whether it was refused)``, the load
     NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
     part's (its numbers ``bp``), ``update`` the integrator part's (its numbers ``ip``), ``radius``,
-    ``prepare`` and ``radii`` the growth part's (its numbers ``params``).
+    ``prepare`` and ``radii`` the growth part's (its numbers ``params``), ``law`` and ``flow`` the
+    resin's (its numbers ``rp``); ``run_pass`` how a run of springs is done (``_run_serial`` on one
+    thread, ``_run_threaded``).
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
@@ -464,10 +538,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     uniform, breaking, fresh, block, kept, evolve = flags
     ticks, halvings, levels, may_double = clock[0], clock[1], clock[2], clock[3] != 0
     size = 1 << (levels - halvings)
-    h = size * h_min
-    accept_load, report_load = _limits(over, halvings, levels)
+    h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
     log_id, log_step, log_t = log
-    hm = h / m
     # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
     # that flows changes its springs too: that call is replayed from its start by the caller instead)
     in_place = over < np.inf and levels > 0 and not evolve and ends.shape[0] > IN_PLACE_STEPS
@@ -507,11 +579,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             r_kept = r_before
             r_before = r_now
             before = n_log
-        # one place for the spring pass, so that it is compiled once
-        top, springs_finite, n_log, picked = _spring_pass((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f,
-                                                          work, step, tops and step, breaking and step, rule, load, bp,
-                                                          log_id, log_step, log_t, n_log, done + 1, block, law, flow,
-                                                          (rp, h, evolve and step))
+        top, springs_finite, n_log, picked = _spring_pass(  # one place for it, so that it is compiled once
+            (x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, step, tops and step, breaking and step,
+            rule, load, bp, log_id, log_step, log_t, n_log, done + 1, block, law, flow, (rp, h, evolve and step),
+            run_pass)
         if remake:
             remake = False
             continue
@@ -535,9 +606,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             if halvings < levels:  # halved and taken again in this call (``Clock.halve``): its forces made again
                 halvings += 1
                 size //= 2
-                h = size * h_min
-                hm = h / m
-                accept_load, report_load = _limits(over, halvings, levels)
+                h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
                 remake, undone = True, False
                 continue
         stop = _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget,
@@ -545,9 +614,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         if double:  # the clock doubles the step, for this call or the next
             halvings -= 1
             size *= 2
-            h = size * h_min
-            hm = h / m
-            accept_load, report_load = _limits(over, halvings, levels)
+            h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
         if stop:
             break
     done += tried  # a refused last step the state still holds counts (the caller replays the call to it)
@@ -603,9 +670,10 @@ def _take_back(prev, bases, live, broke):
 def _copy_block(source, target, lo, hi):
     """Entries ``lo .. hi`` of the vectors ``source`` into ``target``.  Compiled once for every kernel
     (not inlined into each: their compile time)."""
-    if hi > lo:
-        for v in range(len(source)):
-            target[v][lo:hi] = source[v][lo:hi]
+    for v in range(len(source)):  # a loop, not a slice assignment: numba's generic setitem compiles slowly
+        s, t = source[v], target[v]
+        for q in range(lo, hi):
+            t[q] = s[q]
 
 
 @inline
@@ -660,6 +728,7 @@ _flow_part = {flow}
 import numpy as np
 from bark.engine.kernels.numba_backend import {kernel_names}
 update, rule, load, radius, prepare, radii, law, flow = _update, _rule, _load, _radius, _prepare, _radii, _law, _flow
+from bark.engine.kernels.numba_backend import {run_pass} as run_pass  # how a run of springs is done
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
@@ -958,12 +1027,13 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
         block = each_height(g) if growth.radii is None else inline(growth.radii)
         rule, load = adapted(breaker, columns)
         law, flow = resin_adapted(resin, columns)
+        run_pass = _run_threaded if parallel else _run_serial
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
         def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
                   log, heights, start):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp,
-                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow)
+                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow, run_pass)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -1023,13 +1093,16 @@ def _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpe
                            radii="each_height(_radius)" if "radii" not in refs else f"inline({refs['radii']})",
                            adapters=adapters, parallel=bool(parallel), law=refs["law"],
                            flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text,
-                           kernel_names=_kernel_names())
+                           kernel_names=_kernel_names(),
+                           run_pass="_run_threaded" if parallel else "_run_serial")
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     return name, text.replace("KERNEL", _kernel_source())
 
 
-_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow")
-"""The kernel's last parameters: the parts' functions, which a generated module binds by name."""
+_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow", "run_pass")
+"""The kernel's last parameters, which a generated module binds by name: the parts' functions, and
+how a run of springs is done (``_run_serial`` on one thread, ``_run_threaded``: only that writing is
+compiled into the kernel)."""
 
 
 def _kernel_source() -> str:
@@ -1164,7 +1237,7 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
     own = np.empty((rest.shape[0], 0))  # the paper's spring reads no declared field
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, own, (f[:, 0], f[:, 1], f[:, 2]),
                  work, False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK, _hooke, _no_flow,
-                 (no, 0.0, False))
+                 (no, 0.0, False), _run_serial)
 
 
 @jit
