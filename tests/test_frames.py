@@ -118,6 +118,16 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(growth):
     _same(serial, shared)
 
 
+@pytest.mark.parametrize("growth", ["bulge", "sqrt"])
+def test_one_thread_sweeps_in_small_blocks_to_the_same_bits(growth):
+    """The serial kernel's one sweep over blocks of bases (``_step_fused``) in blocks of 16: its base
+    pass runs blocks ahead of the gather, and each run's window of springs slides down every block or
+    two — against the same kernel in its usual blocks, where no window slides at this size."""
+    usual, small = _threaded(1, numba_backend.BLOCK, growth), _threaded(1, 16, growth)
+    assert small.n_broken > 100 and small.state.n_bases > small.lattice.n_start  # breaks, and joins, happened
+    _same(usual, small)
+
+
 @settings(max_examples=200, deadline=None)
 @given(i0=st.integers(0, 50), o=st.integers(-40, 40).filter(bool), n=st.integers(1, 200), block=st.integers(1, 64),
        seed=st.integers(0, 2**32 - 1))

@@ -12,16 +12,17 @@ Each piece of physics is :mod:`bark.model.physics`'s function, inlined (``inline
 fastmath: every expression is evaluated as written, so a run does not depend on where its compiled
 calls begin and end (what makes a resumed run end bit-identical).  The one exception is a maximum
 (``_largest_load``), exact in any order: it may use SIMD lanes, and it is taken every step only when
-adaptive stepping needs it, else once at the end of a call.
+adaptive stepping needs it, else in the pass of a call's last step (after the call, if it ended
+before that step).
 
 **Blocks, and threads.**  The loops over bases and over a run's springs go a block of ``BLOCK`` at a
 time, and a spring's force reaches its bases by a *gather* over blocks of bases (each base takes its
 springs' forces in the order of the serial sum), so no two blocks write the same entry.  Every
-kernel is compiled twice from the same source: serial, and with the blocks shared among threads
-(``prange``, ``Numerics.threads``); the serial kernel gathers each block of springs' forces as soon
-as it is made (``_run_serial``), the threaded one after all blocks (``_run_threaded``).  Per
-base and per spring the arithmetic, and its order, are the same, so the two give the same bits
-(tested).  Threads pay on large lattices only (a parallel loop
+kernel is compiled twice from the same source: with the blocks shared among threads (``prange``,
+``Numerics.threads``: ``_step_split``, the base pass over every block, then the spring pass), and
+serial, in one sweep over the blocks of bases (``_step_fused``: each block of bases moved, the
+springs that reach it made, its forces gathered, while they are in cache).  Per base and per
+spring the arithmetic, and its order, are the same, so the two give the same bits (tested).  Threads pay on large lattices only (a parallel loop
 costs a few microseconds to start: ``PARALLEL_BASES``).
 """
 
@@ -219,7 +220,7 @@ def _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_
 
 @inline
 def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, tops, breaking, rule, load, bp,
-                 log_id, log_step, log_t, n_log, step, block, law, flow, resin, run_pass):
+                 log_id, log_step, log_t, n_log, step, block, law, flow, resin):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
     finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
     ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
@@ -228,8 +229,8 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
     picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
-    ``SpringOrder.runs``), each done by ``run_pass`` (``_run_threaded`` or ``_run_serial``, the same
-    bits) on contiguous slices, so the loops run in SIMD lanes, a block of springs at a time: the
+    ``SpringOrder.runs``), each done by ``_run_pass`` on contiguous slices, so the loops run in SIMD
+    lanes, a block of springs at a time, the blocks shared among threads: the
     springs' tensions, force vectors, finiteness and the rule in one loop, into work buffers; their
     largest load in a second; a spring by itself only where the rule picks one (``_picked``); then
     the forces, gathered a block of bases at a time, each base taking its force as a second end
@@ -244,7 +245,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
     for r in range(r_start.shape[0]):
         s0, n = r_start[r], r_len[r]
         spring = (rest[s0:s0 + n], live[s0:s0 + n], fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n])
-        run_top, run_finite, n_log, run_picked = run_pass(
+        run_top, run_finite, n_log, run_picked = _run_pass(
             x, spring, s0, n, r_i[r], r_o[r], k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step,
             log_t, n_log, step, block, law, flow, resin)
         top = max(top, run_top)
@@ -254,8 +255,8 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
 
 
 @inline
-def _run_threaded(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step, log_t,
-                  n_log, step, block, law, flow, resin):
+def _run_pass(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step, log_t,
+              n_log, step, block, law, flow, resin):
     """One run of ``_spring_pass`` (springs ``s0 .. s0 + n``, from base ``i0`` to ``i0 + o``; ``spring``
     their fields), its blocks shared among threads: every block's forces made into the run's work
     buffers, then gathered.  Returns what ``_spring_pass`` does, for this run."""
@@ -292,40 +293,131 @@ def _run_threaded(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, ru
 
 
 @inline
-def _run_serial(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step, log_t,
-                n_log, step, block, law, flow, resin):
-    """``_run_threaded`` on one thread, the same bits: each block of springs' forces added to the
-    bases as soon as it is made, so that its work buffers (the first ``block`` entries of the run's,
-    the same for every block) stay in cache — on a large lattice the round trip of a whole run's
-    buffers through main memory costs as much as the arithmetic.  A base still takes its force as a
-    second end before its force as a first end: a run of more than one spring has ``o > 0``, so a
-    base's second-end spring (``b − i − o``) comes in the same block as its first-end spring
-    (``b − i``, where ``_gather_forces`` takes second ends first) or in an earlier one."""
-    x0, x1, x2 = x
-    w0, w1, w2, wt, wl, wp = work
-    rr, lv, fm, inv, ow = spring
+def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, motion, update, radii, heights, block,
+                prev, save, tops, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+    """One step (``move``; without, only the forces of the bases as they are): the base pass over
+    every base (``_base_pass``, its numbers ``motion``), then the spring pass over every spring, each
+    a block at a time, the blocks shared among threads (the parallel kernel's).  Returns ``(bases
+    finite, largest load, tensions finite, log length, whether the rule picked a spring)``."""
+    c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius = motion
+    log_id, log_step, log_t = log
+    finite = True
+    if move:
+        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before, from_radius,
+                            heights, block, prev, save)
+    x, f = (bases[0], bases[1], bases[2]), (bases[6], bases[7], bases[8])
+    tops, breaking = tops and move, breaking and move
+    top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move, tops,
+                                                      breaking, rule, load, bp, log_id, log_step, log_t, n_log, step,
+                                                      block, law, flow, resin)
+    return finite, top, springs_finite, n_log, picked
+
+
+@inline
+def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, motion, update, radii, heights, block,
+                prev, save, tops, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+    """``_step_split`` on one thread, the same bits, in one sweep over blocks of bases: a block's
+    forces are gathered as soon as the springs that reach it are made, and those springs are made as
+    soon as the base pass has moved both their ends, so that the bases' positions and forces, and
+    the springs' work buffers, are used while they are in cache — on a large lattice their round
+    trips through main memory cost as much as the arithmetic.  The base pass runs ahead of the
+    gather by the runs' largest offset; each run keeps its springs made but not yet gathered at both
+    ends in a window of its own (``2 · block + |o|`` springs, slid down when full).  Per base the
+    forces arrive in the order of the runs, second end before first end (``_gather_forces`` over the
+    block of bases, on the run's window), per spring the arithmetic is the same: the same bits.  The
+    springs the rule picks are broken and logged as their block is made (the log's order is not
+    the split pass's; the backend sorts it by step and spring id)."""
+    c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius = motion
+    log_id, log_step, log_t = log
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    r_start, r_len, r_i, r_o = runs
+    n, runs_n = x0.shape[0], r_start.shape[0]
+    reach = 0
+    room = np.empty(runs_n + 1, np.int64)  # run r's window: room[r] .. room[r + 1] of the window buffers
+    room[0] = 0
+    for r in range(runs_n):
+        reach = max(reach, abs(r_o[r]))
+        room[r + 1] = room[r] + min(r_len[r], 2 * block + abs(r_o[r]))
+    win = (np.empty(room[runs_n]), np.empty(room[runs_n]), np.empty(room[runs_n]), np.empty(room[runs_n]),
+           np.empty(room[runs_n]), np.zeros(room[runs_n], np.bool_))
+    low = np.zeros(runs_n, np.int64)  # the first spring in run r's window
+    made = np.zeros(runs_n, np.int64)  # springs of run r made so far
+    bad = 0
     top = -np.inf
     finite = True
     picked = False
-    for lo in range(0, n, block):
-        hi = min(n, lo + block)
-        m, a, e = hi - lo, i0 + lo, i0 + hi
-        block_finite, hit = _run_forces(
-            x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
-            fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[:m], w1[:m], w2[:m], wt[:m], wl[:m], wp[:m], loads, rule,
-            load, bp, law, flow, resin)
-        finite = finite & block_finite
-        if loads and tops:
-            top = max(top, _largest_load(wl[:m], lv[lo:hi]))
-        if loads and hit:
-            n_log, noted = _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_t, n_log,
-                                   step)
-            picked = picked | noted
-        low = a + min(o, 0)  # the bases this block reaches: low .. low + m + |o|
-        _gather_forces(f[0], w0, a, o, m, low, low + m + abs(o))
-        _gather_forces(f[1], w1, a, o, m, low, low + m + abs(o))
-        _gather_forces(f[2], w2, a, o, m, low, low + m + abs(o))
-    return top, finite, n_log, picked
+    moved = 0 if move else n  # bases moved so far
+    for blk in range(_blocks(n, block)):
+        lo, hi = blk * block, min(n, (blk + 1) * block)
+        while moved < min(n, hi + reach):  # the base pass, ahead of the springs that reach this block
+            bad += _base_block(bases, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, uniform,
+                               r_now, r_before, from_radius, heights, prev, save)
+            moved = min(n, moved + block)
+        for r in range(runs_n):
+            s0, nr, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+            need_lo = max(0, lo - i0 - max(o, 0))  # the springs whose ends this block holds
+            need_hi = min(nr, hi - i0 + max(-o, 0))
+            if need_hi <= need_lo:
+                continue
+            w = _window(win, room[r], room[r + 1])
+            if need_hi > made[r]:
+                if need_hi - low[r] > room[r + 1] - room[r]:  # slid down: what is still to be gathered to the front
+                    keep = min(need_lo, made[r])
+                    _slide(w, keep - low[r], made[r] - keep)
+                    low[r] = keep
+                run_finite, run_top, n_log, run_picked = _make_springs(
+                    x0, x1, x2, rest[s0:s0 + nr], live[s0:s0 + nr], fmax[s0:s0 + nr], inv_fmax[s0:s0 + nr],
+                    own[s0:s0 + nr], k, w, low[r], made[r], need_hi, s0, i0, o, move, tops, breaking, rule, load,
+                    bp, log, n_log, step, law, flow, resin)
+                finite = finite & run_finite
+                top = max(top, run_top)
+                picked = picked | run_picked
+                made[r] = need_hi
+            i_low, m = i0 + low[r], made[r] - low[r]  # the window as a run of its own
+            _gather_forces(f0, w[0], i_low, o, m, lo, hi)
+            _gather_forces(f1, w[1], i_low, o, m, lo, hi)
+            _gather_forces(f2, w[2], i_low, o, m, lo, hi)
+    return bad == 0, top, finite, n_log, picked
+
+
+@inline
+def _window(win, a, e):
+    """Entries ``a .. e`` of each of the window buffers."""
+    w0, w1, w2, wt, wl, wp = win
+    return w0[a:e], w1[a:e], w2[a:e], wt[a:e], wl[a:e], wp[a:e]
+
+
+@inline
+def _slide(w, first, count):
+    """Entries ``first .. first + count`` of each of a window's buffers moved to its front."""
+    w0, w1, w2, wt, wl, wp = w
+    for q in range(count):
+        w0[q] = w0[first + q]
+        w1[q] = w1[first + q]
+        w2[q] = w2[first + q]
+        wt[q] = wt[first + q]
+        wl[q] = wl[first + q]
+        wp[q] = wp[first + q]
+
+
+@inline
+def _make_springs(x0, x1, x2, rest, live, fmax, inv_fmax, own, k, w, low, lo, hi, s0, i0, o, loads, tops, breaking,
+                  rule, load, bp, log, n_log, step, law, flow, resin):
+    """The springs ``lo .. hi`` of a run (``rest`` … ``own`` its fields) made into its window ``w``
+    (which begins at spring ``low``), with the rule applied (``_run_forces``, ``_picked``).  Returns
+    ``(tensions finite, largest load or -inf, log length, whether the rule picked a spring)``."""
+    w0, w1, w2, wt, wl, wp = w
+    log_id, log_step, log_t = log
+    a, e, p, z = i0 + lo, i0 + hi, lo - low, hi - low
+    finite, hit = _run_forces(x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o],
+                              rest[lo:hi], live[lo:hi], fmax[lo:hi], inv_fmax[lo:hi], own[lo:hi], k, w0[p:z], w1[p:z],
+                              w2[p:z], wt[p:z], wl[p:z], wp[p:z], loads, rule, load, bp, law, flow, resin)
+    top = _largest_load(wl[p:z], live[lo:hi]) if loads and tops else -np.inf
+    picked = False
+    if loads and hit:
+        n_log, picked = _picked(live, s0, lo, hi, wp[p:z], wt[p:z], w0[p:z], w1[p:z], w2[p:z], breaking, log_id,
+                                log_step, log_t, n_log, step)
+    return finite, top, n_log, picked
 
 
 @inline
@@ -362,21 +454,27 @@ def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now,
     block's positions and velocities (and anchors, where the radius depends on height) are first
     copied into ``prev``, while the block is in cache, so that the step can be taken back."""
     n = bases[0].shape[0]
-    weights, stride = heights
-    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     block_bad = np.zeros(_blocks(n, block), np.int64)
     for blk in prange(_blocks(n, block)):
-        lo, hi = blk * block, min(n, (blk + 1) * block)
-        if save and uniform:  # a uniform radius leaves the anchors as they are until the call ends
-            _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
-        elif save:
-            _copy_block((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
-        part = _slices(bases, lo, hi)
-        if uniform:
-            block_bad[blk] = _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
-        else:
-            block_bad[blk] = _per_base_radius(part, c, b, hm, h, t, update, ip, radii, params, weights, stride, lo)
+        block_bad[blk] = _base_block(bases, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip,
+                                     radii, params, uniform, r_now, r_before, from_radius, heights, prev, save)
     return block_bad.sum() == 0
+
+
+@inline
+def _base_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, uniform, r_now, r_before, from_radius,
+                heights, prev, save):
+    """``_base_pass`` on the bases ``lo .. hi``; returns how many went non-finite."""
+    weights, stride = heights
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    if save and uniform:  # a uniform radius leaves the anchors as they are until the call ends
+        _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
+    elif save:
+        _copy_block((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
+    part = _slices(bases, lo, hi)
+    if uniform:
+        return _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
+    return _per_base_radius(part, c, b, hm, h, t, update, ip, radii, params, weights, stride, lo)
 
 
 @inline
@@ -503,7 +601,7 @@ def _step_of(size, h_min, m, over, halvings, levels):
 
 @inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
-                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow, run_pass):
+                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow, step_pass):
     """Up to ``len(ends)`` whole steps in one call (see ``Plan``), on the clock ``clock`` (``Plan.clock``:
     it doubles a halved step where ``kernels.doubles`` says, and leaves in ``clock`` the ticks and
     halvings it ends with; ``ends`` receives each kept step's end in ticks).  Returns ``(steps taken, largest
@@ -512,8 +610,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     NaN if that step went non-finite.  ``rule`` and ``load`` are the breaker
     part's (its numbers ``bp``), ``update`` the integrator part's (its numbers ``ip``), ``radius``,
     ``prepare`` and ``radii`` the growth part's (its numbers ``params``), ``law`` and ``flow`` the
-    resin's (its numbers ``rp``); ``run_pass`` how a run of springs is done (``_run_serial`` on one
-    thread, ``_run_threaded``).
+    resin's (its numbers ``rp``); ``step_pass`` how a step's passes go (``_step_fused`` on one thread,
+    ``_step_split``).
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
@@ -549,10 +647,12 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     remake = fresh == 0  # every force made again, in the loop (one place: compiled once)
     if not remake and fresh < x0.shape[0]:
         _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh, law, rp)
-    # every step's load is needed (to refuse, report or double on it); else only the last one's
-    # (below: taken after the call, which a resin that flows has changed since)
+    # every step's load is needed (to refuse, report or double on it); else only the last one's: in
+    # the pass of the call's last step if it takes them all, else after the call (a resin that flows
+    # has changed its springs since: it takes every step's)
     tops = over < np.inf or halvings > 0 or evolve
     top = -np.inf
+    seen, seen_at = -np.inf, -1  # without ``tops``: the load the pass of step ``seen_at`` found
     finite = True
     done = 0
     n_log = 0
@@ -567,25 +667,29 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     while done < ends.shape[0]:
         step = not remake
         if remake:  # the forces of the bases as they are (at the call's start, or after a step taken back): the
-            f0[:] = 0.0  # spring pass below without a step, its loads or its breaks
+            f0[:] = 0.0  # step's spring pass without its base pass, its loads or its breaks
             f1[:] = 0.0
             f2[:] = 0.0
-        else:
-            t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
-            q = prepare(t, params)  # the growth law's time-only part, once a step
-            r_now = radius(t, 0.0, q) if uniform else 0.0
-            finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before,
-                                uniform and done > 0, heights, block, prev, in_place)
-            r_kept = r_before
-            r_before = r_now
-            before = n_log
-        top, springs_finite, n_log, picked = _spring_pass(  # one place for it, so that it is compiled once
-            (x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, f, work, step, tops and step, breaking and step,
-            rule, load, bp, log_id, log_step, log_t, n_log, done + 1, block, law, flow, (rp, h, evolve and step),
-            run_pass)
+        t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
+        q = prepare(t, params)  # the growth law's time-only part, once a step
+        r_now = radius(t, 0.0, q) if uniform else 0.0
+        before = n_log
+        from_radius = uniform and done > 0  # (outside the call: numba takes no branch among its arguments)
+        resin = (rp, h, evolve and step)
+        motion = (c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius)
+        looks = tops or done + 1 == ends.shape[0]
+        finite, top, springs_finite, n_log, picked = step_pass(  # one place for it, so that it is compiled once
+            bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, motion, update, radii, heights, block, prev,
+            in_place, looks, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin)
         if remake:
             remake = False
             continue
+        if not tops:  # a load no step is judged by: the last step's kept for after the call
+            if looks:
+                seen, seen_at = top, done
+            top = -np.inf
+        r_kept = r_before
+        r_before = r_now
         finite = finite and springs_finite
         tried = 1
         kept_step = finite and top <= accept_load
@@ -624,8 +728,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             ax[q] = r_before * dx[q]
             ay[q] = r_before * dy[q]
     if finite and not tops and done > 0:
-        top = _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work, log_id[before:n_log], load, bp,
-                         law, rp)
+        top = seen if seen_at == done - 1 else _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work,
+                                                          log_id[before:n_log], load, bp, law, rp, block)
         kept_step = kept_step and not np.isnan(top)  # a NaN load refuses the step, as where it is taken every step
     if kept_step:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
@@ -685,10 +789,12 @@ def _copy_blocks(source, target, first, block):
 
 
 @inline
-def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, bp, law, rp):
+def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, bp, law, rp, block):
     """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
     those it broke): what that step's own pass finds when it looks (the same loads, and a maximum
-    is exact), taken once per call instead of every step."""
+    is exact), taken once per call instead of every step, where the call ended before its last step
+    (the pass of which finds it).  A block of springs at a time, into the first ``block`` entries of
+    the work buffers (kept in cache)."""
     x0, x1, x2 = x
     w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
@@ -698,10 +804,13 @@ def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, b
     for r in range(r_start.shape[0]):
         s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
         rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
-        _run_forces(x0[i0:i0 + n], x1[i0:i0 + n], x2[i0:i0 + n], x0[i0 + o:i0 + o + n], x1[i0 + o:i0 + o + n],
-                    x2[i0 + o:i0 + o + n], rr, lv, fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n], k, w0, w1,
-                    w2, wt, wl, wp, True, _never, load, bp, law, _no_flow, (rp, 0.0, False))
-        top = max(top, _largest_load(wl, lv))
+        for lo in range(0, n, block):
+            hi = min(n, lo + block)
+            m, a, e = hi - lo, i0 + lo, i0 + hi
+            _run_forces(x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi],
+                        lv[lo:hi], fmax[s0 + lo:s0 + hi], inv_fmax[s0 + lo:s0 + hi], own[s0 + lo:s0 + hi], k, w0[:m],
+                        w1[:m], w2[:m], wt[:m], wl[:m], wp[:m], True, _never, load, bp, law, _no_flow, (rp, 0.0, False))
+            top = max(top, _largest_load(wl[:m], lv[lo:hi]))
     for s in broke:
         live[s] = False
     return top
@@ -728,7 +837,7 @@ _flow_part = {flow}
 import numpy as np
 from bark.engine.kernels.numba_backend import {kernel_names}
 update, rule, load, radius, prepare, radii, law, flow = _update, _rule, _load, _radius, _prepare, _radii, _law, _flow
-from bark.engine.kernels.numba_backend import {run_pass} as run_pass  # how a run of springs is done
+from bark.engine.kernels.numba_backend import {step_pass} as step_pass  # how a step's passes go
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
@@ -1027,13 +1136,13 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
         block = each_height(g) if growth.radii is None else inline(growth.radii)
         rule, load = adapted(breaker, columns)
         law, flow = resin_adapted(resin, columns)
-        run_pass = _run_threaded if parallel else _run_serial
+        step_pass = _step_split if parallel else _step_fused
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
         def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
                   log, heights, start):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp,
-                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow, run_pass)
+                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow, step_pass)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -1094,15 +1203,15 @@ def _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpe
                            adapters=adapters, parallel=bool(parallel), law=refs["law"],
                            flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text,
                            kernel_names=_kernel_names(),
-                           run_pass="_run_threaded" if parallel else "_run_serial")
+                           step_pass="_step_split" if parallel else "_step_fused")
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     return name, text.replace("KERNEL", _kernel_source())
 
 
-_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow", "run_pass")
+_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow", "step_pass")
 """The kernel's last parameters, which a generated module binds by name: the parts' functions, and
-how a run of springs is done (``_run_serial`` on one thread, ``_run_threaded``: only that writing is
-compiled into the kernel)."""
+how a step's passes go (``_step_fused`` on one thread, ``_step_split``: only that writing is compiled
+into the kernel)."""
 
 
 def _kernel_source() -> str:
@@ -1237,7 +1346,7 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
     own = np.empty((rest.shape[0], 0))  # the paper's spring reads no declared field
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, own, (f[:, 0], f[:, 1], f[:, 2]),
                  work, False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK, _hooke, _no_flow,
-                 (no, 0.0, False), _run_serial)
+                 (no, 0.0, False))
 
 
 @jit
