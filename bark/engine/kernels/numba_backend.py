@@ -775,8 +775,8 @@ def _copy_block(source, target, lo, hi):
     """Entries ``lo .. hi`` of the vectors ``source`` into ``target``.  Compiled once for every kernel
     (not inlined into each: their compile time)."""
     for v in range(len(source)):  # a loop, not a slice assignment: numba's generic setitem compiles slowly
-        s, t = source[v], target[v]
-        for q in range(lo, hi):
+        s, t = source[v][lo:hi], target[v][lo:hi]
+        for q in range(s.shape[0]):  # from 0: no negative index to wrap, so a vector copy
             t[q] = s[q]
 
 
