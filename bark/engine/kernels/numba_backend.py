@@ -22,8 +22,9 @@ kernel is compiled twice from the same source: with the blocks shared among thre
 ``Numerics.threads``: ``_step_split``, the base pass over every block, then the spring pass), and
 serial, in one sweep over the blocks of bases (``_step_fused``: each block of bases moved, the
 springs that reach it made, its forces gathered, while they are in cache).  Per base and per
-spring the arithmetic, and its order, are the same, so the two give the same bits (tested).  Threads pay on large lattices only (a parallel loop
-costs a few microseconds to start: ``PARALLEL_BASES``).
+spring the arithmetic, and its order, are the same, so the two give the same bits (tested).
+Threads pay on large lattices only (a parallel loop costs a few microseconds to start:
+``PARALLEL_BASES``).
 """
 
 from __future__ import annotations
@@ -229,67 +230,57 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
     picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
-    ``SpringOrder.runs``), each done by ``_run_pass`` on contiguous slices, so the loops run in SIMD
-    lanes, a block of springs at a time, the blocks shared among threads: the
-    springs' tensions, force vectors, finiteness and the rule in one loop, into work buffers; their
-    largest load in a second; a spring by itself only where the rule picks one (``_picked``); then
+    ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes, a block of
+    springs at a time, the blocks shared among threads: the springs' tensions, force vectors,
+    finiteness and the rule in one loop, into the run's work buffers; their largest load in a
+    second; a spring by itself only where the rule picks one (after all blocks, ``_picked``); then
     the forces, gathered a block of bases at a time, each base taking its force as a second end
     before its force as a first end (``_gather_forces``), so that every base receives its springs'
     forces in the order of the runs (:class:`bark.model.forces.SpringOrder`, in which the springs
     come here) — the order, and the bits, of a pass one spring at a time, and of the numpy
     backend's sum."""
+    x0, x1, x2 = x
+    f0, f1, f2 = f
+    w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
     top = -np.inf
     finite = True
     picked = False
     for r in range(r_start.shape[0]):
-        s0, n = r_start[r], r_len[r]
-        spring = (rest[s0:s0 + n], live[s0:s0 + n], fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n])
-        run_top, run_finite, n_log, run_picked = _run_pass(
-            x, spring, s0, n, r_i[r], r_o[r], k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step,
-            log_t, n_log, step, block, law, flow, resin)
-        top = max(top, run_top)
-        finite = finite & run_finite
-        picked = picked | run_picked
+        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
+        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
+        fm, inv, ow = fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n]
+        nb = _blocks(n, block)
+        block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
+        for blk in prange(nb):  # the springs' forces, a block at a time
+            lo, hi = blk * block, min(n, (blk + 1) * block)
+            a, e = i0 + lo, i0 + hi
+            block_finite[blk], block_hit[blk] = _run_forces(
+                x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
+                fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
+                loads, rule, load, bp, law, flow, resin)
+            if loads and tops:
+                block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
+        hit = False
+        for blk in range(nb):
+            finite = finite & block_finite[blk]
+            hit = hit | block_hit[blk]
+            top = max(top, block_top[blk])
+        if loads and hit:
+            for blk in range(nb):  # only the blocks the rule picked springs in, in order
+                if block_hit[blk]:
+                    lo, hi = blk * block, min(n, (blk + 1) * block)
+                    n_log, noted = _picked(lv, s0, lo, hi, wp[lo:hi], wt[lo:hi], w0[lo:hi], w1[lo:hi], w2[lo:hi],
+                                           breaking, log_id, log_step, log_t, n_log, step)
+                    picked = picked | noted
+        low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
+        span = n + abs(o)
+        for blk in prange(_blocks(span, block)):  # then added to the bases they reach, a block of bases at a time
+            lo, hi = low + blk * block, low + min(span, (blk + 1) * block)
+            _gather_forces(f0, w0, i0, o, n, lo, hi)
+            _gather_forces(f1, w1, i0, o, n, lo, hi)
+            _gather_forces(f2, w2, i0, o, n, lo, hi)
     return top, finite, n_log, picked
-
-
-@inline
-def _run_pass(x, spring, s0, n, i0, o, k, f, work, loads, tops, breaking, rule, load, bp, log_id, log_step, log_t,
-              n_log, step, block, law, flow, resin):
-    """One run of ``_spring_pass`` (springs ``s0 .. s0 + n``, from base ``i0`` to ``i0 + o``; ``spring``
-    their fields), its blocks shared among threads: every block's forces made into the run's work
-    buffers, then gathered.  Returns what ``_spring_pass`` does, for this run."""
-    x0, x1, x2 = x
-    w0, w1, w2, wt, wl, wp = work
-    rr, lv, fm, inv, ow = spring
-    picked = False
-    nb = _blocks(n, block)
-    block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
-    for blk in prange(nb):  # the springs' forces, a block at a time
-        lo, hi = blk * block, min(n, (blk + 1) * block)
-        a, e = i0 + lo, i0 + hi
-        block_finite[blk], block_hit[blk] = _run_forces(
-            x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
-            fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
-            loads, rule, load, bp, law, flow, resin)
-        if loads and tops:
-            block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
-    if loads and block_hit.any():
-        for blk in range(nb):  # only the blocks the rule picked springs in, in order
-            if block_hit[blk]:
-                lo, hi = blk * block, min(n, (blk + 1) * block)
-                n_log, noted = _picked(lv, s0, lo, hi, wp[lo:hi], wt[lo:hi], w0[lo:hi], w1[lo:hi], w2[lo:hi],
-                                       breaking, log_id, log_step, log_t, n_log, step)
-                picked = picked | noted
-    low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
-    span = n + abs(o)
-    for blk in prange(_blocks(span, block)):  # then added to the bases they reach, a block of bases at a time
-        lo, hi = low + blk * block, low + min(span, (blk + 1) * block)
-        _gather_forces(f[0], w0, i0, o, n, lo, hi)
-        _gather_forces(f[1], w1, i0, o, n, lo, hi)
-        _gather_forces(f[2], w2, i0, o, n, lo, hi)
-    return block_top.max() if nb else -np.inf, block_finite.all(), n_log, picked
 
 
 @inline
@@ -566,10 +557,11 @@ def _refresh(x, runs, rest, own, k, live, f, work, first, law, rp):
     w0, w1, w2, wt, wl, wp = work
     r_start, r_len, r_i, r_o = runs
     f0, f1, f2 = f
-    for q in range(first, f0.shape[0]):  # written out: a loop over the tuple, inlined here, left them as they were
-        f0[q] = 0.0
-        f1[q] = 0.0
-        f2[q] = 0.0
+    g0, g1, g2 = f0[first:], f1[first:], f2[first:]
+    for q in range(g0.shape[0]):  # written out: a loop over the tuple, inlined here, left them as they were
+        g0[q] = 0.0
+        g1[q] = 0.0
+        g2[q] = 0.0
     for r in range(r_start.shape[0]):
         s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
         lo = max(0, first - i0 - o)  # the first spring whose second end is a base from `first` on
