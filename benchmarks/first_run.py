@@ -1,6 +1,7 @@
 """What a first run costs on empty caches (every kernel compiled), against another checkout.
 
     python benchmarks/first_run.py [--scene default] [--scene whole-tree] [--against DIR] [--rounds 1]
+                                   [--until-time T] [--backend numba]
 
 Runs ``bark simulate`` of each scene (``default``: no ``--scene``) as a whole process whose every
 cache is a new, empty folder (``NUMBA_CACHE_DIR``, ``BARK_CACHE_DIR``, ``XDG_CACHE_HOME``), so that
@@ -8,6 +9,8 @@ it compiles whatever it uses as on a new machine, then once more on those caches
 wall and CPU seconds of both. With ``--against DIR`` (a checkout of bark, e.g. ``git worktree add
 /tmp/base <commit>``) the same runs of that code are interleaved with these, and the ratios this /
 that are printed: of the first runs, and of the first runs less the warm ones (the compiling).
+``--until-time`` ends every run there (the compiling of a long scene, without its whole run);
+``--backend`` is passed on (``numba``: compiled even where ``auto`` would run a short run on numpy).
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ def timed(argv: list[str], env: dict, cwd: str) -> tuple[float, float]:
     return wall, usage.ru_utime + usage.ru_stime
 
 
-def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path) -> dict:
+def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path, extra: tuple[str, ...] = ()) -> dict:
     """A first run on empty caches and a warm one after it, of ``code`` (``None``: as installed)."""
     caches = Path(tempfile.mkdtemp(dir=tmp))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(caches / "numba"), "BARK_CACHE_DIR": str(caches / "bark"),
@@ -46,7 +49,7 @@ def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path) -> dic
         env["PYTHONPATH"] = str(links)
     out = caches / "out"
     argv = [sys.executable, "-m", "bark_cli", "simulate", *(() if scene == "default" else ("--scene", scene)),
-            "--out", str(out), "--quiet", "--overwrite"]
+            *extra, "--out", str(out), "--quiet", "--overwrite"]
     first = timed(argv, env, str(tmp))
     warm = timed(argv, env, str(tmp))
     return {"first": first, "warm": warm}
@@ -57,7 +60,11 @@ def main() -> None:
     parser.add_argument("--scene", action="append", default=None, help="a shipped scene's name, or default")
     parser.add_argument("--against", type=Path, default=None, help="another checkout of bark to compare with")
     parser.add_argument("--rounds", type=int, default=1)
+    parser.add_argument("--until-time", type=float, default=None, help="end every run at this time")
+    parser.add_argument("--backend", default=None, help="bark simulate's --backend for every run")
     args = parser.parse_args()
+    extra = (*(("--until-time", repr(args.until_time)) if args.until_time is not None else ()),
+             *(("--backend", args.backend) if args.backend else ()))
     scenes = args.scene or ["default"]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -71,9 +78,9 @@ def main() -> None:
         for _ in range(args.rounds):
             for scene in scenes:
                 for side, code in sides.items():  # interleaved: a change in the machine's load falls on both
-                    got[(scene, side)].append(first_and_warm(code, scene, links, tmp))
+                    got[(scene, side)].append(first_and_warm(code, scene, links, tmp, extra))
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "
-          f"{args.rounds} round(s); seconds: wall / CPU")
+          f"{args.rounds} round(s){'; bark simulate ' + ' '.join(extra) if extra else ''}; seconds: wall / CPU")
     for scene in scenes:
         for side, code in sides.items():
             for r in got[(scene, side)]:
