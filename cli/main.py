@@ -554,6 +554,7 @@ def compile_kernels(scene_names):
     but the cache (BARK_CACHE_DIR moves it)."""
     import time as clock
 
+    from bark.engine.kernels import numba_alongside
     from bark.engine.kernels.numba_env import cache_dir
     from bark.engine.scene import STOP_KEYS, Scene, merge, read_toml, shipped_scenes
     from bark.studies import runner
@@ -570,6 +571,8 @@ def compile_kernels(scene_names):
     for name, scene in scenes:
         t0 = clock.perf_counter()
         runner.run(scene, None)
+        for failed in numba_alongside.wait():  # a threaded kernel compiling alongside the step: it is asked for too
+            click.echo(f"bark: {name}: its threaded kernel did not compile ({failed}); runs compile it when they need it")
         click.echo(f"bark: {name}: ready ({clock.perf_counter() - t0:.1f} s)")
     click.echo(f"bark: the kernels are in {cache_dir() / 'kernels'}; later runs load them")
 

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import attrs
 
-from bark.engine.kernels import numba_env
+from bark.engine.kernels import numba_alongside, numba_env
 
 numba_env.settle()  # before numba reads the environment
 
@@ -1240,6 +1240,58 @@ def compiled(integrator, breaker, growth, parallel=False, columns: tuple[str, ..
     return _holds(path, text) and _compiled_before(path)
 
 
+ALONGSIDE = True
+"""Whether a threaded kernel not yet compiled is compiled alongside the run, in a process of its own,
+the run's calls taking one thread meanwhile (:func:`threaded_ready`); ``False``: in the run's process,
+before its first threaded call (what a measurement of the threaded kernel itself needs)."""
+
+_WAITING: dict[tuple, tuple] = {}
+"""Threaded kernels compiling alongside, by their parts' identities (as ``_BY_PARTS``): the parts
+(kept, so that the ids stay theirs) and the compile's job."""
+
+
+def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bool:
+    """Whether a call may take the threaded kernel of these parts now: compiled in this process or
+    in the cache, or to be compiled here (parts that cannot be imported by name, ``ALONGSIDE`` off, a
+    compile alongside that failed: said in one line).  Else it is compiled alongside
+    (:mod:`~bark.engine.kernels.numba_alongside`: started the first time, for the types of a call's
+    ``arguments()``), and not ready until that process has put it in the cache."""
+    ids = (id(integrator), id(breaker), id(growth), id(resin), True, tuple(columns))
+    seen = _BY_PARTS.get(ids)
+    if not ALONGSIDE or seen is not None and all(a is b for a, b in zip(seen[:4], (integrator, breaker, growth, resin))):
+        return True
+    waiting = _WAITING.get(ids)
+    if waiting is None or not all(a is b for a, b in zip(waiting[:4], (integrator, breaker, growth, resin))):
+        key, named, helpers, names = _combination(integrator, breaker, growth, True, columns, resin)
+        if key in _SPECIALIZED or None in names.values():
+            return True
+        name, text = _wrapper(integrator, breaker, growth, True, key[4], HOOKEAN if resin is None else resin, named,
+                              helpers, names)
+        path = _write_once(name, text)
+        job = numba_alongside.job(path)
+        if job is None:
+            if _compiled_before(path):
+                return True
+            try:
+                job = numba_alongside.start(path, tuple(numba.typeof(a) for a in arguments()))
+            except OSError as err:
+                LOG.info(f"the threaded stepping kernel cannot be compiled alongside ({err.strerror or err}): compiling "
+                         "it in this process")
+                return True
+            LOG.info("compiling the threaded stepping kernel alongside, in a process of its own (once): the run goes "
+                     "on with one thread until it is ready, with the same results")
+        _WAITING[ids] = (integrator, breaker, growth, resin, job)
+    job = _WAITING[ids][4]
+    done = job.done()
+    if done is None:
+        return False
+    del _WAITING[ids]
+    if not done:
+        LOG.info(f"the threaded stepping kernel could not be compiled alongside ({job.why()}): compiling it in this "
+                 "process")
+    return True
+
+
 def _cache_folders(source: Path) -> list[Path]:
     """The folders numba may cache the compiled functions of ``source`` in (its locators': under
     ``NUMBA_CACHE_DIR``, beside the source, in the user's cache)."""
@@ -1752,19 +1804,28 @@ class NumbaBackend(Backend):
         are of the positions, springs and stiffness now (``k`` the same, no break outside the kernel,
         and the positions those the call ended with, compared in full by the kernel as it copies the
         state it starts from): only the bases that joined since, and those their springs reach, get
-        theirs made again (from ``refresh_from``; the same bits as a fresh pass over all)."""
-        self.threads = self._threads(plan.threads, state.n_bases)
-        if self.threads > 1 and numba.get_num_threads() != self.threads:  # setting it costs more than asking
-            numba.set_num_threads(self.threads)
-        return _NumbaCall(self, state, mech, plan, tension)
+        theirs made again (from ``refresh_from``; the same bits as a fresh pass over all).  A call
+        that would share its blocks among threads takes one while the threaded kernel compiles
+        alongside (:func:`threaded_ready`)."""
+        made = _NumbaCall(self, state, mech, plan, tension)
+        threads = self._threads(plan.threads, state.n_bases)
+        if threads > 1 and not threaded_ready(*made.parts, lambda: made.arguments(1)):
+            threads = 1  # the serial kernel meanwhile: the same bits
+        self.threads = threads
+        if threads > 1 and numba.get_num_threads() != threads:  # setting it costs more than asking
+            numba.set_num_threads(threads)
+        made.kernel = specialized(made.parts[0], made.parts[1], made.parts[2], threads > 1, made.parts[3], made.parts[4])
+        return made
 
     def ready(self, kernel) -> bool:
         """Whether the stepping kernel of ``kernel``'s parts is compiled already (:func:`compiled`);
         a run whose strategies have no compiled parts steps in Python and compiles no kernel."""
         if kernel.integrator is None or kernel.breaker is None or kernel.growth is None:
             return True
-        return compiled(kernel.integrator, kernel.breaker, kernel.growth, self._threads(kernel.threads, kernel.n_bases) > 1,
-                        kernel.columns, kernel.resin)
+        parts, threaded = (kernel.integrator, kernel.breaker, kernel.growth), self._threads(kernel.threads, kernel.n_bases) > 1
+        # a threaded run starts on the serial kernel while the threaded one compiles alongside
+        return (ALONGSIDE or not threaded) and compiled(*parts, False, kernel.columns, kernel.resin) or (
+            threaded and compiled(*parts, True, kernel.columns, kernel.resin))
 
     def patch_labels(self, state) -> np.ndarray:
         """Compiled union–find over the intact springs, labels in order of each patch's smallest base."""
@@ -1778,8 +1839,8 @@ class _NumbaCall(Call):
 
     def __init__(self, backend: NumbaBackend, state, mech, plan: Plan, tension: np.ndarray) -> None:
         self.backend, self.state, self.mech, self.plan, self.tension = backend, state, mech, plan, tension
-        self.kernel = specialized(plan.integrator, plan.breaker, plan.growth, parallel=backend.threads > 1,
-                                  columns=columns(state), resin=backend.resin)
+        self.parts = (plan.integrator, plan.breaker, plan.growth, columns(state), backend.resin)
+        self.kernel = None  # the serial or the threaded one (``NumbaBackend.call``)
         fr = self.frame = backend.frame(state)
         self.live = backend._live(state, fr)
         self.k = float(mech.k)
@@ -1795,16 +1856,20 @@ class _NumbaCall(Call):
         self.flowed = (fr.springs[0].copy(), fr.springs[3].copy()) if self.resin.evolves else None
         self.n_log, self.valid = 0, True  # valid: the forces in f are of the positions the last call ended with
 
-    def take(self, n: int) -> tuple[int, float, bool]:
+    def arguments(self, n: int) -> tuple:
+        """The kernel's arguments for a call of at most ``n`` steps."""
         plan, fr = self.plan, self.frame
         rest, fmax, inv_fmax, own = fr.springs
         flags = (bool(plan.growth.uniform), plan.breaks == "kernel", int(self.fresh),
                  self.backend.block, int(self.kept), self.resin.evolves)
-        self.ends, self.clock = np.empty(n, np.int64), plan.clock()
-        done, load, self.n_log, picked, self.undone, self.refused = self.kernel(
-            fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, self.ends, self.clock,
-            plan.growth.params, plan.breaker.params, plan.integrator.params, self.resin.params, flags, fr.log,
-            self.heights, self.start)
+        return (fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, np.empty(n, np.int64),
+                plan.clock(), plan.growth.params, plan.breaker.params, plan.integrator.params, self.resin.params, flags,
+                fr.log, self.heights, self.start)
+
+    def take(self, n: int) -> tuple[int, float, bool]:
+        arguments = self.arguments(n)
+        self.ends, self.clock = arguments[9], arguments[10]
+        done, load, self.n_log, picked, self.undone, self.refused = self.kernel(*arguments)
         return done + self.undone, load, picked
 
     def undo(self) -> None:

@@ -1,0 +1,115 @@
+"""A threaded kernel compiled alongside a run: in a process of its own, while the run steps with the
+serial kernel of the same parts, which gives the same bits.
+
+numba compiles a kernel's parallel loops (``prange``) several times more slowly than its serial
+ones, so on an empty cache a large lattice's first run would wait for the threaded kernel before
+its first step.  Instead the numba backend (``threaded_ready``) starts a process that compiles it
+into numba's cache from the generated module's file and the types of a call's arguments, and runs
+its calls on one thread until that process has finished; the next call then loads the threaded
+kernel and goes on with every thread.  Only the speed changes.  A process still compiling when the
+run's process leaves is ended with it (``bark compile`` waits for it instead: :func:`wait`), and
+one that fails is reported and its kernel compiled in the run's process, as without this module.
+
+This module imports neither numba nor the backend: the compiling process does (:func:`main`).
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import pickle
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+CODE = "from bark.engine.kernels.numba_alongside import main; main()"
+"""The program of the compiling process (a test puts a failing one here)."""
+
+ORPHAN_CHECK_S = 1.0
+"""How often the compiling process checks that the process that started it is still there (it ends
+itself when not: a run killed outright leaves no compile behind)."""
+
+
+class Job:
+    """One kernel's compile in a process of its own."""
+
+    def __init__(self, path: Path, process: subprocess.Popen, errors) -> None:
+        self.path, self.process, self.errors = path, process, errors
+
+    def done(self) -> bool | None:
+        """``None`` while it compiles; then whether the kernel is in the cache."""
+        code = self.process.poll()
+        return None if code is None else code == 0
+
+    def why(self) -> str:
+        """What the compiling process said last (its error), or its exit status."""
+        self.errors.seek(0)
+        lines = [line.strip() for line in self.errors.read().decode(errors="replace").splitlines() if line.strip()]
+        return lines[-1] if lines else f"exit status {self.process.returncode}"
+
+
+_JOBS: dict[str, Job] = {}
+
+
+def job(path: Path) -> Job | None:
+    """The compile of the generated module ``path``'s kernel started in this process, if any."""
+    return _JOBS.get(str(path))
+
+
+def start(path: Path, types: tuple) -> Job:
+    """Compile the kernel ``steps`` of the generated module ``path`` for the argument ``types`` (numba
+    types) in a process of its own; the job.  ``OSError`` where no process can be started (the
+    process limit, memory)."""
+    errors = tempfile.TemporaryFile()
+    process = subprocess.Popen([sys.executable, "-c", CODE], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                               stderr=errors)
+    try:
+        process.stdin.write(pickle.dumps((str(path), types, os.getpid())))
+        process.stdin.close()
+    except OSError:  # it ended before reading (its failure is reported as any other)
+        pass
+    made = _JOBS[str(path)] = Job(path, process, errors)
+    return made
+
+
+def wait() -> list[str]:
+    """Wait for every compile still running; the failures, one line each."""
+    failed = []
+    for made in list(_JOBS.values()):
+        made.process.wait()
+        if not made.done():
+            failed.append(f"{made.path.name}: {made.why()}")
+    return failed
+
+
+@atexit.register
+def _end_all() -> None:
+    """Compiles still running end with the process that started them."""
+    for made in _JOBS.values():
+        if made.process.poll() is None:
+            made.process.kill()
+            made.process.wait()
+
+
+def _orphaned(parent: int) -> None:
+    """End this process once the one that started it is gone (killed outright: no exit hook ran)."""
+    while not threading.Event().wait(ORPHAN_CHECK_S):
+        if os.getppid() != parent:
+            os._exit(1)
+
+
+def main() -> None:
+    """The compiling process: reads ``(path, types, parent)`` on stdin, imports the generated module
+    ``path`` as the backend does, compiles its ``steps`` for ``types`` (numba caches it), and exits."""
+    import importlib.util
+
+    path, types, parent = pickle.load(sys.stdin.buffer)
+    threading.Thread(target=_orphaned, args=(parent,), daemon=True).start()
+    name = Path(path).stem
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    module.steps.compile(tuple(types))

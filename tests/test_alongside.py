@@ -1,0 +1,183 @@
+"""A threaded kernel not yet compiled is compiled alongside the run, in a process of its own: the
+run's calls take the serial kernel (the same bits) until it is in the cache, then every thread; a
+compile that fails is said in one line and done in the run's process; a compile still running when
+the run's process leaves ends with it, and one left by a killed run ends itself."""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+numba = pytest.importorskip("numba")
+
+from bark import Stop  # noqa: E402
+from bark.engine.kernels import numba_alongside, numba_backend  # noqa: E402
+from bark.engine.kernels.numba_backend import NumbaBackend  # noqa: E402
+from bark.model.lattice import Lattice  # noqa: E402
+from bark_plugins.breakers import ProbabilisticBreaker  # noqa: E402
+from bark_plugins.growth import SqrtGrowth  # noqa: E402
+from conftest import build_sim  # noqa: E402
+
+pytestmark = pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
+
+
+class _Job:
+    """A compile alongside that is done after ``polls`` questions, well or not."""
+
+    def __init__(self, polls: int, ok: bool) -> None:
+        self.polls, self.ok, self.asked = polls, ok, 0
+
+    def done(self):
+        self.asked += 1
+        return None if self.asked <= self.polls else self.ok
+
+    def why(self) -> str:
+        return "it ran out of memory"
+
+
+def _sim(threads: int):
+    """Bases joining and springs breaking, in blocks of 16 (several blocks per thread): the sqrt case
+    of tests/test_frames.py, whose threaded kernel those tests compile too."""
+    lattice = Lattice(n_bases=2000, n_start=1500, join_rate=150.0, join_every=0.1, jitter=0.05)
+    sim = build_sim(G=0.08, dt=0.05, seed=2, stepping="fixed", backend="numba", fmax_spread=0.05,
+                    growth=SqrtGrowth(G=0.08), lattice=lattice, breakers=[ProbabilisticBreaker()], threads=threads)
+    sim.build().backend.block = 16
+    return sim
+
+
+@pytest.fixture
+def calls(monkeypatch):
+    """The threads of every kernel call, and a compile alongside that is never found on disk."""
+    seen = []
+    call = NumbaBackend.call
+
+    def counted(self, *args):
+        made = call(self, *args)
+        seen.append(self.threads)
+        return made
+
+    monkeypatch.setattr(NumbaBackend, "call", counted)
+    monkeypatch.setattr(numba_backend, "_compiled_before", lambda path: False)
+    monkeypatch.setattr(numba_backend, "_WAITING", {})
+    monkeypatch.setattr(numba_backend, "_BY_PARTS", {})
+    monkeypatch.setattr(numba_backend, "_SPECIALIZED", {})
+    return seen
+
+
+@pytest.mark.parametrize("ok", [True, False])
+def test_a_threaded_run_takes_one_thread_until_its_kernel_is_ready_with_the_same_bits(calls, monkeypatch, caplog, ok):
+    serial = _sim(1)
+    serial.run(Stop(until_time=4.0))
+    started = []
+    monkeypatch.setattr(numba_alongside, "job", lambda path: None)
+    monkeypatch.setattr(numba_alongside, "start", lambda path, types: started.append((path, types)) or _Job(5, ok))
+    calls.clear()
+    shared = _sim(2)
+    with caplog.at_level(logging.INFO, logger="bark"):
+        shared.run(Stop(until_time=4.0))
+    assert len(started) == 1 and "parallel=True" in started[0][0].read_text()  # the threaded kernel's module
+    assert len(started[0][1]) == 19 and all(isinstance(t, numba.types.Type) for t in started[0][1])
+    assert calls[:5] == [1] * 5 and calls[5:] and set(calls[5:]) == {2}  # asked at each call; then threads
+    said = [r.getMessage() for r in caplog.records]
+    assert sum("alongside, in a process of its own" in m for m in said) == 1
+    assert sum("could not be compiled alongside (it ran out of memory)" in m for m in said) == (not ok)
+    assert shared.n_broken > 100 and shared.state.n_bases > 1500
+    for name in ("x", "v", "anchor", "intact"):
+        assert (getattr(serial.state, name) == getattr(shared.state, name)).all(), name
+
+
+def test_a_compile_alongside_that_cannot_start_is_done_in_the_runs_process(calls, monkeypatch, caplog):
+    def refused(path, types):
+        raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(numba_alongside, "job", lambda path: None)
+    monkeypatch.setattr(numba_alongside, "start", refused)
+    with caplog.at_level(logging.INFO, logger="bark"):
+        _sim(2).run(Stop(until_time=0.5))
+    assert set(calls) == {2}
+    said = [r.getMessage() for r in caplog.records if "alongside" in r.getMessage()]
+    assert len(said) == 1 and "cannot be compiled alongside (Resource temporarily unavailable)" in said[0], said
+
+
+def test_with_alongside_off_a_threaded_run_is_threaded_from_its_first_call(calls, monkeypatch):
+    monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
+    monkeypatch.setattr(numba_alongside, "start", lambda path, types: pytest.fail("compiled alongside"))
+    _sim(2).run(Stop(until_time=0.5))
+    assert set(calls) == {2}
+
+
+def _env(tmp_path) -> dict:
+    return {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache"), "BARK_CACHE_DIR": str(tmp_path / "bark-cache"),
+            "NUMBA_NUM_THREADS": "2"}
+
+
+SCENE = """
+[lattice]
+n_bases = 400
+[run]
+backend = "numba"
+threads = 2
+until_time = 2.0
+"""
+
+
+@pytest.mark.slow
+def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(tmp_path):
+    """On empty caches: ``bark compile`` takes its step on the serial kernel while the threaded one
+    compiles alongside, waits for it, and a later run in a new process loads the threaded kernel
+    from the cache (the types the compile was given are the call's: no compile of its own)."""
+    (tmp_path / "scene.toml").write_text(SCENE)
+    env = _env(tmp_path)
+    done = subprocess.run([sys.executable, "-m", "bark_cli", "compile", str(tmp_path / "scene.toml")], cwd=tmp_path,
+                          env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    out = done.stdout + done.stderr
+    assert "alongside" in out and "ready (" in out and "did not compile" not in out, out
+    check = textwrap.dedent(f"""
+        import json
+        from bark import Stop
+        from bark.engine.scene import Scene, read_toml
+        sim = Scene.from_dict(read_toml({str(tmp_path / 'scene.toml')!r})).simulation()
+        sim.run(Stop(until_time=0.5))
+        from bark.engine.kernels import numba_backend
+        threaded = [k for k in numba_backend._SPECIALIZED.values() if k.targetoptions.get("parallel")]
+        print(json.dumps({{"threads": sim.backend.threads, "kernels": len(threaded),
+                           "hits": sum(k.stats.cache_hits.get(s, 0) for k in threaded for s in k.stats.cache_hits),
+                           "misses": sum(k.stats.cache_misses.get(s, 0) for k in threaded for s in k.stats.cache_misses)}}))
+    """)
+    later = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert later.returncode == 0, later.stderr
+    import json
+
+    got = json.loads(later.stdout.splitlines()[-1])
+    assert got == {"threads": 2, "kernels": 1, "hits": 1, "misses": 0}, (got, later.stderr)
+
+
+@pytest.mark.slow
+def test_a_run_that_ends_before_the_compile_alongside_leaves_no_process_behind(tmp_path):
+    """A short threaded run on empty caches ends while its threaded kernel still compiles: the
+    compiling process ends with it (its pid, printed by the run, is gone when the run has left)."""
+    env = _env(tmp_path)
+    code = textwrap.dedent("""
+        from bark import Stop
+        from bark.engine.kernels import numba_alongside
+        from conftest import build_sim
+        sim = build_sim(n_bases=400, threads=2, backend="numba")
+        sim.run(Stop(until_time=0.3))
+        jobs = list(numba_alongside._JOBS.values())
+        print(len(jobs), *(j.process.pid for j in jobs))
+    """)
+    done = subprocess.run([sys.executable, "-c", code], cwd=os.path.dirname(__file__), env=env, capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr
+    count, *pids = done.stdout.split()
+    assert count == "1"
+    for pid in pids:  # ended and reaped by the run's exit hook: no such process now
+        with pytest.raises(ProcessLookupError):
+            os.kill(int(pid), 0)
