@@ -4,6 +4,7 @@ vectorised numpy step of the same model written here (``PlainNumpy``), not a slo
 
 from __future__ import annotations
 
+import contextlib
 import time
 import tracemalloc
 
@@ -44,14 +45,27 @@ def _phase_sim(n: int, backend: str, start_t: float, case: str = "default", thre
     dt = 0.01, so that a step is the same work whatever the backend), compiled and run up to ``start_t``."""
     from bark.engine.scene import Scene, merge
 
-    if backend == "numba":  # the kernel measured is the one asked for: a threaded one compiles before the timing
-        from bark.engine.kernels import numba_backend
-
-        numba_backend.ALONGSIDE = False
     run = {"backend": backend, "threads": threads, "dt": 0.01, "stepping": "fixed", "until_time": 1e6}  # the bench stops it
     sim = Scene.from_dict(merge(_case(n, case), {"run": run})).simulation()
-    sim.run(Stop(until_time=max(start_t, 2 * sim.clock.h)))  # also compiles the kernels, outside the timing
+    with _kernel_first(backend):  # also compiles the kernels, outside the timing
+        sim.run(Stop(until_time=max(start_t, 2 * sim.clock.h)))
     return sim
+
+
+@contextlib.contextmanager
+def _kernel_first(backend: str):
+    """The kernel measured is the one asked for: a threaded one compiles in this process before the
+    timing, not alongside it (``numba_backend.ALONGSIDE``, as it was after)."""
+    if backend != "numba":
+        yield
+        return
+    from bark.engine.kernels import numba_backend as module
+
+    was, module.ALONGSIDE = module.ALONGSIDE, False
+    try:
+        yield
+    finally:
+        module.ALONGSIDE = was
 
 
 class PlainNumpy:

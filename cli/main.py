@@ -571,8 +571,11 @@ def compile_kernels(scene_names):
     for name, scene in scenes:
         t0 = clock.perf_counter()
         runner.run(scene, None)
-        for failed in numba_alongside.wait():  # a threaded kernel compiling alongside the step: it is asked for too
-            click.echo(f"bark: {name}: its threaded kernel did not compile ({failed}); runs compile it when they need it")
+        failed = numba_alongside.wait()  # a threaded kernel compiling alongside the step: it is asked for too
+        if failed:  # the step again: a compile alongside that failed is done in this process
+            click.echo(f"bark: {name}: its threaded kernel did not compile alongside ({'; '.join(failed)}): "
+                       "compiling it here")
+            runner.run(scene, None)
         click.echo(f"bark: {name}: ready ({clock.perf_counter() - t0:.1f} s)")
     click.echo(f"bark: the kernels are in {cache_dir() / 'kernels'}; later runs load them")
 

@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 
 import pytest
 
@@ -63,6 +64,7 @@ def calls(monkeypatch):
         return made
 
     monkeypatch.setattr(NumbaBackend, "call", counted)
+    monkeypatch.setattr(numba_backend, "ALONGSIDE", True)
     monkeypatch.setattr(numba_backend, "_compiled_before", lambda path: False)
     monkeypatch.setattr(numba_backend, "_WAITING", {})
     monkeypatch.setattr(numba_backend, "_BY_PARTS", {})
@@ -76,13 +78,14 @@ def test_a_threaded_run_takes_one_thread_until_its_kernel_is_ready_with_the_same
     serial.run(Stop(until_time=4.0))
     started = []
     monkeypatch.setattr(numba_alongside, "job", lambda path: None)
-    monkeypatch.setattr(numba_alongside, "start", lambda path, types: started.append((path, types)) or _Job(5, ok))
+    monkeypatch.setattr(numba_alongside, "start", lambda path, types, helpers: started.append((path, types)) or _Job(5, ok))
     calls.clear()
     shared = _sim(2)
     with caplog.at_level(logging.INFO, logger="bark"):
         shared.run(Stop(until_time=4.0))
     assert len(started) == 1 and "parallel=True" in started[0][0].read_text()  # the threaded kernel's module
-    assert len(started[0][1]) == 19 and all(isinstance(t, numba.types.Type) for t in started[0][1])
+    arguments = numba_backend._steps_kernel.py_func.__code__.co_argcount - len(numba_backend._PARTS)
+    assert len(started[0][1]) == arguments and all(isinstance(t, numba.types.Type) for t in started[0][1])
     assert calls[:5] == [1] * 5 and calls[5:] and set(calls[5:]) == {2}  # asked at each call; then threads
     said = [r.getMessage() for r in caplog.records]
     assert sum("alongside, in a process of its own" in m for m in said) == 1
@@ -93,7 +96,7 @@ def test_a_threaded_run_takes_one_thread_until_its_kernel_is_ready_with_the_same
 
 
 def test_a_compile_alongside_that_cannot_start_is_done_in_the_runs_process(calls, monkeypatch, caplog):
-    def refused(path, types):
+    def refused(path, types, helpers):
         raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
 
     monkeypatch.setattr(numba_alongside, "job", lambda path: None)
@@ -107,7 +110,7 @@ def test_a_compile_alongside_that_cannot_start_is_done_in_the_runs_process(calls
 
 def test_with_alongside_off_a_threaded_run_is_threaded_from_its_first_call(calls, monkeypatch):
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
-    monkeypatch.setattr(numba_alongside, "start", lambda path, types: pytest.fail("compiled alongside"))
+    monkeypatch.setattr(numba_alongside, "start", lambda path, types, helpers: pytest.fail("compiled alongside"))
     _sim(2).run(Stop(until_time=0.5))
     assert set(calls) == {2}
 
@@ -120,18 +123,29 @@ def _env(tmp_path) -> dict:
 SCENE = """
 [lattice]
 n_bases = 400
+[growth]
+name = "bulge"
+base = { name = "sqrt", r0 = 0.2, G = 0.05 }
+[[growth.bulges]]
+z = 0.1
+half_width = 0.05
+magnitude = 0.01
+G = 0.02
 [run]
 backend = "numba"
 threads = 2
 until_time = 2.0
 """
+"""Threaded, on a small lattice; its growth law's part calls helpers of its own (the bulges'
+profile), which the compiling process must make jitable as the run's process does."""
 
 
 @pytest.mark.slow
 def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(tmp_path):
     """On empty caches: ``bark compile`` takes its step on the serial kernel while the threaded one
     compiles alongside, waits for it, and a later run in a new process loads the threaded kernel
-    from the cache (the types the compile was given are the call's: no compile of its own)."""
+    from the cache (the types the compile was given are the call's, the helpers made jitable: no
+    compile of its own)."""
     (tmp_path / "scene.toml").write_text(SCENE)
     env = _env(tmp_path)
     done = subprocess.run([sys.executable, "-m", "bark_cli", "compile", str(tmp_path / "scene.toml")], cwd=tmp_path,
@@ -159,25 +173,45 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     assert got == {"threads": 2, "kernels": 1, "hits": 1, "misses": 0}, (got, later.stderr)
 
 
-@pytest.mark.slow
-def test_a_run_that_ends_before_the_compile_alongside_leaves_no_process_behind(tmp_path):
-    """A short threaded run on empty caches ends while its threaded kernel still compiles: the
-    compiling process ends with it (its pid, printed by the run, is gone when the run has left)."""
-    env = _env(tmp_path)
-    code = textwrap.dedent("""
-        from bark import Stop
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` is still a compile alongside (not gone, nor another process since)."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return b"numba_alongside" in fh.read()
+    except FileNotFoundError:
+        return False
+
+
+NEVER_DONE = ("from bark.engine.kernels import numba_alongside as a; import pickle, sys, threading; "
+              "_, _, _, _, parent = pickle.load(sys.stdin.buffer); {then}")
+"""A compile alongside that never ends on its own (the run's exit hook must end it), or that only its
+watch over the run's process ends."""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads /proc")
+@pytest.mark.parametrize("how", ["leaves", "is killed"])
+def test_a_compile_alongside_ends_with_the_run_that_started_it(tmp_path, how):
+    """A run's process that leaves while its compile alongside is running ends it (the exit hook);
+    one killed outright leaves it to end itself (it watches that process)."""
+    then = "threading.Event().wait()" if how == "leaves" else "a.ORPHAN_CHECK_S = 0.05; a._orphaned(parent)"
+    code = textwrap.dedent(f"""
+        import os, signal, sys
+        from pathlib import Path
         from bark.engine.kernels import numba_alongside
-        from conftest import build_sim
-        sim = build_sim(n_bases=400, threads=2, backend="numba")
-        sim.run(Stop(until_time=0.3))
-        jobs = list(numba_alongside._JOBS.values())
-        print(len(jobs), *(j.process.pid for j in jobs))
+        numba_alongside.CODE = {NEVER_DONE.format(then=then)!r}
+        job = numba_alongside.start(Path("steps.py"), (), [])
+        print(job.process.pid, flush=True)
+        if {how == "is killed"}:
+            os.kill(os.getpid(), signal.SIGKILL)
     """)
-    done = subprocess.run([sys.executable, "-c", code], cwd=os.path.dirname(__file__), env=env, capture_output=True,
-                          text=True)
-    assert done.returncode == 0, done.stderr
-    count, *pids = done.stdout.split()
-    assert count == "1"
-    for pid in pids:  # ended and reaped by the run's exit hook: no such process now
-        with pytest.raises(ProcessLookupError):
-            os.kill(int(pid), 0)
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True)
+    pid = int(done.stdout.split()[0])
+    if how == "leaves":
+        assert done.returncode == 0, done.stderr
+        assert not _alive(pid)  # ended and reaped before the run's process was gone
+    else:
+        assert done.returncode == -9
+        guard = time.monotonic() + 600  # a bound on a hang, not a timing: it ends within a tenth of a second
+        while _alive(pid):  # until it has gone (or is a zombie left to init): a state, not a time
+            assert time.monotonic() < guard, "the compile alongside outlived its run"
+            os.sched_yield()

@@ -10,7 +10,8 @@ kernel and goes on with every thread.  Only the speed changes.  A process still 
 run's process leaves is ended with it (``bark compile`` waits for it instead: :func:`wait`), and
 one that fails is reported and its kernel compiled in the run's process, as without this module.
 
-This module imports neither numba nor the backend: the compiling process does (:func:`main`).
+This module imports neither numba nor the backend; the compiling process runs the backend's
+``compile_alongside``.
 """
 
 from __future__ import annotations
@@ -24,8 +25,10 @@ import tempfile
 import threading
 from pathlib import Path
 
-CODE = "from bark.engine.kernels.numba_alongside import main; main()"
-"""The program of the compiling process (a test puts a failing one here)."""
+CODE = "from bark.engine.kernels.numba_backend import compile_alongside; compile_alongside()"
+"""The program of the compiling process (a test puts another here), run with ``-P``: the folder it
+starts in is not on its path (a ``bark`` folder there would stand for the package); the run's
+``sys.path`` is given to it instead."""
 
 ORPHAN_CHECK_S = 1.0
 """How often the compiling process checks that the process that started it is still there (it ends
@@ -44,10 +47,11 @@ class Job:
         return None if code is None else code == 0
 
     def why(self) -> str:
-        """What the compiling process said last (its error), or its exit status."""
+        """The error the compiling process stopped on (its last line naming one), or its exit status."""
         self.errors.seek(0)
         lines = [line.strip() for line in self.errors.read().decode(errors="replace").splitlines() if line.strip()]
-        return lines[-1] if lines else f"exit status {self.process.returncode}"
+        named = [line for line in lines if "Error" in line.split(":")[0]]
+        return (named or lines or [f"exit status {self.process.returncode}"])[-1]
 
 
 _JOBS: dict[str, Job] = {}
@@ -58,15 +62,21 @@ def job(path: Path) -> Job | None:
     return _JOBS.get(str(path))
 
 
-def start(path: Path, types: tuple) -> Job:
+def start(path: Path, types: tuple, helpers: list[tuple[str, str]]) -> Job:
     """Compile the kernel ``steps`` of the generated module ``path`` for the argument ``types`` (numba
-    types) in a process of its own; the job.  ``OSError`` where no process can be started (the
-    process limit, memory)."""
+    types) in a process of its own, the parts' ``helpers`` (``(module, qualname)`` each) made
+    jitable there first, as the backend does before it imports the module; the job.  Raises where
+    the order cannot be written or no process started (the process limit, memory)."""
+    order = pickle.dumps((str(path), types, helpers, list(sys.path), os.getpid()))
     errors = tempfile.TemporaryFile()
-    process = subprocess.Popen([sys.executable, "-c", CODE], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                               stderr=errors)
     try:
-        process.stdin.write(pickle.dumps((str(path), types, os.getpid())))
+        process = subprocess.Popen([sys.executable, "-P", "-c", CODE], stdin=subprocess.PIPE,
+                                   stdout=subprocess.DEVNULL, stderr=errors)
+    except BaseException:
+        errors.close()
+        raise
+    try:
+        process.stdin.write(order)
         process.stdin.close()
     except OSError:  # it ended before reading (its failure is reported as any other)
         pass
@@ -100,16 +110,14 @@ def _orphaned(parent: int) -> None:
             os._exit(1)
 
 
-def main() -> None:
-    """The compiling process: reads ``(path, types, parent)`` on stdin, imports the generated module
-    ``path`` as the backend does, compiles its ``steps`` for ``types`` (numba caches it), and exits."""
-    import importlib.util
+def read_order() -> tuple[str, tuple, list]:
+    """In the compiling process (``CODE``: ``numba_backend.compile_alongside``): its order read from
+    stdin, ``(path, types, helpers)``; the run's ``sys.path`` taken, Ctrl-C left to the run (whose
+    process ends this one as it leaves), and the watch over the run's process started."""
+    import signal
 
-    path, types, parent = pickle.load(sys.stdin.buffer)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    path, types, helpers, search, parent = pickle.load(sys.stdin.buffer)
     threading.Thread(target=_orphaned, args=(parent,), daemon=True).start()
-    name = Path(path).stem
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    module.steps.compile(tuple(types))
+    sys.path[:] = search
+    return path, types, helpers

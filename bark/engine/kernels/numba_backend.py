@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import importlib
 import importlib.util
 import inspect
 import logging
@@ -1252,8 +1253,8 @@ _WAITING: dict[tuple, tuple] = {}
 
 def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bool:
     """Whether a call may take the threaded kernel of these parts now: compiled in this process or
-    in the cache, or to be compiled here (parts that cannot be imported by name, ``ALONGSIDE`` off, a
-    compile alongside that failed: said in one line).  Else it is compiled alongside
+    in the cache, or to be compiled here (parts or their helpers that cannot be imported by name,
+    ``ALONGSIDE`` off, a compile alongside that failed or could not start: said in one line).  Else it is compiled alongside
     (:mod:`~bark.engine.kernels.numba_alongside`: started the first time, for the types of a call's
     ``arguments()``), and not ready until that process has put it in the cache."""
     ids = (id(integrator), id(breaker), id(growth), id(resin), True, tuple(columns))
@@ -1263,7 +1264,8 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bo
     waiting = _WAITING.get(ids)
     if waiting is None or not all(a is b for a, b in zip(waiting[:4], (integrator, breaker, growth, resin))):
         key, named, helpers, names = _combination(integrator, breaker, growth, True, columns, resin)
-        if key in _SPECIALIZED or None in names.values():
+        helper_names = [_importable(fn) for fn in helpers]
+        if key in _SPECIALIZED or None in names.values() or None in helper_names:
             return True
         name, text = _wrapper(integrator, breaker, growth, True, key[4], HOOKEAN if resin is None else resin, named,
                               helpers, names)
@@ -1273,10 +1275,11 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bo
             if _compiled_before(path):
                 return True
             try:
-                job = numba_alongside.start(path, tuple(numba.typeof(a) for a in arguments()))
-            except OSError as err:
-                LOG.info(f"the threaded stepping kernel cannot be compiled alongside ({err.strerror or err}): compiling "
-                         "it in this process")
+                job = numba_alongside.start(path, tuple(numba.typeof(a) for a in arguments()), helper_names)
+            except Exception as err:  # noqa: BLE001 — no process, or an order it cannot be given: compiled here
+                why = err.strerror if isinstance(err, OSError) and err.strerror else f"{type(err).__name__}: {err}"
+                LOG.info(f"the threaded stepping kernel cannot be compiled alongside ({why}): compiling it in this "
+                         "process")
                 return True
             LOG.info("compiling the threaded stepping kernel alongside, in a process of its own (once): the run goes "
                      "on with one thread until it is ready, with the same results")
@@ -1285,11 +1288,32 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bo
     done = job.done()
     if done is None:
         return False
-    del _WAITING[ids]
+    _WAITING.pop(ids, None)
     if not done:
         LOG.info(f"the threaded stepping kernel could not be compiled alongside ({job.why()}): compiling it in this "
                  "process")
     return True
+
+
+def compile_alongside() -> None:
+    """The process of a compile alongside (``numba_alongside.CODE``): given its order
+    (``numba_alongside.read_order``), the helpers made jitable and the generated module imported as a
+    run's process does (:func:`_combination`, :func:`_specialized`), its kernel compiled for the
+    types given (numba caches it)."""
+    path, types, helpers = numba_alongside.read_order()
+    functions = []
+    for module, qualname in helpers:
+        obj = importlib.import_module(module)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+        functions.append(obj)
+    _make_jitable(functions)
+    name = Path(path).stem
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    module.steps.compile(tuple(types))
 
 
 def _cache_folders(source: Path) -> list[Path]:
@@ -1818,8 +1842,10 @@ class NumbaBackend(Backend):
         return made
 
     def ready(self, kernel) -> bool:
-        """Whether the stepping kernel of ``kernel``'s parts is compiled already (:func:`compiled`);
-        a run whose strategies have no compiled parts steps in Python and compiles no kernel."""
+        """Whether a run of ``kernel``'s parts can start without compiling first: its kernel
+        compiled already (:func:`compiled`) — for a threaded run, either kernel, the serial one
+        stepping while the threaded one compiles alongside (:func:`threaded_ready`); a run whose
+        strategies have no compiled parts steps in Python and compiles no kernel."""
         if kernel.integrator is None or kernel.breaker is None or kernel.growth is None:
             return True
         parts, threaded = (kernel.integrator, kernel.breaker, kernel.growth), self._threads(kernel.threads, kernel.n_bases) > 1
