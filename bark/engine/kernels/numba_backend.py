@@ -1099,13 +1099,19 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
     """:func:`_specialized`, found by the parts' identities after the first time."""
     ids = (id(integrator), id(breaker), id(growth), id(resin), bool(parallel), tuple(columns))
     seen = _BY_PARTS.get(ids)
-    if seen is not None and all(a is b for a, b in zip(seen[:4], (integrator, breaker, growth, resin))):
+    if _same_parts(seen, (integrator, breaker, growth, resin)):
         return seen[4]
     kernel = _specialized(integrator, breaker, growth, parallel, columns, resin)
     while len(_BY_PARTS) >= BY_PARTS_KEPT:  # the oldest goes
         del _BY_PARTS[next(iter(_BY_PARTS))]
     _BY_PARTS[ids] = (integrator, breaker, growth, resin, kernel)  # the parts kept: their ids stay theirs
     return kernel
+
+
+def _same_parts(entry: tuple | None, parts: tuple) -> bool:
+    """Whether ``entry`` (of ``_BY_PARTS`` or ``_WAITING``, found by the parts' ids) holds these very
+    parts: an id is another object's once its own is gone."""
+    return entry is not None and all(a is b for a, b in zip(entry[:len(parts)], parts))
 
 
 def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None):
@@ -1144,12 +1150,18 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
     if not _compiled_before(path):
         LOG.info(f"compiling the stepping kernel for {integrator.update.__name__}, {breaker.rule.__name__} and "
                  f"{growth.radius.__name__} (once: later runs load it from {str(path.parent)!r})")
+    _SPECIALIZED[key] = steps = _load_generated(path).steps
+    return steps
+
+
+def _load_generated(path: Path):
+    """The generated module ``path``, imported by its file (and named in ``sys.modules``)."""
+    name = path.stem
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     spec.loader.exec_module(module)
-    _SPECIALIZED[key] = module.steps
-    return module.steps
+    return module
 
 
 def _combination(integrator, breaker, growth, parallel, columns, resin) -> tuple:
@@ -1254,15 +1266,15 @@ _WAITING: dict[tuple, tuple] = {}
 def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bool:
     """Whether a call may take the threaded kernel of these parts now: compiled in this process or
     in the cache, or to be compiled here (parts or their helpers that cannot be imported by name,
-    ``ALONGSIDE`` off, a compile alongside that failed or could not start: said in one line).  Else it is compiled alongside
-    (:mod:`~bark.engine.kernels.numba_alongside`: started the first time, for the types of a call's
-    ``arguments()``), and not ready until that process has put it in the cache."""
+    ``ALONGSIDE`` off, a compile alongside that failed or could not start: said in one line).  Else
+    it is compiled alongside (:mod:`~bark.engine.kernels.numba_alongside`: started the first time,
+    for the types of a call's ``arguments()``), and not ready until that process has put it in the
+    cache."""
     ids = (id(integrator), id(breaker), id(growth), id(resin), True, tuple(columns))
-    seen = _BY_PARTS.get(ids)
-    if not ALONGSIDE or seen is not None and all(a is b for a, b in zip(seen[:4], (integrator, breaker, growth, resin))):
+    parts = (integrator, breaker, growth, resin)
+    if not ALONGSIDE or _same_parts(_BY_PARTS.get(ids), parts):
         return True
-    waiting = _WAITING.get(ids)
-    if waiting is None or not all(a is b for a, b in zip(waiting[:4], (integrator, breaker, growth, resin))):
+    if not _same_parts(_WAITING.get(ids), parts):
         key, named, helpers, names = _combination(integrator, breaker, growth, True, columns, resin)
         helper_names = [_importable(fn) for fn in helpers]
         if key in _SPECIALIZED or None in names.values() or None in helper_names:
@@ -1308,12 +1320,7 @@ def compile_alongside() -> None:
             obj = getattr(obj, part)
         functions.append(obj)
     _make_jitable(functions)
-    name = Path(path).stem
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    module.steps.compile(tuple(types))
+    _load_generated(Path(path)).steps.compile(tuple(types))
 
 
 def _cache_folders(source: Path) -> list[Path]:
