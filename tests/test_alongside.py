@@ -215,3 +215,60 @@ def test_a_compile_alongside_ends_with_the_run_that_started_it(tmp_path, how):
         while _alive(pid):  # until it has gone (or is a zombie left to init): a state, not a time
             assert time.monotonic() < guard, "the compile alongside outlived its run"
             os.sched_yield()
+
+
+HOLDS = textwrap.dedent("""
+    import os, pathlib, threading
+    from bark.engine.kernels import numba_alongside as a
+    path, _, _ = a.read_order()
+    folder = pathlib.Path(path).parent
+    with a.alone(path):
+        (folder / f"in-{os.getpid()}").write_text("")
+        while not (folder / "go").exists():
+            threading.Event().wait(0.01)
+""")
+"""A compile alongside that holds its kernel's lock until the test lets it go."""
+
+
+def _blocked_on(lock) -> bool:
+    """Whether a process waits for a ``flock`` on ``lock`` (``/proc/locks``: a waiter's line has ``->``)."""
+    ino = os.stat(lock).st_ino
+    with open("/proc/locks") as fh:
+        return any("->" in line and line.split()[-3].endswith(f":{ino}") for line in fh)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/locks"), reason="reads /proc/locks")
+def test_compiles_alongside_of_one_kernel_take_turns(tmp_path, monkeypatch):
+    """Two processes that compile the same kernel alongside (two runs' that started together): the
+    second waits, without compiling, until the first has ended (then it finds the kernel in numba's
+    cache); both end well."""
+    monkeypatch.setattr(numba_alongside, "CODE", HOLDS)
+    monkeypatch.setattr(numba_alongside, "_JOBS", {})
+    path = tmp_path / "bark_steps_x.py"
+    path.write_text("")
+    guard = time.monotonic() + 600  # a bound on a hang, not a timing
+
+    def until(state, job) -> None:
+        while not state():
+            assert job.done() is None, job.why()
+            assert time.monotonic() < guard
+            os.sched_yield()
+
+    first = numba_alongside.start(path, (), [])
+    jobs = [first]
+    try:
+        until(lambda: (tmp_path / f"in-{first.process.pid}").exists(), first)
+        numba_alongside._JOBS.clear()  # the second as another process's
+        second = numba_alongside.start(path, (), [])
+        jobs.append(second)
+        entered = tmp_path / f"in-{second.process.pid}"
+        until(lambda: entered.exists() or _blocked_on(path.with_suffix(".lock")), second)
+        assert not entered.exists(), "the second compile went on while the first held the kernel"
+        (tmp_path / "go").write_text("")
+        assert first.process.wait() == 0 and second.process.wait() == 0, (first.why(), second.why())
+        assert entered.exists()
+    finally:
+        (tmp_path / "go").write_text("")
+        for job in jobs:
+            job.process.wait()
+            job.errors.close()

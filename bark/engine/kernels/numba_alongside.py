@@ -9,6 +9,9 @@ its calls on one thread until that process has finished; the next call then load
 kernel and goes on with every thread.  Only the speed changes.  A process still compiling when the
 run's process leaves is ended with it (``bark compile`` waits for it instead: :func:`wait`), and
 one that fails is reported and its kernel compiled in the run's process, as without this module.
+Processes that start the same kernel's compile at once (a sweep's or a fit's workers) compile it
+once: each compile holds a lock on the kernel's file (:func:`alone`), the others wait for it and
+then find the kernel in the cache.
 
 This module imports neither numba nor the backend; the compiling process runs the backend's
 ``compile_alongside``.
@@ -17,6 +20,7 @@ This module imports neither numba nor the backend; the compiling process runs th
 from __future__ import annotations
 
 import atexit
+import contextlib
 import os
 import pickle
 import subprocess
@@ -24,6 +28,11 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover — no flock on this system: compiles are not shared
+    fcntl = None
 
 CODE = "from bark.engine.kernels.numba_backend import compile_alongside; compile_alongside()"
 """The program of the compiling process (a test puts another here), run with ``-P``: the folder it
@@ -108,6 +117,28 @@ def _orphaned(parent: int) -> None:
     while not threading.Event().wait(ORPHAN_CHECK_S):
         if os.getppid() != parent:
             os._exit(1)
+
+
+@contextlib.contextmanager
+def alone(path: str | Path):
+    """Held while the compiling process compiles the kernel of the generated module ``path``: an
+    exclusive ``flock`` on ``path`` with ``.lock`` for its suffix, waited for while another process
+    holds it (which ends by putting the kernel in numba's cache, where this one then finds it; or,
+    ended early, leaves this one to compile it).  The lock goes with the process, however it ends.
+    Where the system or its file system has no ``flock``, nothing is held."""
+    lock = Path(path).with_suffix(".lock")
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        fd = None
+    try:
+        if fd is not None and fcntl is not None:
+            with contextlib.suppress(OSError):  # a file system without flock: not shared
+                fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)  # releases the flock
 
 
 def read_order() -> tuple[str, tuple, list]:

@@ -1097,7 +1097,7 @@ BY_PARTS_KEPT = 16
 
 def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str, ...] = (), resin=None):
     """:func:`_specialized`, found by the parts' identities after the first time."""
-    ids = (id(integrator), id(breaker), id(growth), id(resin), bool(parallel), tuple(columns))
+    ids = _ids(integrator, breaker, growth, resin, parallel, columns)
     seen = _BY_PARTS.get(ids)
     if _same_parts(seen, (integrator, breaker, growth, resin)):
         return seen[4]
@@ -1106,6 +1106,11 @@ def specialized(integrator, breaker, growth, parallel=False, columns: tuple[str,
         del _BY_PARTS[next(iter(_BY_PARTS))]
     _BY_PARTS[ids] = (integrator, breaker, growth, resin, kernel)  # the parts kept: their ids stay theirs
     return kernel
+
+
+def _ids(integrator, breaker, growth, resin, parallel, columns) -> tuple:
+    """What ``_BY_PARTS`` and ``_WAITING`` key on: the parts' identities, the threads, the columns."""
+    return id(integrator), id(breaker), id(growth), id(resin), bool(parallel), tuple(columns)
 
 
 def _same_parts(entry: tuple | None, parts: tuple) -> bool:
@@ -1123,13 +1128,14 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
     (compiled once per combination and kept on disk; see the module's docstring), its block loops
     shared among threads if ``parallel``, the breaker and the resin law (``resin``, a
     :class:`~bark.contract.parts.ResinPart`; the paper's spring by default) reading the declared
-    per-spring fields by their ``columns`` of the frame's ``own``.  Functions that cannot be imported by name (lambdas, local
-    functions) get a wrapper compiled in this process only."""
-    key, named, helpers, names = _combination(integrator, breaker, growth, parallel, columns, resin)
+    per-spring fields by their ``columns`` of the frame's ``own``.  Functions that cannot be imported
+    by name (lambdas, local functions) get a wrapper compiled in this process only."""
+    combination = _combination(integrator, breaker, growth, parallel, columns, resin)
+    key = combination.key
     if key in _SPECIALIZED:
         return _SPECIALIZED[key]
-    resin, columns = HOOKEAN if resin is None else resin, key[4]
-    if None in names.values():
+    resin, columns = combination.resin, key[4]
+    if not combination.importable:
         u, g = inline(integrator.update), inline(growth.radius)
         p = _time_of(growth)
         block = each_height(g) if growth.radii is None else inline(growth.radii)
@@ -1145,8 +1151,7 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
 
         _SPECIALIZED[key] = steps
         return steps
-    name, text = _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpers, names)
-    path = _write_once(name, text)
+    path = _write_once(*combination.file())
     if not _compiled_before(path):
         LOG.info(f"compiling the stepping kernel for {integrator.update.__name__}, {breaker.rule.__name__} and "
                  f"{growth.radius.__name__} (once: later runs load it from {str(path.parent)!r})")
@@ -1164,9 +1169,34 @@ def _load_generated(path: Path):
     return module
 
 
-def _combination(integrator, breaker, growth, parallel, columns, resin) -> tuple:
-    """The kernel's key for these parts (what ``_SPECIALIZED`` keys on), the functions it inlines by
-    role, their helpers (made jitable), and the name each is imported by (``None``: it cannot be)."""
+@attrs.frozen
+class _Combination:
+    """A combination of parts as its kernel is found: its ``key`` (what ``_SPECIALIZED`` keys on), the
+    functions it inlines by role (``named``), their ``helpers`` (made jitable), the name each is
+    imported by (``names``; ``None``: it cannot be), and the parts (``resin``: the paper's spring where
+    none is given)."""
+
+    key: tuple
+    named: dict
+    helpers: list
+    names: dict
+    breaker: object
+    growth: object
+    resin: object
+    parallel: bool
+
+    @property
+    def importable(self) -> bool:
+        """Whether its functions can all be imported by name (else compiled in each process, no file)."""
+        return None not in self.names.values()
+
+    def file(self) -> tuple[str, str]:
+        """Its generated module's name and text (:func:`_wrapper`); only where it is importable."""
+        return _wrapper(self)
+
+
+def _combination(integrator, breaker, growth, parallel, columns, resin) -> _Combination:
+    """These parts' :class:`_Combination`."""
     inner = growth.inner
     resin = HOOKEAN if resin is None else resin
     named = {"update": integrator.update, "rule": breaker.rule, "radius": growth.radius, "time": growth.time,
@@ -1180,14 +1210,17 @@ def _combination(integrator, breaker, growth, parallel, columns, resin) -> tuple
     key = (breaker.reads, breaker.load_reads, resin.reads, resin.writes, columns, *named.items(), bool(parallel))
     helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
-    return key, named, helpers, {k: _importable(fn) for k, fn in named.items()}
+    return _Combination(key, named, helpers, {k: _importable(fn) for k, fn in named.items()}, breaker, growth, resin,
+                        bool(parallel))
 
 
-def _wrapper(integrator, breaker, growth, parallel, columns, resin, named, helpers, names) -> tuple[str, str]:
-    """The generated module's name and text for these parts: named by a digest of everything its
-    compiled code depends on (numba's version, the sources), so that a change compiles it again."""
-    inner = growth.inner
-    adapters = _adapters(breaker, columns)
+def _wrapper(combination: _Combination) -> tuple[str, str]:
+    """The generated module's name and text for a combination of parts: named by a digest of
+    everything its compiled code depends on (numba's version, the sources), so that a change
+    compiles it again."""
+    named, helpers, names, parallel = combination.named, combination.helpers, combination.names, combination.parallel
+    resin, columns, inner = combination.resin, combination.key[4], combination.growth.inner
+    adapters = _adapters(combination.breaker, columns)
     resin_text = _resin_adapters(resin, columns)
     digest = hashlib.sha256()
     for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), _source(ends_call), *(_source(fn) for fn in named.values()),
@@ -1242,13 +1275,12 @@ def compiled(integrator, breaker, growth, parallel=False, columns: tuple[str, ..
     """Whether the kernel :func:`specialized` gives for these parts is compiled already, in this
     process or in the cache on disk (numba's index of it there, undamaged), so that a run can start
     without compiling it.  Compiles nothing."""
-    key, named, helpers, names = _combination(integrator, breaker, growth, parallel, columns, resin)
-    if key in _SPECIALIZED:
+    combination = _combination(integrator, breaker, growth, parallel, columns, resin)
+    if combination.key in _SPECIALIZED:
         return True
-    if None in names.values():
+    if not combination.importable:
         return False  # compiled in each process that uses it
-    resin = HOOKEAN if resin is None else resin
-    name, text = _wrapper(integrator, breaker, growth, parallel, key[4], resin, named, helpers, names)
+    name, text = combination.file()
     path = cache_dir() / f"{name}.py"
     return _holds(path, text) and _compiled_before(path)
 
@@ -1270,18 +1302,16 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bo
     it is compiled alongside (:mod:`~bark.engine.kernels.numba_alongside`: started the first time,
     for the types of a call's ``arguments()``), and not ready until that process has put it in the
     cache."""
-    ids = (id(integrator), id(breaker), id(growth), id(resin), True, tuple(columns))
+    ids = _ids(integrator, breaker, growth, resin, True, columns)
     parts = (integrator, breaker, growth, resin)
     if not ALONGSIDE or _same_parts(_BY_PARTS.get(ids), parts):
         return True
     if not _same_parts(_WAITING.get(ids), parts):
-        key, named, helpers, names = _combination(integrator, breaker, growth, True, columns, resin)
-        helper_names = [_importable(fn) for fn in helpers]
-        if key in _SPECIALIZED or None in names.values() or None in helper_names:
+        combination = _combination(integrator, breaker, growth, True, columns, resin)
+        helper_names = [_importable(fn) for fn in combination.helpers]
+        if combination.key in _SPECIALIZED or not combination.importable or None in helper_names:
             return True
-        name, text = _wrapper(integrator, breaker, growth, True, key[4], HOOKEAN if resin is None else resin, named,
-                              helpers, names)
-        path = _write_once(name, text)
+        path = _write_once(*combination.file())
         job = numba_alongside.job(path)
         if job is None:
             if _compiled_before(path):
@@ -1311,7 +1341,8 @@ def compile_alongside() -> None:
     """The process of a compile alongside (``numba_alongside.CODE``): given its order
     (``numba_alongside.read_order``), the helpers made jitable and the generated module imported as a
     run's process does (:func:`_combination`, :func:`_specialized`), its kernel compiled for the
-    types given (numba caches it)."""
+    types given (numba caches it) — alone: where another process compiles it already, once that one
+    has ended (``numba_alongside.alone``), loaded from the cache instead."""
     path, types, helpers = numba_alongside.read_order()
     functions = []
     for module, qualname in helpers:
@@ -1320,7 +1351,8 @@ def compile_alongside() -> None:
             obj = getattr(obj, part)
         functions.append(obj)
     _make_jitable(functions)
-    _load_generated(Path(path)).steps.compile(tuple(types))
+    with numba_alongside.alone(path):
+        _load_generated(Path(path)).steps.compile(tuple(types))
 
 
 def _cache_folders(source: Path) -> list[Path]:
