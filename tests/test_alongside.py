@@ -6,6 +6,7 @@ the run's process leaves ends with it, and one left by a killed run ends itself.
 from __future__ import annotations
 
 import errno
+import json
 import logging
 import os
 import subprocess
@@ -153,6 +154,8 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     assert done.returncode == 0, done.stderr
     out = done.stdout + done.stderr
     assert "alongside" in out and "ready (" in out and "did not compile" not in out, out
+    timed = json.loads((tmp_path / "bark-cache" / "kernels" / "compile-seconds.json").read_text())
+    assert set(timed) == {"serial", "threaded"} and min(timed.values()) > 0, timed  # what the next notices say
     check = textwrap.dedent(f"""
         import json
         from bark import Stop
@@ -167,8 +170,6 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     """)
     later = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert later.returncode == 0, later.stderr
-    import json
-
     got = json.loads(later.stdout.splitlines()[-1])
     assert got == {"threads": 2, "kernels": 1, "hits": 1, "misses": 0}, (got, later.stderr)
 

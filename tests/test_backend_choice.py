@@ -105,3 +105,73 @@ def test_a_first_run_on_empty_caches_starts_at_once_with_the_same_results(tmp_pa
     again = subprocess.run([*args, "--backend", "numba", "--out", str(tmp_path / "numba")], capture_output=True, text=True)
     assert again.returncode == 0, again.stderr
     assert (tmp_path / "first" / "breaks.csv").read_bytes() == (tmp_path / "numba" / "breaks.csv").read_bytes()
+
+
+@pytest.fixture
+def record(monkeypatch, tmp_path):
+    """The compile record in a folder of the test's own."""
+    from bark.engine.kernels import numba_backend
+
+    path = tmp_path / "kernels" / "compile-seconds.json"
+    monkeypatch.setattr(numba_backend, "compile_record", lambda: path)
+    return path
+
+
+def test_a_first_compile_is_timed_and_the_next_ones_notice_says_how_long(record, monkeypatch, caplog):
+    """The notice before a kernel's first compile says how long it takes: a range where this machine
+    has compiled none yet, then the seconds the last one took here (its first call, timed)."""
+    from bark.engine.kernels import numba_backend
+
+    for round_ in range(2):
+        monkeypatch.setattr(numba_backend, "_compiled_before", lambda path: False)  # as on a new machine
+        monkeypatch.setattr(numba_backend, "_SPECIALIZED", {})
+        monkeypatch.setattr(numba_backend, "_BY_PARTS", {})
+        caplog.clear()
+        with caplog.at_level(logging.INFO, logger="bark"):
+            runner.run(Scene.from_dict({**SHORT, "run": {**SHORT["run"], "until_time": 5.0, "backend": "numba"}}), None)
+        said = [r.getMessage() for r in caplog.records if r.getMessage().startswith("compiling the stepping kernel")]
+        kept = json.loads(record.read_text())
+        assert set(kept) == {"serial"} and kept["serial"] > 0
+        if round_ == 0:
+            assert len(said) == 1 and "(once, tens of seconds: later runs load it from" in said[0], said
+            first = kept["serial"]
+        else:
+            assert len(said) == 1 and f"(once, about {max(1, round(first))} s here the last time: later" in said[0], said
+    assert not numba_backend._UNTIMED  # each timed once, at its first call
+
+
+@pytest.mark.parametrize("held", [b"", b"{", b"[1, 2]", b'"serial"', b'{"serial": "20"}', b'{"serial": NaN}',
+                                  b'{"serial": Infinity}', b'{"serial": -3}', b'{"serial": 0}', b'{"serial": true}',
+                                  b'{"serial": null}', b'{"serial": [20]}', b"\xff\xfe{}", None])
+def test_a_damaged_compile_record_gives_a_range_and_is_written_anew(record, held):
+    """Whatever the record holds (or a folder in its place: ``None``), the notice gives a range and
+    nothing is raised; a file is replaced by the next compile's seconds."""
+    from bark.engine.kernels import numba_backend
+
+    record.parent.mkdir()
+    if held is None:
+        record.mkdir()
+    else:
+        record.write_bytes(held)
+    assert numba_backend.compile_seconds() == {}
+    assert numba_backend._how_long("serial") == "tens of seconds" and numba_backend._how_long("threaded") == "minutes"
+    numba_backend.record_compile("threaded", 61.04)
+    assert numba_backend.compile_seconds() == ({} if held is None else {"threaded": 61.0})
+
+
+@pytest.mark.parametrize("seconds", [float("nan"), float("inf"), -1.0, 0.0])
+def test_a_compile_time_that_is_not_a_time_is_not_kept(record, seconds):
+    from bark.engine.kernels import numba_backend
+
+    numba_backend.record_compile("serial", seconds)
+    assert not record.exists()
+
+
+def test_a_compile_record_that_cannot_be_written_is_skipped_in_silence(monkeypatch, tmp_path):
+    from bark.engine.kernels import numba_backend
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    monkeypatch.setattr(numba_backend, "compile_record", lambda: blocker / "compile-seconds.json")
+    numba_backend.record_compile("serial", 20.0)  # its folder is a file: not written, no error
+    assert numba_backend.compile_seconds() == {}

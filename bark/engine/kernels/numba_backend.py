@@ -34,11 +34,14 @@ import hashlib
 import importlib
 import importlib.util
 import inspect
+import json
 import logging
+import math
 import os
 import pickle
 import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -1152,11 +1155,59 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
         _SPECIALIZED[key] = steps
         return steps
     path = _write_once(*combination.file())
-    if not _compiled_before(path):
-        LOG.info(f"compiling the stepping kernel for {integrator.update.__name__}, {breaker.rule.__name__} and "
-                 f"{growth.radius.__name__} (once: later runs load it from {str(path.parent)!r})")
+    first = not _compiled_before(path)
+    kind = "threaded" if parallel else "serial"
+    if first:
+        LOG.info(f"compiling the {'threaded ' if parallel else ''}stepping kernel for {integrator.update.__name__}, "
+                 f"{breaker.rule.__name__} and {growth.radius.__name__} (once, {_how_long(kind)}: later runs load it "
+                 f"from {str(path.parent)!r})")
     _SPECIALIZED[key] = steps = _load_generated(path).steps
+    if first:
+        _UNTIMED[steps] = kind
     return steps
+
+
+def compile_record() -> Path:
+    """The file that keeps how long the last first compile of each kind of kernel (``serial``,
+    ``threaded``) took on this machine, in seconds (in the kernels' cache folder): what the notice
+    of the next one says it will take."""
+    return cache_dir() / "compile-seconds.json"
+
+_UNTIMED: dict = {}
+"""Kernels loaded but not compiled yet (numba compiles at the first call), by their kind: the first
+call's seconds are the compile's (``_NumbaCall.take``)."""
+
+
+def compile_seconds() -> dict[str, float]:
+    """The seconds the last first compile of each kind of kernel took here (:func:`compile_record`);
+    none where the file is missing, damaged or cannot be read (an estimate, never an error)."""
+    try:
+        held = json.loads(compile_record().read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(held, dict):
+        return {}
+    return {kind: float(held[kind]) for kind in ("serial", "threaded")
+            if isinstance(held.get(kind), (int, float)) and not isinstance(held[kind], bool)
+            and math.isfinite(held[kind]) and held[kind] > 0}
+
+
+def record_compile(kind: str, seconds: float) -> None:
+    """Keep ``seconds`` as the last first compile of a ``kind`` kernel here; a cache folder that
+    cannot be written keeps nothing (an estimate is not worth a warning)."""
+    if not (math.isfinite(seconds) and seconds > 0):
+        return
+    with contextlib.suppress(OSError, ValueError):
+        compile_record().parent.mkdir(parents=True, exist_ok=True)
+        _write_atomically(compile_record(), json.dumps({**compile_seconds(), kind: max(0.1, round(seconds, 1))}))
+
+
+def _how_long(kind: str) -> str:
+    """What the notice of a compile says of its length: the last one of its kind here, or a range."""
+    last = compile_seconds().get(kind)
+    if last is None:
+        return "tens of seconds" if kind == "serial" else "minutes"
+    return f"about {max(1, round(last))} s here the last time"
 
 
 def _load_generated(path: Path):
@@ -1323,8 +1374,9 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bo
                 LOG.info(f"the threaded stepping kernel cannot be compiled alongside ({why}): compiling it in this "
                          "process")
                 return True
-            LOG.info("compiling the threaded stepping kernel alongside, in a process of its own (once): the run goes "
-                     "on with one thread until it is ready, with the same results")
+            LOG.info(f"compiling the threaded stepping kernel alongside, in a process of its own (once, "
+                     f"{_how_long('threaded')}): the run goes on with one thread until it is ready, with the same "
+                     "results")
         _WAITING[ids] = (integrator, breaker, growth, resin, job)
     job = _WAITING[ids][4]
     done = job.done()
@@ -1352,7 +1404,11 @@ def compile_alongside() -> None:
         functions.append(obj)
     _make_jitable(functions)
     with numba_alongside.alone(path):
+        first = not _compiled_before(Path(path))  # else another process compiled it while this one waited
+        t0 = time.perf_counter()
         _load_generated(Path(path)).steps.compile(tuple(types))
+        if first:
+            record_compile("threaded", time.perf_counter() - t0)
 
 
 def _cache_folders(source: Path) -> list[Path]:
@@ -1418,6 +1474,19 @@ class _Readable(pickle.Unpickler):
         return _Anything
 
 
+def _write_atomically(path: Path, text: str) -> None:
+    """``text`` into ``path`` through a temporary file beside it, renamed onto it: a reader (another
+    process starting a run) sees the old file or the whole new one.  Raises ``OSError``."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def _write_once(name: str, text: str) -> Path:
     """The generated file ``name``.py holding ``text``: written (atomically) unless it is there with
     that text already (a damaged one is written again); in the temporary folder, said in one line,
@@ -1428,10 +1497,7 @@ def _write_once(name: str, text: str) -> Path:
         if not _holds(path, text):
             try:
                 folder.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-                with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                    fh.write(text)
-                os.replace(tmp, path)
+                _write_atomically(path, text)
             except OSError:
                 continue
         if folder is not first:
@@ -1934,7 +2000,11 @@ class _NumbaCall(Call):
     def take(self, n: int) -> tuple[int, float, bool]:
         arguments = self.arguments(n)
         self.ends, self.clock = arguments[9], arguments[10]
+        kind = _UNTIMED.pop(self.kernel, None) if _UNTIMED else None  # its first call: numba compiles it
+        t0 = time.perf_counter() if kind is not None else 0.0
         done, load, self.n_log, picked, self.undone, self.refused = self.kernel(*arguments)
+        if kind is not None:
+            record_compile(kind, time.perf_counter() - t0)
         return done + self.undone, load, picked
 
     def undo(self) -> None:
