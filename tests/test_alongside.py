@@ -273,3 +273,38 @@ def test_compiles_alongside_of_one_kernel_take_turns(tmp_path, monkeypatch):
         for job in jobs:
             job.process.wait()
             job.errors.close()
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/locks"), reason="reads /proc/locks")
+def test_a_kernels_first_call_waits_for_another_process_compiling_it(monkeypatch):
+    """A run whose kernel another process is compiling (it holds the kernel's lock: a sweep's worker
+    that started first) waits for it at its first call, without compiling it too, then goes on."""
+    import fcntl
+    import threading
+
+    from bark.engine.stepping import breaking_part
+
+    monkeypatch.setattr(numba_backend, "_compiled_before", lambda path: False)  # a first call, as on a new machine
+    monkeypatch.setattr(numba_backend, "_SPECIALIZED", {})
+    monkeypatch.setattr(numba_backend, "_BY_PARTS", {})
+    monkeypatch.setattr(numba_backend, "_FIRST_CALL", {})
+    monkeypatch.setattr(numba_backend, "record_compile", lambda kind, seconds: None)
+    sim = _sim(1)
+    combination = numba_backend._combination(sim.integrator.part_, breaking_part(sim.breakers), sim.growth.part_,
+                                             False, (), sim.resin_part)
+    lock = numba_backend.cache_dir() / f"{combination.file()[0]}.lock"
+    held = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(held, fcntl.LOCK_EX)  # the other process's compile
+    outcome = []
+    run = threading.Thread(target=lambda: outcome.append((sim.run(Stop(until_time=0.5)), sim.step_count)[1]))
+    try:
+        run.start()
+        guard = time.monotonic() + 600  # a bound on a hang, not a timing
+        while not (outcome or _blocked_on(lock)) and run.is_alive():
+            assert time.monotonic() < guard
+            os.sched_yield()
+        assert not outcome and run.is_alive(), "the run compiled the kernel another process was compiling"
+    finally:
+        os.close(held)  # that compile ends
+        run.join()
+    assert outcome and outcome[0] > 0

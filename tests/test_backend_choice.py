@@ -137,7 +137,7 @@ def test_a_first_compile_is_timed_and_the_next_ones_notice_says_how_long(record,
             first = kept["serial"]
         else:
             assert len(said) == 1 and f"(once, about {max(1, round(first))} s here the last time: later" in said[0], said
-    assert not numba_backend._UNTIMED  # each timed once, at its first call
+    assert not numba_backend._FIRST_CALL  # each timed once, at its first call
 
 
 @pytest.mark.parametrize("held", [b"", b"{", b"[1, 2]", b'"serial"', b'{"serial": "20"}', b'{"serial": NaN}',

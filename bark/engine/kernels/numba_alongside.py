@@ -10,8 +10,8 @@ kernel and goes on with every thread.  Only the speed changes.  A process still 
 run's process leaves is ended with it (``bark compile`` waits for it instead: :func:`wait`), and
 one that fails is reported and its kernel compiled in the run's process, as without this module.
 Processes that start the same kernel's compile at once (a sweep's or a fit's workers) compile it
-once: each compile holds a lock on the kernel's file (:func:`alone`), the others wait for it and
-then find the kernel in the cache.
+once: each compile — alongside, or in a run's process at the kernel's first call — holds a lock on
+the kernel's file (:func:`alone`), the others wait for it and then find the kernel in the cache.
 
 This module imports neither numba nor the backend; the compiling process runs the backend's
 ``compile_alongside``.
@@ -121,7 +121,7 @@ def _orphaned(parent: int) -> None:
 
 @contextlib.contextmanager
 def alone(path: str | Path):
-    """Held while the compiling process compiles the kernel of the generated module ``path``: an
+    """Held while a process compiles the kernel of the generated module ``path``: an
     exclusive ``flock`` on ``path`` with ``.lock`` for its suffix, waited for while another process
     holds it (which ends by putting the kernel in numba's cache, where this one then finds it; or,
     ended early, leaves this one to compile it).  The lock goes with the process, however it ends.

@@ -1163,7 +1163,7 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
                  f"from {str(path.parent)!r})")
     _SPECIALIZED[key] = steps = _load_generated(path).steps
     if first:
-        _UNTIMED[steps] = kind
+        _FIRST_CALL[steps] = (kind, path)
     return steps
 
 
@@ -1173,9 +1173,22 @@ def compile_record() -> Path:
     of the next one says it will take."""
     return cache_dir() / "compile-seconds.json"
 
-_UNTIMED: dict = {}
-"""Kernels loaded but not compiled yet (numba compiles at the first call), by their kind: the first
-call's seconds are the compile's (``_NumbaCall.take``)."""
+_FIRST_CALL: dict = {}
+"""Kernels loaded but not compiled yet (numba compiles them at their first call), with their kind
+and generated module: their first call is :func:`_first_call`."""
+
+
+def _first_call(kernel, arguments: tuple, kind: str, path: Path):
+    """``kernel``'s first call, which compiles it: alone — where another process compiles the same
+    kernel (a sweep's workers starting together), after it, then loaded from numba's cache
+    (``numba_alongside.alone``) — and timed, for the next notice (:func:`record_compile`)."""
+    with numba_alongside.alone(path):
+        meanwhile = _compiled_before(path)
+        t0 = time.perf_counter()
+        result = kernel(*arguments)
+        if not meanwhile:
+            record_compile(kind, time.perf_counter() - t0)
+    return result
 
 
 def compile_seconds() -> dict[str, float]:
@@ -2000,11 +2013,9 @@ class _NumbaCall(Call):
     def take(self, n: int) -> tuple[int, float, bool]:
         arguments = self.arguments(n)
         self.ends, self.clock = arguments[9], arguments[10]
-        kind = _UNTIMED.pop(self.kernel, None) if _UNTIMED else None  # its first call: numba compiles it
-        t0 = time.perf_counter() if kind is not None else 0.0
-        done, load, self.n_log, picked, self.undone, self.refused = self.kernel(*arguments)
-        if kind is not None:
-            record_compile(kind, time.perf_counter() - t0)
+        first = _FIRST_CALL.pop(self.kernel, None) if _FIRST_CALL else None
+        result = self.kernel(*arguments) if first is None else _first_call(self.kernel, arguments, *first)
+        done, load, self.n_log, picked, self.undone, self.refused = result
         return done + self.undone, load, picked
 
     def undo(self) -> None:
