@@ -1,7 +1,7 @@
 """What a first run costs on empty caches (every kernel compiled), against another checkout.
 
     python benchmarks/first_run.py [--scene default] [--scene whole-tree] [--against DIR] [--rounds 1]
-                                   [--until-time T] [--backend numba]
+                                   [--until-time T] [--backend numba] [--together N]
 
 Runs ``bark simulate`` of each scene (``default``: no ``--scene``) as a whole process whose every
 cache is a new, empty folder (``NUMBA_CACHE_DIR``, ``BARK_CACHE_DIR``, ``XDG_CACHE_HOME``), so that
@@ -11,6 +11,8 @@ wall and CPU seconds of both. With ``--against DIR`` (a checkout of bark, e.g. `
 that are printed: of the first runs, and of the first runs less the warm ones (the compiling).
 ``--until-time`` ends every run there (the compiling of a long scene, without its whole run);
 ``--backend`` is passed on (``numba``: compiled even where ``auto`` would run a short run on numpy).
+``--together N``: the first run is N processes started together on the one empty cache (a sweep's
+workers, a shell loop), its wall until the last ends and its CPU theirs summed; the warm run is one.
 """
 
 from __future__ import annotations
@@ -27,31 +29,36 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def timed(argv: list[str], env: dict, cwd: str) -> tuple[float, float]:
-    """(wall seconds, CPU seconds: user + sys of the process and its children) of one process."""
+def timed(argvs: list[list[str]], env: dict, cwd: str) -> tuple[float, float]:
+    """(wall seconds until the last ends, CPU seconds: user + sys of the processes and their children)
+    of processes started together."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=cwd)
-    _, status, usage = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    err = proc.stderr.read().decode(errors="replace")
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise SystemExit(f"{' '.join(argv)} failed: {err.strip()[-2000:]}")
-    return wall, usage.ru_utime + usage.ru_stime
+    procs = [subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=cwd)
+             for argv in argvs]
+    cpu = 0.0
+    for argv, proc in zip(argvs, procs):
+        _, status, usage = os.wait4(proc.pid, 0)
+        cpu += usage.ru_utime + usage.ru_stime
+        err = proc.stderr.read().decode(errors="replace")
+        proc.stderr.close()
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise SystemExit(f"{' '.join(argv)} failed: {err.strip()[-2000:]}")
+    return time.perf_counter() - t0, cpu
 
 
-def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path, extra: tuple[str, ...] = ()) -> dict:
-    """A first run on empty caches and a warm one after it, of ``code`` (``None``: as installed)."""
+def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path, extra: tuple[str, ...] = (),
+                   together: int = 1) -> dict:
+    """A first run on empty caches (``together`` processes at once) and a warm one after it, of ``code``
+    (``None``: as installed)."""
     caches = Path(tempfile.mkdtemp(dir=tmp))
     env = {**os.environ, "NUMBA_CACHE_DIR": str(caches / "numba"), "BARK_CACHE_DIR": str(caches / "bark"),
            "XDG_CACHE_HOME": str(caches / "xdg")}
     if code is not None:
         env["PYTHONPATH"] = str(links)
-    out = caches / "out"
-    argv = [sys.executable, "-m", "bark_cli", "simulate", *(() if scene == "default" else ("--scene", scene)),
-            *extra, "--out", str(out), "--quiet", "--overwrite"]
-    first = timed(argv, env, str(tmp))
-    warm = timed(argv, env, str(tmp))
+    argvs = [[sys.executable, "-m", "bark_cli", "simulate", *(() if scene == "default" else ("--scene", scene)),
+              *extra, "--out", str(caches / f"out{i}"), "--quiet", "--overwrite"] for i in range(together)]
+    first = timed(argvs, env, str(tmp))
+    warm = timed(argvs[:1], env, str(tmp))
     return {"first": first, "warm": warm}
 
 
@@ -62,6 +69,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=1)
     parser.add_argument("--until-time", type=float, default=None, help="end every run at this time")
     parser.add_argument("--backend", default=None, help="bark simulate's --backend for every run")
+    parser.add_argument("--together", type=int, default=1, help="processes of the first run, started at once")
     args = parser.parse_args()
     extra = (*(("--until-time", repr(args.until_time)) if args.until_time is not None else ()),
              *(("--backend", args.backend) if args.backend else ()))
@@ -78,9 +86,10 @@ def main() -> None:
         for _ in range(args.rounds):
             for scene in scenes:
                 for side, code in sides.items():  # interleaved: a change in the machine's load falls on both
-                    got[(scene, side)].append(first_and_warm(code, scene, links, tmp, extra))
+                    got[(scene, side)].append(first_and_warm(code, scene, links, tmp, extra, args.together))
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; "
-          f"{args.rounds} round(s){'; bark simulate ' + ' '.join(extra) if extra else ''}; seconds: wall / CPU")
+          f"{args.rounds} round(s){'; bark simulate ' + ' '.join(extra) if extra else ''}"
+          f"{f'; first runs {args.together} processes together' if args.together > 1 else ''}; seconds: wall / CPU")
     for scene in scenes:
         for side, code in sides.items():
             for r in got[(scene, side)]:
