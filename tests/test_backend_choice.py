@@ -136,7 +136,8 @@ def test_a_first_compile_is_timed_and_the_next_ones_notice_says_how_long(record,
             assert len(said) == 1 and "(once, tens of seconds: later runs load it from" in said[0], said
             first = kept["serial"]
         else:
-            assert len(said) == 1 and f"(once, about {max(1, round(first))} s here the last time: later" in said[0], said
+            expected = f"(once, about {max(1, round(first))} s here the last time: later"
+            assert len(said) == 1 and expected in said[0], said
     assert not numba_backend._FIRST_CALL  # each timed once, at its first call
 
 

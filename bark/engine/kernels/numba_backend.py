@@ -1173,6 +1173,7 @@ def compile_record() -> Path:
     of the next one says it will take."""
     return cache_dir() / "compile-seconds.json"
 
+
 _FIRST_CALL: dict = {}
 """Kernels loaded but not compiled yet (numba compiles them at their first call), with their kind
 and generated module: their first call is :func:`_first_call`."""
