@@ -4,8 +4,9 @@
 
 A worker process runs the scene in memory to its stop and measures its statistics, as ``bark fit``'s
 workers do (``bark.studies.fit.simulate_statistics``), once to warm up (imports, compiled kernels
-loaded) and then once per seed, timing each run's CPU (``time.process_time``) and counting its
-passes of the loop (``Simulation.advance``: one call of the kernel each). With ``--against DIR`` (a
+loaded — or compiled: the worker says it runs many, as a fit's does, so that ``auto`` takes numba
+even where its kernel is not compiled yet) and then once per seed, timing each run's CPU
+(``time.process_time``) and counting its passes of the loop (``Simulation.advance``: one call of the kernel each). With ``--against DIR`` (a
 checkout of bark, e.g. ``git worktree add /tmp/base <commit>``) the same worker runs that code too,
 the two interleaved round by round so that a change in the machine's load falls on both, and the
 script prints both, the median of the pairwise ratios this / that, and whether the final states and
@@ -33,6 +34,9 @@ import numpy as np
 from bark.engine.scene import read_toml
 from bark.engine.simulation import Simulation
 from bark.studies.fit import simulate_statistics
+from bark.engine import kernels
+if hasattr(kernels, "expect_many"):  # as a fit's worker says: its warm-up compiles a kernel not yet compiled
+    kernels.expect_many()
 
 scene, seeds = sys.argv[1], [int(s) for s in sys.argv[2].split(",")]
 counted = {"advances": 0, "sim": None}
