@@ -44,6 +44,7 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+from typing import Callable
 
 import attrs
 
@@ -1163,7 +1164,7 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
                  f"from {str(path.parent)!r})")
     _SPECIALIZED[key] = steps = _load_generated(path).steps
     if first:
-        _FIRST_CALL[steps] = (kind, path)
+        _FIRST_CALL[steps] = (path, kind)
     return steps
 
 
@@ -1176,17 +1177,18 @@ def compile_record() -> Path:
 
 _FIRST_CALL: dict = {}
 """Kernels loaded but not compiled yet (numba compiles them at their first call), with their kind
-and generated module: their first call is :func:`_first_call`."""
+and generated module: their first call goes through :func:`_compile_alone`."""
 
 
-def _first_call(kernel, arguments: tuple, kind: str, path: Path):
-    """``kernel``'s first call, which compiles it: alone — where another process compiles the same
-    kernel (a sweep's workers starting together), after it, then loaded from numba's cache
-    (``numba_alongside.alone``) — and timed, for the next notice (:func:`record_compile`)."""
+def _compile_alone(path: Path, kind: str, make: Callable):
+    """``make()`` — the compile of the generated module ``path``'s kernel (a ``kind`` one), or its
+    first call, which compiles it — alone: where another process compiles the same kernel (a sweep's
+    workers starting together), after it, then loaded from numba's cache (``numba_alongside.alone``);
+    and timed, for the next notice (:func:`record_compile`), unless it was loaded.  Its result."""
     with numba_alongside.alone(path):
         meanwhile = _compiled_before(path)
         t0 = time.perf_counter()
-        result = kernel(*arguments)
+        result = make()
         if not meanwhile:
             record_compile(kind, time.perf_counter() - t0)
     return result
@@ -1417,12 +1419,7 @@ def compile_alongside() -> None:
             obj = getattr(obj, part)
         functions.append(obj)
     _make_jitable(functions)
-    with numba_alongside.alone(path):
-        first = not _compiled_before(Path(path))  # else another process compiled it while this one waited
-        t0 = time.perf_counter()
-        _load_generated(Path(path)).steps.compile(tuple(types))
-        if first:
-            record_compile("threaded", time.perf_counter() - t0)
+    _compile_alone(Path(path), "threaded", lambda: _load_generated(Path(path)).steps.compile(tuple(types)))
 
 
 def _cache_folders(source: Path) -> list[Path]:
@@ -2015,7 +2012,8 @@ class _NumbaCall(Call):
         arguments = self.arguments(n)
         self.ends, self.clock = arguments[9], arguments[10]
         first = _FIRST_CALL.pop(self.kernel, None) if _FIRST_CALL else None
-        result = self.kernel(*arguments) if first is None else _first_call(self.kernel, arguments, *first)
+        kernel = self.kernel
+        result = kernel(*arguments) if first is None else _compile_alone(*first, lambda: kernel(*arguments))
         done, load, self.n_log, picked, self.undone, self.refused = result
         return done + self.undone, load, picked
 
