@@ -23,6 +23,7 @@ import platform
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -35,11 +36,16 @@ def timed(argvs: list[list[str]], env: dict, cwd: str) -> tuple[float, float]:
     t0 = time.perf_counter()
     procs = [subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=cwd)
              for argv in argvs]
+    errs = [[] for _ in procs]  # read while they run: a process that fills its pipe would wait on it
+    readers = [threading.Thread(target=lambda p=proc, e=err: e.append(p.stderr.read())) for proc, err in zip(procs, errs)]
+    for reader in readers:
+        reader.start()
     cpu = 0.0
-    for argv, proc in zip(argvs, procs):
+    for argv, proc, reader, got in zip(argvs, procs, readers, errs):
         _, status, usage = os.wait4(proc.pid, 0)
         cpu += usage.ru_utime + usage.ru_stime
-        err = proc.stderr.read().decode(errors="replace")
+        reader.join()
+        err = b"".join(got).decode(errors="replace")
         proc.stderr.close()
         if os.waitstatus_to_exitcode(status) != 0:
             raise SystemExit(f"{' '.join(argv)} failed: {err.strip()[-2000:]}")

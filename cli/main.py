@@ -554,11 +554,12 @@ def compile_kernels(scene_names):
     but the cache (BARK_CACHE_DIR moves it)."""
     import time as clock
 
-    from bark.engine.kernels import numba_alongside
+    from bark.engine.kernels import expect_many, numba_alongside
     from bark.engine.kernels.numba_env import cache_dir
     from bark.engine.scene import STOP_KEYS, Scene, merge, read_toml, shipped_scenes
     from bark.studies import runner
 
+    expect_many()  # its one-step runs are for the many after them: a threaded kernel is compiled too
     prov = Provenance()
     NAMER.set(prov.name)
     names = scene_names or tuple(shipped_scenes())

@@ -43,12 +43,13 @@ class _Job:
         return "it ran out of memory"
 
 
-def _sim(threads: int):
+def _sim(threads: int, horizon: float | None = None):
     """Bases joining and springs breaking, in blocks of 16 (several blocks per thread): the sqrt case
     of tests/test_frames.py, whose threaded kernel those tests compile too."""
     lattice = Lattice(n_bases=2000, n_start=1500, join_rate=150.0, join_every=0.1, jitter=0.05)
     sim = build_sim(G=0.08, dt=0.05, seed=2, stepping="fixed", backend="numba", fmax_spread=0.05,
                     growth=SqrtGrowth(G=0.08), lattice=lattice, breakers=[ProbabilisticBreaker()], threads=threads)
+    sim.horizon = horizon  # the run's expected length, as a run that builds itself takes it from its stop
     sim.build().backend.block = 16
     return sim
 
@@ -66,6 +67,7 @@ def calls(monkeypatch):
 
     monkeypatch.setattr(NumbaBackend, "call", counted)
     monkeypatch.setattr(numba_backend, "ALONGSIDE", True)
+    monkeypatch.setattr(numba_backend, "runs_many", lambda: True)  # its runs are short: as a fit's worker's
     monkeypatch.setattr(numba_backend, "_compiled_before", lambda path: False)
     monkeypatch.setattr(numba_backend, "_WAITING", {})
     monkeypatch.setattr(numba_backend, "_BY_PARTS", {})
@@ -114,6 +116,39 @@ def test_with_alongside_off_a_threaded_run_is_threaded_from_its_first_call(calls
     monkeypatch.setattr(numba_alongside, "start", lambda path, types, helpers: pytest.fail("compiled alongside"))
     _sim(2).run(Stop(until_time=0.5))
     assert set(calls) == {2}
+
+
+@pytest.mark.parametrize("many", [False, True])
+def test_a_run_expected_to_end_before_its_threaded_kernel_compiles_keeps_to_one_thread(calls, monkeypatch, caplog, many,
+                                                                                       tmp_path):
+    """No compile alongside that the run would end unused as it leaves (and the next short run start
+    again): a run expected to be shorter than the compile (its base-steps at the serial kernel's
+    speed, against the last threaded compile timed here, else a minute) takes one thread throughout,
+    the same bits, and says so once; a process that runs many (a worker, ``bark compile``) starts
+    the compile whatever one run's length; so does a run whose length is not known."""
+    monkeypatch.setattr(numba_backend, "runs_many", lambda: many)
+    monkeypatch.setattr(numba_backend, "compile_record", lambda: tmp_path / "compile-seconds.json")
+    started = []
+    monkeypatch.setattr(numba_alongside, "job", lambda path: None)
+    monkeypatch.setattr(numba_alongside, "start", lambda path, types, helpers: started.append(path) or _Job(10**6, True))
+    sim = _sim(2, 4.0)  # 2000 bases for 4 time units at a step of 0.05: 160,000 base-steps (ms on one thread)
+    with caplog.at_level(logging.INFO, logger="bark"):
+        sim.run(Stop(until_time=4.0))
+    said = [r.getMessage() for r in caplog.records if "running on one thread" in r.getMessage()]
+    assert sim.backend.expected_work == pytest.approx(160_000) and set(calls) == {1}
+    assert (len(started), len(said)) == ((1, 0) if many else (0, 1)), (started, said)
+    if not many:
+        assert "before its threaded kernel would compile (minutes)" in said[0] and "`bark compile`" in said[0]
+        # the same run judged long enough (one timed here in a tenth of its length): compiled alongside
+        (tmp_path / "compile-seconds.json").write_text(json.dumps({"threaded": 160_000 * numba_backend.SERIAL_BASE_STEP_S / 10}))
+        calls.clear()
+        _sim(2, 4.0).run(Stop(until_time=4.0))
+        assert len(started) == 1 and set(calls) == {1}
+        unknown = _sim(2)  # a run without a time bound, or built before it was given one
+        (tmp_path / "compile-seconds.json").unlink()
+        numba_backend._WAITING.clear()
+        unknown.run(Stop(until_time=0.5))
+        assert len(started) == 2
 
 
 def _env(tmp_path) -> dict:

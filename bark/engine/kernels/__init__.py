@@ -47,7 +47,8 @@ import numpy as np
 from bark.errors import BarkError, BarkWarning, Ref
 from bark.contract.parts import HOOKEAN, NO_BREAKING, BreakerPart, GrowthPart, IntegratorPart
 
-__all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "doubles", "ends_call", "limits", "take_steps", "available", "resolve", "load"]
+__all__ = ["BACKENDS", "Backend", "Call", "Plan", "Steps", "doubles", "ends_call", "limits", "take_steps", "available",
+           "resolve", "load", "expect_many", "runs_many"]
 
 BACKENDS = ("auto", "numpy", "numba")
 
@@ -228,6 +229,9 @@ class Backend:
     """The hot loop's operations (see the module's docstring)."""
 
     name = ""
+    expected_work: float | None = None
+    """Base-steps the run is expected to take (``stepping.expected_work``; ``None``: not known), set
+    by :func:`load`: what a backend weighs a compile it might start against."""
     resin = HOOKEAN
     """The springs' resin law (``bark.contract.parts.ResinPart``), which every tension and force of
     this backend's follows: set once, by the simulation that loads it."""
@@ -298,6 +302,11 @@ def expect_many() -> None:
     _MANY[0] = True
 
 
+def runs_many() -> bool:
+    """Whether this process runs many simulations (:func:`expect_many`)."""
+    return _MANY[0]
+
+
 @attrs.frozen
 class KernelParts:
     """What a run's stepping kernel is made of, as ``auto`` asks whether it is compiled already
@@ -362,5 +371,6 @@ def load(name: str, work: float | None = None, kernel: KernelParts | None = None
             and work < AUTO_COMPILE_WORK and not backend.ready(kernel)):
         LOG.info("running on numpy, with the same results: this run is too short to repay compiling numba's kernel "
                  "for it first (tens of seconds, once); `bark compile` or --backend numba compiles it")
-        return importlib.import_module("bark.engine.kernels.numpy_backend").BACKEND_CLASS()
+        backend = importlib.import_module("bark.engine.kernels.numpy_backend").BACKEND_CLASS()
+    backend.expected_work = work
     return backend

@@ -60,7 +60,7 @@ from numba import prange
 
 from bark.model import physics
 from bark.model.forces import SpringOrder, order_keys
-from bark.engine.kernels import Backend, Call, Plan, Steps, doubles, ends_call, limits
+from bark.engine.kernels import Backend, Call, Plan, Steps, doubles, ends_call, limits, runs_many
 from bark.errors import BarkError, BarkWarning
 from bark.model.state import grown
 from bark.model.physics import weighted_radius
@@ -1357,18 +1357,28 @@ ALONGSIDE = True
 the run's calls taking one thread meanwhile (:func:`threaded_ready`); ``False``: in the run's process,
 before its first threaded call (what a measurement of the threaded kernel itself needs)."""
 
+SERIAL_BASE_STEP_S = 2e-8
+"""Seconds a base-step of the serial kernel takes, about (14–34 ns measured from 3,000 to 10⁶ bases):
+what a run's expected work (``Backend.expected_work``) is turned into seconds by, to be weighed
+against a threaded kernel's compile (:meth:`NumbaBackend.threads_worth_compiling`)."""
+
+THREADED_COMPILE_S = 60.0
+"""Seconds a threaded kernel's compile is taken to last where none has been timed here yet
+(``compile-seconds.json``; one to two minutes measured on 2-core machines): the low end, so that
+no run that would gain from threads is kept from them."""
+
 _WAITING: dict[tuple, tuple] = {}
 """Threaded kernels compiling alongside, by their parts' identities (as ``_BY_PARTS``): the parts
 (kept, so that the ids stay theirs) and the compile's job."""
 
 
-def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bool:
+def threaded_ready(integrator, breaker, growth, columns, resin, arguments, worth=lambda: True) -> bool:
     """Whether a call may take the threaded kernel of these parts now: compiled in this process or
     in the cache, or to be compiled here (parts or their helpers that cannot be imported by name,
     ``ALONGSIDE`` off, a compile alongside that failed or could not start: said in one line).  Else
     it is compiled alongside (:mod:`~bark.engine.kernels.numba_alongside`: started the first time,
-    for the types of a call's ``arguments()``), and not ready until that process has put it in the
-    cache."""
+    for the types of a call's ``arguments()``, where ``worth()``), and not ready until that process
+    has put it in the cache."""
     ids = _ids(integrator, breaker, growth, resin, True, columns)
     parts = (integrator, breaker, growth, resin)
     if not ALONGSIDE or _same_parts(_BY_PARTS.get(ids), parts):
@@ -1383,6 +1393,8 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments) -> bo
         if job is None:
             if _compiled_before(path):
                 return True
+            if not worth():
+                return False
             try:
                 job = numba_alongside.start(path, tuple(numba.typeof(a) for a in arguments()), helper_names)
             except Exception as err:  # noqa: BLE001 — no process, or an order it cannot be given: compiled here
@@ -1753,6 +1765,9 @@ class NumbaBackend(Backend):
         """Threads the last kernel call shared its blocks among."""
         self.block = BLOCK
         """Bases or springs a block of the kernel's loops (the results do not depend on it)."""
+        self.one_thread = False
+        """Whether this run keeps to one thread, its threaded kernel not compiled and the run expected
+        to end before it would be (:meth:`threads_worth_compiling`)."""
 
     @staticmethod
     def _threads(requested: int, n_bases: int) -> int:
@@ -1946,16 +1961,35 @@ class NumbaBackend(Backend):
         state it starts from): only the bases that joined since, and those their springs reach, get
         theirs made again (from ``refresh_from``; the same bits as a fresh pass over all).  A call
         that would share its blocks among threads takes one while the threaded kernel compiles
-        alongside (:func:`threaded_ready`)."""
+        alongside (:func:`threaded_ready`), or throughout a run expected to end before it would
+        (:meth:`threads_worth_compiling`)."""
         made = _NumbaCall(self, state, mech, plan, tension)
         threads = self._threads(plan.threads, state.n_bases)
-        if threads > 1 and not threaded_ready(*made.parts, lambda: made.arguments(1)):
-            threads = 1  # the serial kernel meanwhile: the same bits
+        if threads > 1 and (self.one_thread or not threaded_ready(*made.parts, lambda: made.arguments(1),
+                                                                   self.threads_worth_compiling)):
+            threads = 1  # the serial kernel meanwhile, or throughout: the same bits
         self.threads = threads
         if threads > 1 and numba.get_num_threads() != threads:  # setting it costs more than asking
             numba.set_num_threads(threads)
         made.kernel = specialized(made.parts[0], made.parts[1], made.parts[2], threads > 1, made.parts[3], made.parts[4])
         return made
+
+    def threads_worth_compiling(self) -> bool:
+        """Whether this run's threaded kernel, not compiled yet, is worth compiling alongside: the run
+        is expected to last on one thread (``expected_work`` base-steps at ``SERIAL_BASE_STEP_S``) as
+        long as the compile takes (the last one timed here, else ``THREADED_COMPILE_S``), or its
+        length is not known, or the process runs many (a sweep's or a fit's worker, ``bark
+        compile``: ``kernels.expect_many``).  Else the run keeps to one thread — the same bits — and
+        says so once: a compile it would end unused as it leaves (and the next short run start
+        again) is not begun."""
+        work = self.expected_work
+        compile_s = compile_seconds().get("threaded", THREADED_COMPILE_S)
+        if work is None or runs_many() or work * SERIAL_BASE_STEP_S >= compile_s:
+            return True
+        self.one_thread = True
+        LOG.info(f"running on one thread, with the same results: this run is expected to end before its threaded "
+                 f"kernel would compile ({_how_long('threaded')}); `bark compile` compiles it for later runs")
+        return False
 
     def ready(self, kernel) -> bool:
         """Whether a run of ``kernel``'s parts can start without compiling first: its kernel
