@@ -10,10 +10,9 @@ the many-step paths are calls of this one kernel, so their bits agree by constru
 
 Each piece of physics is :mod:`bark.model.physics`'s function, inlined (``inline="always"``).  No
 fastmath: every expression is evaluated as written, so a run does not depend on where its compiled
-calls begin and end (what makes a resumed run end bit-identical).  The one exception is a maximum
-(``_largest_load``), exact in any order: it may use SIMD lanes, and it is taken every step only when
-adaptive stepping needs it, else in the pass of a call's last step (after the call, if it ended
-before that step).
+calls begin and end (what makes a resumed run end bit-identical).  A maximum is exact in any order:
+the largest load (``_largest_load``) is taken in SIMD lanes, in every step's pass over the loads the
+pass makes anyway, whether or not adaptive stepping judges the step by it.
 
 **Blocks, and threads.**  The loops over bases and over a run's springs go a block of ``BLOCK`` at a
 time, and a spring's force reaches its bases by a *gather* over blocks of bases (each base takes its
@@ -47,6 +46,7 @@ from pathlib import Path
 from typing import Callable
 
 import attrs
+import llvmlite.ir
 
 from bark.engine.kernels import numba_alongside, numba_env
 
@@ -126,8 +126,8 @@ on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,19
 def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp,
                 law, flow, resin):
     """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
-    with ``loads``, also the breaker part's load into ``wl`` and whether its ``rule`` picks each live
-    spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, own, q,
+    with ``loads``, also the breaker part's load into ``wl`` (``-inf`` where the spring is not live)
+    and whether its ``rule`` picks each live spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, own, q,
     bp)``, ``own[q]`` the spring's declared fields: the generated adapters pass on what the part
     reads), and return whether every live tension is finite and every live load a number (not NaN)
     and whether the rule picked a live spring.  The tension is the resin law's (``law(length, rest,
@@ -157,7 +157,7 @@ def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w
         if loads:
             lq = load(t, length, rest[q], fmax[q], inv[q], own, q, bp)
             pq = on & rule(t, length, rest[q], fmax[q], inv[q], own, q, bp)
-            wl[q] = lq
+            wl[q] = lq if on else -np.inf  # as ``_largest_load`` takes them
             wp[q] = pq
             finite = finite & (((abs(t) < np.inf) & (lq == lq)) | (not on))
             hit = hit | pq
@@ -189,16 +189,39 @@ def _gather_forces(u, w, i0, o, n, lo, hi):
             first[q] += wf[q]
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath={"nnan", "nsz"})
-def _largest_load(wl, live):
-    """The largest load ``wl`` of the live springs of a run (``-inf`` if none).  A maximum is exact in
-    any order, so it may be taken in SIMD lanes (what these flags allow; the call that gets a NaN
-    here reports NaN from its finiteness check instead)."""
-    top = -np.inf
-    for q in range(live.shape[0]):
-        load = wl[q] if live[q] else -np.inf
-        top = max(top, load)
-    return top
+@numba.extending.intrinsic
+def _bits(typingctx, x):
+    """A double's 64 bits as an integer (no conversion: the same register)."""
+    return numba.types.int64(numba.types.float64), lambda context, builder, sig, args: builder.bitcast(
+        args[0], llvmlite.ir.IntType(64))
+
+
+@numba.extending.intrinsic
+def _number(typingctx, x):
+    """The double whose 64 bits are the integer ``x`` (``_bits`` undone)."""
+    return numba.types.float64(numba.types.int64), lambda context, builder, sig, args: builder.bitcast(
+        args[0], llvmlite.ir.DoubleType())
+
+
+_MAGNITUDE = np.int64(0x7FFF_FFFF_FFFF_FFFF)
+"""A double's bits but its sign: flipped where it is negative, its bits as an integer order as the
+numbers do (``_largest_load``)."""
+
+
+@jit
+def _largest_load(wl):
+    """The largest of the loads ``wl`` (``_run_forces`` writes ``-inf`` for a spring that is not
+    live; ``-inf`` if there are none).  A maximum is exact in any order, so it is taken on integers
+    that order as the doubles do — each one's bits, its magnitude bits flipped where it is negative
+    — in SIMD lanes: numba takes a maximum of doubles one at a time (a chain of compares, several
+    times slower).  The order differs from the doubles' only for NaN (the finiteness check
+    reports that step instead) and between −0 and +0 (equal as loads)."""
+    top = _bits(-np.inf) ^ _MAGNITUDE
+    for q in range(wl.shape[0]):
+        key = _bits(wl[q])
+        key = key ^ ((key >> 63) & _MAGNITUDE)
+        top = key if key > top else top
+    return _number(top ^ ((top >> 63) & _MAGNITUDE))
 
 
 @inline
@@ -225,13 +248,13 @@ def _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_
 
 
 @inline
-def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, tops, breaking, rule, load, bp,
+def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, breaking, rule, load, bp,
                  log_id, log_step, log_t, n_log, step, block, law, flow, resin):
     """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
     finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
     ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
-    the bit) and logged; without, it is only noted.  With ``tops`` too: find the largest of the part's
-    loads (else ``-inf``).  Returns ``(largest load, all tensions finite, log length, whether the rule
+    the bit) and logged; without, it is only noted; and find the largest of the part's loads (else
+    ``-inf``).  Returns ``(largest load, all tensions finite, log length, whether the rule
     picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
@@ -264,8 +287,8 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
                 x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi], lv[lo:hi],
                 fm[lo:hi], inv[lo:hi], ow[lo:hi], k, w0[lo:hi], w1[lo:hi], w2[lo:hi], wt[lo:hi], wl[lo:hi], wp[lo:hi],
                 loads, rule, load, bp, law, flow, resin)
-            if loads and tops:
-                block_top[blk] = _largest_load(wl[lo:hi], lv[lo:hi])
+            if loads:
+                block_top[blk] = _largest_load(wl[lo:hi])
         hit = False
         for blk in range(nb):
             finite = finite & block_finite[blk]
@@ -290,7 +313,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, to
 
 @inline
 def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, motion, update, radii, heights, block,
-                prev, save, tops, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+                prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
     """One step (``move``; without, only the forces of the bases as they are): the base pass over
     every base (``_base_pass``, its numbers ``motion``), then the spring pass over every spring, each
     a block at a time, the blocks shared among threads (the parallel kernel's).  Returns ``(bases
@@ -302,16 +325,15 @@ def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, mot
         finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before, from_radius,
                             heights, block, prev, save)
     x, f = (bases[0], bases[1], bases[2]), (bases[6], bases[7], bases[8])
-    tops, breaking = tops and move, breaking and move
-    top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move, tops,
-                                                      breaking, rule, load, bp, log_id, log_step, log_t, n_log, step,
-                                                      block, law, flow, resin)
+    top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move,
+                                                      breaking and move, rule, load, bp, log_id, log_step, log_t, n_log,
+                                                      step, block, law, flow, resin)
     return finite, top, springs_finite, n_log, picked
 
 
 @inline
 def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, motion, update, radii, heights, block,
-                prev, save, tops, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+                prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
     """``_step_split`` on one thread, the same bits, in one sweep over blocks of bases: a block's
     forces are gathered as soon as the springs that reach it are made, and those springs are made as
     soon as the base pass has moved both their ends, so that the bases' positions and forces, and
@@ -363,7 +385,7 @@ def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, mot
                     low[r] = keep
                 run_finite, run_top, n_log, run_picked = _make_springs(
                     x0, x1, x2, rest[s0:s0 + nr], live[s0:s0 + nr], fmax[s0:s0 + nr], inv_fmax[s0:s0 + nr],
-                    own[s0:s0 + nr], k, w, low[r], made[r], need_hi, s0, i0, o, move, tops, breaking, rule, load,
+                    own[s0:s0 + nr], k, w, low[r], made[r], need_hi, s0, i0, o, move, breaking, rule, load,
                     bp, log, n_log, step, law, flow, resin)
                 finite = finite & run_finite
                 top = max(top, run_top)
@@ -397,7 +419,7 @@ def _slide(w, first, count):
 
 
 @inline
-def _make_springs(x0, x1, x2, rest, live, fmax, inv_fmax, own, k, w, low, lo, hi, s0, i0, o, loads, tops, breaking,
+def _make_springs(x0, x1, x2, rest, live, fmax, inv_fmax, own, k, w, low, lo, hi, s0, i0, o, loads, breaking,
                   rule, load, bp, log, n_log, step, law, flow, resin):
     """The springs ``lo .. hi`` of a run (``rest`` … ``own`` its fields) made into its window ``w``
     (which begins at spring ``low``), with the rule applied (``_run_forces``, ``_picked``).  Returns
@@ -408,7 +430,7 @@ def _make_springs(x0, x1, x2, rest, live, fmax, inv_fmax, own, k, w, low, lo, hi
     finite, hit = _run_forces(x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o],
                               rest[lo:hi], live[lo:hi], fmax[lo:hi], inv_fmax[lo:hi], own[lo:hi], k, w0[p:z], w1[p:z],
                               w2[p:z], wt[p:z], wl[p:z], wp[p:z], loads, rule, load, bp, law, flow, resin)
-    top = _largest_load(wl[p:z], live[lo:hi]) if loads and tops else -np.inf
+    top = _largest_load(wl[p:z]) if loads else -np.inf
     picked = False
     if loads and hit:
         n_log, picked = _picked(live, s0, lo, hi, wp[p:z], wt[p:z], w0[p:z], w1[p:z], w2[p:z], breaking, log_id,
@@ -644,12 +666,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     remake = fresh == 0  # every force made again, in the loop (one place: compiled once)
     if not remake and fresh < x0.shape[0]:
         _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh, law, rp)
-    # every step's load is needed (to refuse, report or double on it); else only the last one's: in
-    # the pass of the call's last step if it takes them all, else after the call (a resin that flows
-    # has changed its springs since: it takes every step's)
-    tops = over < np.inf or halvings > 0 or evolve
-    top = -np.inf
-    seen, seen_at = -np.inf, -1  # without ``tops``: the load the pass of step ``seen_at`` found
+    top = -np.inf  # every step's largest load, found by its pass: the last one's is the call's
     finite = True
     done = 0
     n_log = 0
@@ -674,17 +691,12 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         from_radius = uniform and done > 0  # (outside the call: numba takes no branch among its arguments)
         resin = (rp, h, evolve and step)
         motion = (c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius)
-        looks = tops or done + 1 == ends.shape[0]
         finite, top, springs_finite, n_log, picked = step_pass(  # one place for it, so that it is compiled once
             bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, motion, update, radii, heights, block, prev,
-            in_place, looks, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin)
+            in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin)
         if remake:
             remake = False
             continue
-        if not tops:  # a load no step is judged by: the last step's kept for after the call
-            if looks:
-                seen, seen_at = top, done
-            top = -np.inf
         r_kept = r_before
         r_before = r_now
         finite = finite and springs_finite
@@ -724,10 +736,6 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         for q in range(ax.shape[0]):
             ax[q] = r_before * dx[q]
             ay[q] = r_before * dy[q]
-    if finite and not tops and done > 0:
-        top = seen if seen_at == done - 1 else _last_load((x0, x1, x2), runs, rest, k, live, fmax, inv_fmax, own, work,
-                                                          log_id[before:n_log], load, bp, law, rp, block)
-        kept_step = kept_step and not np.isnan(top)  # a NaN load refuses the step, as where it is taken every step
     if kept_step:  # accepted: the positions the next call compares
         _copy_blocks((x0, x1, x2), start[:3], 0, block)
     return done, (top if finite else np.nan), n_log, picked and finite and not undone, undone, not kept_step
@@ -783,34 +791,6 @@ def _copy_blocks(source, target, first, block):
     n = source[0].shape[0]
     for blk in prange(_blocks(n, block)):
         _copy_block(source, target, max(first, blk * block), min(n, (blk + 1) * block))
-
-
-@inline
-def _last_load(x, runs, rest, k, live, fmax, inv_fmax, own, work, broke, load, bp, law, rp, block):
-    """The largest load after the last step, over the springs live before it (``live`` and ``broke``,
-    those it broke): what that step's own pass finds when it looks (the same loads, and a maximum
-    is exact), taken once per call instead of every step, where the call ended before its last step
-    (the pass of which finds it).  A block of springs at a time, into the first ``block`` entries of
-    the work buffers (kept in cache)."""
-    x0, x1, x2 = x
-    w0, w1, w2, wt, wl, wp = work
-    r_start, r_len, r_i, r_o = runs
-    for s in broke:
-        live[s] = True
-    top = -np.inf
-    for r in range(r_start.shape[0]):
-        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
-        rr, lv = rest[s0:s0 + n], live[s0:s0 + n]
-        for lo in range(0, n, block):
-            hi = min(n, lo + block)
-            m, a, e = hi - lo, i0 + lo, i0 + hi
-            _run_forces(x0[a:e], x1[a:e], x2[a:e], x0[a + o:e + o], x1[a + o:e + o], x2[a + o:e + o], rr[lo:hi],
-                        lv[lo:hi], fmax[s0 + lo:s0 + hi], inv_fmax[s0 + lo:s0 + hi], own[s0 + lo:s0 + hi], k, w0[:m],
-                        w1[:m], w2[:m], wt[:m], wl[:m], wp[:m], True, _never, load, bp, law, _no_flow, (rp, 0.0, False))
-            top = max(top, _largest_load(wl[:m], lv[lo:hi]))
-    for s in broke:
-        live[s] = False
-    return top
 
 
 # -- one wrapper per combination of parts, generated and cached -----------------------------------
@@ -1541,7 +1521,7 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
     no_i = np.empty(0, dtype=np.int64)
     own = np.empty((rest.shape[0], 0))  # the paper's spring reads no declared field
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, own, (f[:, 0], f[:, 1], f[:, 2]),
-                 work, False, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK, _hooke, _no_flow,
+                 work, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK, _hooke, _no_flow,
                  (no, 0.0, False))
 
 
