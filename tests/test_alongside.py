@@ -158,22 +158,33 @@ def _env(tmp_path) -> dict:
 
 SCENE = """
 [lattice]
-n_bases = 400
+n_bases = 2000
+n_start = 1500
+join_rate = 150.0
+join_every = 0.1
+jitter = 0.05
 [growth]
 name = "bulge"
-base = { name = "sqrt", r0 = 0.2, G = 0.05 }
+base = { name = "sqrt", G = 0.08 }
 [[growth.bulges]]
-z = 0.1
-half_width = 0.05
+z = 0.4
+half_width = 0.2
 magnitude = 0.01
-G = 0.02
+G = 0.03
+[breaker]
+name = "threshold"
+spread = 0.05
 [run]
 backend = "numba"
 threads = 2
-until_time = 2.0
+dt = 0.3
+stepping = "adaptive"
+until_time = 4.0
+seed = 2
 """
-"""Threaded, on a small lattice; its growth law's part calls helpers of its own (the bulges'
-profile), which the compiling process must make jitable as the run's process does."""
+"""Threaded, bases joining and springs breaking in the kernel at per-base radii; its growth law's
+part calls helpers of its own (the bulges' profile), which the compiling process must make jitable
+as the run's process does."""
 
 
 @pytest.mark.slow
@@ -181,7 +192,9 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     """On empty caches: ``bark compile`` takes its step on the serial kernel while the threaded one
     compiles alongside, waits for it, and a later run in a new process loads the threaded kernel
     from the cache (the types the compile was given are the call's, the helpers made jitable: no
-    compile of its own)."""
+    compile of its own) — in blocks of 16 bases or springs shared between two threads, to the bits
+    of the serial kernel in its usual blocks (``tests/test_frames.py`` checks this of a uniform
+    radius, breaks judged in Python; here per-base radii and breaks in the kernel)."""
     (tmp_path / "scene.toml").write_text(SCENE)
     env = _env(tmp_path)
     done = subprocess.run([sys.executable, "-m", "bark_cli", "compile", str(tmp_path / "scene.toml")], cwd=tmp_path,
@@ -193,20 +206,31 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     assert set(timed) == {"serial", "threaded"} and min(timed.values()) > 0, timed  # what the next notices say
     check = textwrap.dedent(f"""
         import json
+        import numpy as np
         from bark import Stop
-        from bark.engine.scene import Scene, read_toml
-        sim = Scene.from_dict(read_toml({str(tmp_path / 'scene.toml')!r})).simulation()
-        sim.run(Stop(until_time=0.5))
+        from bark.engine.scene import Scene, merge, read_toml
+        data = read_toml({str(tmp_path / 'scene.toml')!r})
+        shared = Scene.from_dict(data).simulation()
+        shared.build().backend.block = 16
+        shared.run(Stop(until_time=4.0))
+        serial = Scene.from_dict(merge(data, {{"run": {{"threads": 1}}}})).simulation()
+        serial.run(Stop(until_time=4.0))
         from bark.engine.kernels import numba_backend
         threaded = [k for k in numba_backend._SPECIALIZED.values() if k.targetoptions.get("parallel")]
-        print(json.dumps({{"threads": sim.backend.threads, "kernels": len(threaded),
+        print(json.dumps({{"threads": (shared.backend.threads, serial.backend.threads), "kernels": len(threaded),
                            "hits": sum(k.stats.cache_hits.get(s, 0) for k in threaded for s in k.stats.cache_hits),
-                           "misses": sum(k.stats.cache_misses.get(s, 0) for k in threaded for s in k.stats.cache_misses)}}))
+                           "misses": sum(k.stats.cache_misses.get(s, 0) for k in threaded for s in k.stats.cache_misses),
+                           "same": [name for name in ("x", "v", "anchor", "intact", "rest", "fmax")
+                                    if np.array_equal(getattr(shared.state, name), getattr(serial.state, name))],
+                           "broken": shared.n_broken, "joined": shared.state.n_bases > 1500}}))
     """)
     later = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert later.returncode == 0, later.stderr
     got = json.loads(later.stdout.splitlines()[-1])
-    assert got == {"threads": 2, "kernels": 1, "hits": 1, "misses": 0}, (got, later.stderr)
+    assert got["broken"] > 100 and got["joined"], got  # breaks, and joins, happened
+    del got["broken"], got["joined"]
+    assert got == {"threads": [2, 1], "kernels": 1, "hits": 1, "misses": 0,
+                   "same": ["x", "v", "anchor", "intact", "rest", "fmax"]}, (got, later.stderr)
 
 
 def _alive(pid: int) -> bool:

@@ -307,7 +307,7 @@ def test_bench_fit_measures_a_fit_against_plain_processes(tmp_path):
     scene = tmp_path / "tiny.toml"
     scene.write_text((REPO_ROOT / "bark" / "scenes" / "reticulate.toml").read_text().replace("n_bases = 3000", "n_bases = 400")
                      .replace("until_patches = 115", "until_patches = 10"))
-    result = CliRunner().invoke(cli, ["bench", "fit", "--scene", str(scene), "--population", "3", "--workers", "2"])
+    result = CliRunner().invoke(cli, ["bench", "fit", "--scene", str(scene), "--population", "2", "--workers", "2"])
     assert result.exit_code == 0, result.output
     rows = [line for line in result.output.splitlines() if "at a time" in line or "whole process" in line]
     assert len(rows) == 3  # one at a time, two at a time, the fit
