@@ -249,8 +249,9 @@ def _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_
 
 @inline
 def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, breaking, rule, load, bp,
-                 log_id, log_step, log_t, n_log, step, block, law, flow, resin):
-    """Add every live spring's force (eq. 1) into ``f``.  With ``loads``: also check the tensions are
+                 log_id, log_step, log_t, n_log, step, block, law, flow, resin, first):
+    """Add every live spring's force (eq. 1) into ``f`` at the bases from ``first`` on (0: all; only
+    the springs that reach them are made, a block at a time from the block of the first).  With ``loads``: also check the tensions are
     finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
     ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
     the bit) and logged; without, it is only noted; and find the largest of the part's loads (else
@@ -280,7 +281,7 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, br
         fm, inv, ow = fmax[s0:s0 + n], inv_fmax[s0:s0 + n], own[s0:s0 + n]
         nb = _blocks(n, block)
         block_finite, block_hit, block_top = np.ones(nb, np.bool_), np.zeros(nb, np.bool_), np.full(nb, -np.inf)
-        for blk in prange(nb):  # the springs' forces, a block at a time
+        for blk in prange(max(0, first - i0 - max(o, 0)) // block, nb):  # the springs' forces, a block at a time
             lo, hi = blk * block, min(n, (blk + 1) * block)
             a, e = i0 + lo, i0 + hi
             block_finite[blk], block_hit[blk] = _run_forces(
@@ -303,8 +304,8 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, br
                     picked = picked | noted
         low = i0 + min(o, 0)  # the bases they reach: low .. low + span (an offset may be negative)
         span = n + abs(o)
-        for blk in prange(_blocks(span, block)):  # then added to the bases they reach, a block of bases at a time
-            lo, hi = low + blk * block, low + min(span, (blk + 1) * block)
+        for blk in prange(max(0, first - low) // block, _blocks(span, block)):  # then added to the bases they
+            lo, hi = max(first, low + blk * block), low + min(span, (blk + 1) * block)  # reach, a block at a time
             _gather_forces(f0, w0, i0, o, n, lo, hi)
             _gather_forces(f1, w1, i0, o, n, lo, hi)
             _gather_forces(f2, w2, i0, o, n, lo, hi)
@@ -312,9 +313,10 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, br
 
 
 @inline
-def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, motion, update, radii, heights, block,
-                prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
-    """One step (``move``; without, only the forces of the bases as they are): the base pass over
+def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
+                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+    """One step (``move``; without, only the forces of the bases from ``first`` on as they are, added
+    into ``f``: the step's spring pass without its base pass, its loads or its breaks): the base pass over
     every base (``_base_pass``, its numbers ``motion``), then the spring pass over every spring, each
     a block at a time, the blocks shared among threads (the parallel kernel's).  Returns ``(bases
     finite, largest load, tensions finite, log length, whether the rule picked a spring)``."""
@@ -327,13 +329,13 @@ def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, mot
     x, f = (bases[0], bases[1], bases[2]), (bases[6], bases[7], bases[8])
     top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move,
                                                       breaking and move, rule, load, bp, log_id, log_step, log_t, n_log,
-                                                      step, block, law, flow, resin)
+                                                      step, block, law, flow, resin, first)
     return finite, top, springs_finite, n_log, picked
 
 
 @inline
-def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, motion, update, radii, heights, block,
-                prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
+                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
     """``_step_split`` on one thread, the same bits, in one sweep over blocks of bases: a block's
     forces are gathered as soon as the springs that reach it are made, and those springs are made as
     soon as the base pass has moved both their ends, so that the bases' positions and forces, and
@@ -358,15 +360,17 @@ def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, mot
         room[r + 1] = room[r] + min(r_len[r], 2 * block + abs(r_o[r]))
     win = (np.empty(room[runs_n]), np.empty(room[runs_n]), np.empty(room[runs_n]), np.empty(room[runs_n]),
            np.empty(room[runs_n]), np.zeros(room[runs_n], np.bool_))
-    low = np.zeros(runs_n, np.int64)  # the first spring in run r's window
-    made = np.zeros(runs_n, np.int64)  # springs of run r made so far
+    low = np.empty(runs_n, np.int64)  # the first spring in run r's window
+    made = np.empty(runs_n, np.int64)  # springs of run r made so far: from the first that reaches base ``first``
+    for r in range(runs_n):
+        low[r] = made[r] = min(r_len[r], max(0, first - r_i[r] - max(r_o[r], 0)))
     bad = 0
     top = -np.inf
     finite = True
     picked = False
     moved = 0 if move else n  # bases moved so far
-    for blk in range(_blocks(n, block)):
-        lo, hi = blk * block, min(n, (blk + 1) * block)
+    for blk in range(first // block, _blocks(n, block)):
+        lo, hi = max(first, blk * block), min(n, (blk + 1) * block)
         while moved < min(n, hi + reach):  # the base pass, ahead of the springs that reach this block
             bad += _base_block(bases, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, uniform,
                                r_now, r_before, from_radius, heights, prev, save)
@@ -576,40 +580,6 @@ def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, 
 
 
 @inline
-def _refresh(x, runs, rest, own, k, live, f, work, first, law, rp):
-    """The spring forces of the bases from ``first`` on, made again (the others' left as they are):
-    for each run, the springs with an end there, computed as the full pass computes them and added
-    in its order — so each of those bases gets the bits of a full pass."""
-    x0, x1, x2 = x
-    w0, w1, w2, wt, wl, wp = work
-    r_start, r_len, r_i, r_o = runs
-    f0, f1, f2 = f
-    g0, g1, g2 = f0[first:], f1[first:], f2[first:]
-    for q in range(g0.shape[0]):  # written out: a loop over the tuple, inlined here, left them as they were
-        g0[q] = 0.0
-        g1[q] = 0.0
-        g2[q] = 0.0
-    for r in range(r_start.shape[0]):
-        s0, n, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
-        lo = max(0, first - i0 - o)  # the first spring whose second end is a base from `first` on
-        if lo >= n:
-            continue
-        a, m = i0 + lo, n - lo
-        _run_forces(x0[a:a + m], x1[a:a + m], x2[a:a + m], x0[a + o:a + o + m], x1[a + o:a + o + m],
-                    x2[a + o:a + o + m], rest[s0 + lo:s0 + n], live[s0 + lo:s0 + n], rest[s0 + lo:s0 + n],
-                    rest[s0 + lo:s0 + n], own[s0 + lo:s0 + n], k, w0, w1, w2, wt, wl, wp, False, _never, _no_load, rest,
-                    law, _no_flow, (rp, 0.0, False))
-        ours = max(0, first - a)  # of these, the first whose first end is a base from `first` on
-        for u, w in ((f0, w0), (f1, w1), (f2, w2)):
-            second = u[a + o:a + o + m]
-            for q in range(m):
-                second[q] -= w[q]
-            head = u[a + ours:a + m]
-            for q in range(m - ours):
-                head[q] += w[ours + q]
-
-
-@inline
 def _step_of(size, h_min, m, over, halvings, levels):
     """The step of ``size`` ticks of ``h_min``: ``(h, h / m``, the largest load it accepts and the
     largest it reports at: ``limits``)."""
@@ -663,9 +633,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
-    remake = fresh == 0  # every force made again, in the loop (one place: compiled once)
-    if not remake and fresh < x0.shape[0]:
-        _refresh((x0, x1, x2), runs, rest, own, k, live, f, work, fresh, law, rp)
+    remake = fresh < x0.shape[0]  # the forces of the bases from ``fresh`` on made again, in the loop (one place)
     top = -np.inf  # every step's largest load, found by its pass: the last one's is the call's
     finite = True
     done = 0
@@ -681,9 +649,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     while done < ends.shape[0]:
         step = not remake
         if remake:  # the forces of the bases as they are (at the call's start, or after a step taken back): the
-            f0[:] = 0.0  # step's spring pass without its base pass, its loads or its breaks
-            f1[:] = 0.0
-            f2[:] = 0.0
+            f0[fresh:] = 0.0  # step's spring pass without its base pass, its loads or its breaks
+            f1[fresh:] = 0.0
+            f2[fresh:] = 0.0
         t = (ticks + size) * h_min  # the clock's time (``Clock.times``)
         q = prepare(t, params)  # the growth law's time-only part, once a step
         r_now = radius(t, 0.0, q) if uniform else 0.0
@@ -692,8 +660,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         resin = (rp, h, evolve and step)
         motion = (c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius)
         finite, top, springs_finite, n_log, picked = step_pass(  # one place for it, so that it is compiled once
-            bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, motion, update, radii, heights, block, prev,
-            in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin)
+            bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, 0 if step else fresh, motion, update, radii,
+            heights, block, prev, in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin)
         if remake:
             remake = False
             continue
@@ -720,7 +688,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                 halvings += 1
                 size //= 2
                 h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
-                remake, undone = True, False
+                remake, undone, fresh = True, False, 0
                 continue
         stop = _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget,
                           max_batch, t >= t_limit or double and not may_double)
@@ -1522,7 +1490,7 @@ def _spring_forces(x, runs, work, rest, k, intact, f):
     own = np.empty((rest.shape[0], 0))  # the paper's spring reads no declared field
     _spring_pass((x[:, 0], x[:, 1], x[:, 2]), runs, rest, k, intact, rest, rest, own, (f[:, 0], f[:, 1], f[:, 2]),
                  work, False, False, _never, _no_load, no, no_i, no_i, no, 0, 0, BLOCK, _hooke, _no_flow,
-                 (no, 0.0, False))
+                 (no, 0.0, False), 0)
 
 
 @jit
