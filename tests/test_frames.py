@@ -150,3 +150,19 @@ def test_the_gather_blocks_write_apart_so_any_order_of_blocks_gives_the_serial_b
     for blk in rng.permutation((span + block - 1) // block):
         numba_backend._gather_forces(gathered, w, i0, o, n, low + blk * block, low + min(span, (blk + 1) * block))
     assert np.array_equal(gathered, serial)
+
+
+SPECIAL = st.sampled_from([0.0, -0.0, np.inf, -np.inf, 5e-324, -5e-324, 2.2250738585072014e-308, -1.0, 1.0,
+                           1.7976931348623157e308, -1.7976931348623157e308])
+
+
+@settings(max_examples=300, deadline=None)
+@given(loads=st.lists(st.one_of(SPECIAL, st.floats(allow_nan=False)), max_size=300))
+def test_the_largest_load_taken_on_integers_is_the_largest_double(loads):
+    """``_largest_load`` takes its maximum on the loads' bits as integers that order as the doubles do
+    (in SIMD lanes): the same as numpy's maximum for any doubles but NaN — signs of zero, infinities,
+    subnormals, the extremes — and ``-inf`` for none (every spring broken: ``_run_forces`` writes
+    ``-inf`` for a spring that is not live)."""
+    wl = np.array(loads, dtype=float)
+    got = numba_backend._largest_load(wl)
+    assert got == (wl.max() if wl.size else -np.inf)
