@@ -3,6 +3,7 @@ a fit stopped and run again, the posterior's summaries, and the command's bad in
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import os
@@ -308,6 +309,62 @@ def test_a_fit_stopped_by_a_signal_goes_on_from_its_last_generation(tmp_path):
     assert whole.exit_code == 0, whole.output
     a, b = (json.loads((p / "fit.json").read_text()) for p in (out, tmp_path / "whole"))
     assert a["generations"] == b["generations"] and a["posterior"] == b["posterior"]
+
+
+def _note_start(folder: str, fail: bool) -> None:
+    """A worker's warm-up that leaves its process id in ``folder``, then fails if asked to."""
+    Path(folder, str(os.getpid())).write_text("warm")
+    if fail:
+        raise RuntimeError("a warm-up that fails")
+
+
+@pytest.mark.slow  # worker processes started: seconds
+@pytest.mark.parametrize("fail", [False, True])
+def test_a_warm_pool_starts_every_worker_at_once_and_a_failed_warm_up_breaks_nothing(tmp_path, fail):
+    """Each worker of a pool given a warm-up runs it as the pool starts, before any run is handed
+    out (the fit's start-up and its workers' go on side by side); a warm-up that fails leaves the
+    worker to its runs, which report what they meet."""
+    import time
+
+    from bark.studies.pool import LocalPool
+
+    pool = LocalPool(2, "test", (_note_start, (str(tmp_path), fail)))
+    try:
+        deadline = time.monotonic() + 240.0  # a bound for a failure, not a time the test waits
+        while len(list(tmp_path.iterdir())) < 2:
+            assert time.monotonic() < deadline, "the workers did not start until a run was handed out"
+            time.sleep(0.05)
+        started = {int(p.name) for p in tmp_path.iterdir()}
+        assert {pool.submit(os.getpid).result(timeout=240) for _ in range(4)} <= started
+    finally:
+        pool.close()
+
+
+WARM_CHILD = r"""
+import json, sys
+from bark.engine import kernels
+from bark.engine.scene import merge, read_toml
+from bark.studies.fit import simulate_statistics, warm_worker
+kernels.expect_many()  # as a worker says
+taken, load = [], kernels.load
+kernels.load = lambda *a, **k: taken.append(load(*a, **k)) or taken[-1]
+base = merge(read_toml("reticulate"), json.loads(sys.argv[1]))
+warm_worker(base)
+simulate_statistics(base, ("orientation",))
+print(json.dumps([b.name for b in taken]))
+"""
+
+
+@pytest.mark.slow  # a process of its own: its first choice of backend is the one to see
+def test_a_fit_worker_warms_up_on_the_backend_its_runs_take():
+    """The warm-up builds the scene for its own stop, so ``auto`` chooses as it will for the runs:
+    one step alone would be short enough for numpy, and the runs' kernel would still load at the
+    first run."""
+    done = subprocess.run([sys.executable, "-c", WARM_CHILD, json.dumps(TINY)], capture_output=True, text=True,
+                          timeout=900)
+    assert done.returncode == 0, done.stderr
+    warm, run = json.loads(done.stdout.strip().splitlines()[-1])
+    assert warm == run == ("numba" if importlib.util.find_spec("numba") else "numpy")
 
 
 @pytest.mark.slow  # whole processes

@@ -319,6 +319,25 @@ class RunModel:
         return compared(simulate_statistics(self.fit.scene(settings, seed), self.fit.compared), self.fit.compared)
 
 
+def warm_worker(base: dict) -> None:
+    """A fit's worker made ready while the fit starts: pyabc imported (a generation's run function
+    is pyabc's, unpickled in the worker), and the ``base`` scene built for its stop — the backend a
+    run takes chosen as for a run — and one step of it taken in memory and its patches labelled,
+    which loads (or compiles) the compiled code its runs take: a prior's settings change a scene's
+    numbers, not its parts."""
+    import cloudpickle  # noqa: F401  (what unpickles the run function)
+
+    from bark.analysis.pattern import Pattern  # noqa: F401  (what measures each run)
+    from bark.engine.scene import Scene
+
+    needs_pyabc()
+    scene = Scene.from_dict(base)
+    sim, stop = scene.simulation(), scene.stop()
+    sim.prepare(stop)
+    sim.advance(stop, most=1)
+    sim.patch_labels()
+
+
 _UNPICKLED: dict[str, Callable] = {}
 """A worker's last generation's run function, by its digest: unpickled once a generation."""
 
@@ -615,7 +634,7 @@ def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None, po
         return result
     own = pool is None
     if own:
-        pool = DaskPool(client) if client is not None else LocalPool(workers, "fit")
+        pool = DaskPool(client) if client is not None else LocalPool(workers, "fit", (warm_worker, (fit.base,)))
     sampler_class = _sampler_class()
     try:
         while len(result.generations) < fit.generations:
@@ -662,7 +681,7 @@ def predictive(result: FitResult, n: int, *, workers: int = 1, client=None, seed
     if client is None and (workers == 1 or n == 1):
         values = [simulate_statistics(sc, names) for sc in scenes]
     else:
-        pool = DaskPool(client) if client is not None else LocalPool(min(workers, n), "fit")
+        pool = DaskPool(client) if client is not None else LocalPool(min(workers, n), "fit", (warm_worker, (fit.base,)))
         try:
             values = [f.result() for f in [pool.submit(simulate_statistics, sc, names) for sc in scenes]]
         finally:

@@ -47,7 +47,10 @@ class LocalPool:
     the caller) and started once for the whole study; each takes its share of the cores for its
     kernels' threads (:func:`worker_start`)."""
 
-    def __init__(self, workers: int, what: str = "study") -> None:
+    def __init__(self, workers: int, what: str = "study", warm: tuple | None = None) -> None:
+        """``warm``: ``(function, args)`` each worker runs as it starts (its imports, the kernel its
+        runs load), the workers started at once — while the caller goes on with its own start-up —
+        rather than at the first run handed out."""
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
@@ -59,7 +62,10 @@ class LocalPool:
         quiet_resource_tracker()
         try:
             self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                                            initializer=worker_start, initargs=(max(1, cores() // workers),))
+                                            initializer=worker_start, initargs=(max(1, cores() // workers), warm))
+            if warm is not None:  # the executor starts a process per task handed out while none is idle
+                for _ in range(workers):
+                    self.pool.submit(os.getpid)
         except OSError as err:
             raise self._cannot_start(err) from None
 
@@ -133,11 +139,13 @@ class DaskPool:
         pass
 
 
-def worker_start(threads: int) -> None:
+def worker_start(threads: int, warm: tuple | None = None) -> None:
     """A local worker leaves signals to the study: Ctrl-C stops the study (which stops handing out
     runs), not the runs in flight mid-step with a traceback each.  Its kernels' threads are its share
     of the cores (``NUMBA_NUM_THREADS``, read when numba is imported, unless the user has set it), so
-    that workers do not contend for them.  It runs many simulations (``kernels.expect_many``)."""
+    that workers do not contend for them.  It runs many simulations (``kernels.expect_many``).  Then
+    ``warm`` (``(function, args)``, :class:`LocalPool`): a warm-up only — whatever it fails on, the
+    runs meet again and report as runs do, so its error is not the worker's (which would break the pool)."""
     import signal
 
     for sig in (signal.SIGINT, signal.SIGHUP):
@@ -146,3 +154,9 @@ def worker_start(threads: int) -> None:
     from bark.engine import kernels
 
     kernels.expect_many()  # its runs share a kernel's compile: ``auto`` takes numba for them
+    if warm is not None:
+        function, args = warm
+        try:
+            function(*args)
+        except Exception:  # noqa: BLE001 (a warm-up: the runs report it)
+            pass

@@ -37,7 +37,7 @@ import attrs
 import numpy as np
 
 from bark.errors import BarkError
-from bark.studies.fit import DEFAULT_PRIORS, STATISTICS, Fit, Observed, Prior, run_fit, simulate_statistics
+from bark.studies.fit import DEFAULT_PRIORS, STATISTICS, Fit, Observed, Prior, run_fit, simulate_statistics, warm_worker
 
 __all__ = ["Calibration", "run_calibration", "summarise", "LEVELS"]
 
@@ -111,8 +111,9 @@ def run_calibration(cal: Calibration, folder: str | Path, *, workers: int = 1,
             if any(values[n] is None for n in cal.statistics):
                 row["skipped"] = "the pattern has no statistics (no patch of the least size, or a non-finite run)"
             else:
-                pool = pool or LocalPool(workers, "calibration")
-                result = run_fit(cal.fit(i, values), folder / f"draw-{i:03d}.db", pool=pool)
+                fit = cal.fit(i, values)
+                pool = pool or LocalPool(workers, "calibration", (warm_worker, (fit.base,)))
+                result = run_fit(fit, folder / f"draw-{i:03d}.db", pool=pool)
                 x, w = result.posterior()
                 row["rank"] = {k: _rank(x[:, j], w, settings[k]) for j, k in enumerate(cal.keys)}
                 row["hpd_level"] = result.hpd_level(settings)
