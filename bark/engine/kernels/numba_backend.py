@@ -126,14 +126,15 @@ on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,19
 def _run_forces(a0, a1, a2, b0, b1, b2, rest, live, fmax, inv, own, k, w0, w1, w2, wt, wl, wp, loads, rule, load, bp,
                 law, flow, resin):
     """Tension and force vector of each spring of a run, ends ``a`` and ``b``, into ``wt`` and ``w``;
-    with ``loads``, also the breaker part's load into ``wl`` (``-inf`` where the spring is not live)
-    and whether its ``rule`` picks each live spring into ``wp`` (``rule`` and ``load`` take ``(tension, length, rest, fmax, 1/fmax, own, q,
-    bp)``, ``own[q]`` the spring's declared fields: the generated adapters pass on what the part
-    reads), and return whether every live tension is finite and every live load a number (not NaN)
-    and whether the rule picked a live spring.  The tension is the resin law's (``law(length, rest,
-    own, q, k, rp)``); with ``resin = (rp, h, evolve)``'s ``evolve``, each live spring then flows for
-    a step ``h`` (``flow`` writes its new rest length or own fields in place) and its force is of
-    the tension after the flow — the next step's (``tests/test_resins.py``: the bits of numpy's)."""
+    with ``loads``, also the breaker part's load into ``wl`` (``-inf`` where the spring is not live) and
+    whether its ``rule`` picks each live spring into ``wp`` (``rule`` and ``load`` take ``(tension,
+    length, rest, fmax, 1/fmax, own, q, bp)``, ``own[q]`` the spring's declared fields: the generated
+    adapters pass on what the part reads), and return whether every live tension is finite and every
+    live load a number (not NaN) and whether the rule picked a live spring.  The tension is the resin
+    law's (``law(length, rest, own, q, k, rp)``); with ``resin = (rp, h, evolve)``'s ``evolve``, each
+    live spring then flows for a step ``h`` (``flow`` writes its new rest length or own fields in place)
+    and its force is of the tension after the flow — the next step's (``tests/test_resins.py``: the bits
+    of numpy's)."""
     rp, h, evolve = resin
     finite = True
     hit = False
@@ -250,13 +251,13 @@ def _picked(lv, s0, lo, hi, wp, wt, w0, w1, w2, breaking, log_id, log_step, log_
 @inline
 def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, breaking, rule, load, bp,
                  log_id, log_step, log_t, n_log, step, block, law, flow, resin, first):
-    """Add every live spring's force (eq. 1) into ``f`` at the bases from ``first`` on (0: all; only
-    the springs that reach them are made, a block at a time from the block of the first).  With ``loads``: also check the tensions are
-    finite and apply the breaker part's rule: with ``breaking``, a spring it picks is marked broken in
-    ``live`` (the call's working copy), left out of ``f`` (what a fresh pass after the break gives, to
-    the bit) and logged; without, it is only noted; and find the largest of the part's loads (else
-    ``-inf``).  Returns ``(largest load, all tensions finite, log length, whether the rule
-    picked a spring)``.
+    """Add every live spring's force (eq. 1) into ``f`` at the bases from ``first`` on (0: all; only the
+    springs that reach them are made, a block at a time from the block of the first).  With ``loads``:
+    also check the tensions are finite and apply the breaker part's rule: with ``breaking``, a spring it
+    picks is marked broken in ``live`` (the call's working copy), left out of ``f`` (what a fresh pass
+    after the break gives, to the bit) and logged; without, it is only noted; and find the largest of
+    the part's loads (else ``-inf``).  Returns ``(largest load, all tensions finite, log length, whether
+    the rule picked a spring)``.
 
     Springs come in runs ``(i, i + o)``, ``i`` consecutive (a lattice is a few such runs; see
     ``SpringOrder.runs``), each done on contiguous slices so the loops run in SIMD lanes, a block of
@@ -314,18 +315,19 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, br
 
 @inline
 def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
-                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
     """One step (``move``; without, only the forces of the bases from ``first`` on as they are, added
     into ``f``: the step's spring pass without its base pass, its loads or its breaks): the base pass over
-    every base (``_base_pass``, its numbers ``motion``), then the spring pass over every spring, each
-    a block at a time, the blocks shared among threads (the parallel kernel's).  Returns ``(bases
-    finite, largest load, tensions finite, log length, whether the rule picked a spring)``."""
-    c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius = motion
+    every base (``_base_pass``, its numbers ``motion``, a block at a time by ``base_block``), then the
+    spring pass over every spring, each a block at a time, the blocks shared among threads (the
+    parallel kernel's).  Returns ``(bases finite, largest load, tensions finite, log length, whether
+    the rule picked a spring)``."""
+    c, b, hm, h, t, ip, q, r_now, r_before, from_radius = motion
     log_id, log_step, log_t = log
     finite = True
     if move:
-        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, uniform, r_now, r_before, from_radius,
-                            heights, block, prev, save)
+        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, r_now, r_before, from_radius, heights, block,
+                            prev, save, base_block)
     x, f = (bases[0], bases[1], bases[2]), (bases[6], bases[7], bases[8])
     top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move,
                                                       breaking and move, rule, load, bp, log_id, log_step, log_t, n_log,
@@ -335,7 +337,7 @@ def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, fir
 
 @inline
 def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
-                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin):
+                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
     """``_step_split`` on one thread, the same bits, in one sweep over blocks of bases: a block's
     forces are gathered as soon as the springs that reach it are made, and those springs are made as
     soon as the base pass has moved both their ends, so that the bases' positions and forces, and
@@ -347,7 +349,7 @@ def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, fir
     block of bases, on the run's window), per spring the arithmetic is the same: the same bits.  The
     springs the rule picks are broken and logged as their block is made (the log's order is not
     the split pass's; the backend sorts it by step and spring id)."""
-    c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius = motion
+    c, b, hm, h, t, ip, q, r_now, r_before, from_radius = motion
     log_id, log_step, log_t = log
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     r_start, r_len, r_i, r_o = runs
@@ -372,8 +374,8 @@ def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, fir
     for blk in range(first // block, _blocks(n, block)):
         lo, hi = max(first, blk * block), min(n, (blk + 1) * block)
         while moved < min(n, hi + reach):  # the base pass, ahead of the springs that reach this block
-            bad += _base_block(bases, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, uniform,
-                               r_now, r_before, from_radius, heights, prev, save)
+            bad += base_block(bases, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, r_now,
+                              r_before, from_radius, heights, prev, save)
             moved = min(n, moved + block)
         for r in range(runs_n):
             s0, nr, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
@@ -461,8 +463,8 @@ def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip):
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now, r_before, from_radius, heights, block,
-               prev, save):
+def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights, block, prev,
+               save, base_block):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
@@ -471,32 +473,41 @@ def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, uniform, r_now,
     at its own radius, every step (``_per_base_radius``, with the anchors' ``heights``).  Returns
     whether every coordinate stayed finite.
 
-    A block of bases at a time (shared among threads in a parallel kernel), each block on slices of
-    the vectors, one coordinate per vector, so its loops run in SIMD lanes.  With ``save`` each
-    block's positions and velocities (and anchors, where the radius depends on height) are first
-    copied into ``prev``, while the block is in cache, so that the step can be taken back."""
+    A block of bases at a time (``base_block``: ``_uniform_block`` or ``_height_block``, the one the
+    growth part's radius calls for, bound in the kernel's module so that only it is compiled), shared
+    among threads in a parallel kernel, each block on slices of the vectors, one coordinate per
+    vector, so its loops run in SIMD lanes.  With ``save`` each block's positions and velocities (and
+    anchors, where the radius depends on height) are first copied into ``prev``, while the block is
+    in cache, so that the step can be taken back."""
     n = bases[0].shape[0]
     block_bad = np.zeros(_blocks(n, block), np.int64)
     for blk in prange(_blocks(n, block)):
-        block_bad[blk] = _base_block(bases, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip,
-                                     radii, params, uniform, r_now, r_before, from_radius, heights, prev, save)
+        block_bad[blk] = base_block(bases, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip, radii,
+                                    params, r_now, r_before, from_radius, heights, prev, save)
     return block_bad.sum() == 0
 
 
 @inline
-def _base_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, uniform, r_now, r_before, from_radius,
-                heights, prev, save):
-    """``_base_pass`` on the bases ``lo .. hi``; returns how many went non-finite."""
+def _uniform_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights,
+                   prev, save):
+    """``_base_pass`` on the bases ``lo .. hi``, for a radius that does not depend on height (which
+    leaves the anchors as they are until the call ends); returns how many went non-finite."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    if save:
+        _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
+    return _uniform_radius(_slices(bases, lo, hi), c, b, hm, h, update, ip, r_now, r_before, from_radius)
+
+
+@inline
+def _height_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights,
+                  prev, save):
+    """``_base_pass`` on the bases ``lo .. hi``, for a radius that depends on height; returns how
+    many went non-finite."""
     weights, stride = heights
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
-    if save and uniform:  # a uniform radius leaves the anchors as they are until the call ends
-        _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
-    elif save:
+    if save:
         _copy_block((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
-    part = _slices(bases, lo, hi)
-    if uniform:
-        return _uniform_radius(part, c, b, hm, h, update, ip, r_now, r_before, from_radius)
-    return _per_base_radius(part, c, b, hm, h, t, update, ip, radii, params, weights, stride, lo)
+    return _per_base_radius(_slices(bases, lo, hi), c, b, hm, h, t, update, ip, radii, params, weights, stride, lo)
 
 
 @inline
@@ -590,7 +601,8 @@ def _step_of(size, h_min, m, over, halvings, levels):
 
 @inline
 def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
-                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow, step_pass):
+                  log, heights, start, update, rule, load, radius, prepare, radii, law, flow, step_pass, base_block,
+                  uniform):
     """Up to ``len(ends)`` whole steps in one call (see ``Plan``), on the clock ``clock`` (``Plan.clock``:
     it doubles a halved step where ``kernels.doubles`` says, and leaves in ``clock`` the ticks and
     halvings it ends with; ``ends`` receives each kept step's end in ticks).  Returns ``(steps taken, largest
@@ -600,7 +612,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     part's (its numbers ``bp``), ``update`` the integrator part's (its numbers ``ip``), ``radius``,
     ``prepare`` and ``radii`` the growth part's (its numbers ``params``), ``law`` and ``flow`` the
     resin's (its numbers ``rp``); ``step_pass`` how a step's passes go (``_step_fused`` on one thread,
-    ``_step_split``).
+    ``_step_split``); ``uniform`` whether the growth part's radius is the same at every height, and
+    ``base_block`` the base pass that follows from it (``_uniform_block``, ``_height_block``): both
+    constants of the kernel's module, so that numba compiles only the branches they take.
 
     The spring pass that finds a step's loads also accumulates the next step's spring forces into
     ``f`` (first same as last), through the same function as the fresh pass at the start of the
@@ -622,7 +636,7 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
     k, c, b, m, h_min, over, t_limit, max_batch, break_budget = constants
-    uniform, breaking, fresh, block, kept, evolve = flags
+    breaking, fresh, block, kept, evolve = flags
     ticks, halvings, levels, may_double = clock[0], clock[1], clock[2], clock[3] != 0
     size = 1 << (levels - halvings)
     h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
@@ -658,10 +672,11 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         before = n_log
         from_radius = uniform and done > 0  # (outside the call: numba takes no branch among its arguments)
         resin = (rp, h, evolve and step)
-        motion = (c, b, hm, h, t, ip, q, uniform, r_now, r_before, from_radius)
+        motion = (c, b, hm, h, t, ip, q, r_now, r_before, from_radius)
         finite, top, springs_finite, n_log, picked = step_pass(  # one place for it, so that it is compiled once
             bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, 0 if step else fresh, motion, update, radii,
-            heights, block, prev, in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin)
+            heights, block, prev, in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin,
+            base_block)
         if remake:
             remake = False
             continue
@@ -783,6 +798,8 @@ import numpy as np
 from bark.engine.kernels.numba_backend import {kernel_names}
 update, rule, load, radius, prepare, radii, law, flow = _update, _rule, _load, _radius, _prepare, _radii, _law, _flow
 from bark.engine.kernels.numba_backend import {step_pass} as step_pass  # how a step's passes go
+from bark.engine.kernels.numba_backend import {base_block} as base_block  # the base pass the radius calls for
+uniform = {uniform}  # the growth part's radius is the same at every height
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", parallel={parallel})
@@ -1094,12 +1111,15 @@ def _specialized(integrator, breaker, growth, parallel=False, columns: tuple[str
         rule, load = adapted(breaker, columns)
         law, flow = resin_adapted(resin, columns)
         step_pass = _step_split if parallel else _step_fused
+        uniform = bool(growth.uniform)
+        base_block = _uniform_block if uniform else _height_block
 
         @numba.njit(nogil=True, error_model="numpy", parallel=bool(parallel))
         def steps(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp, ip, rp, flags,
                   log, heights, start):
             return _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants, ends, clock, params, bp,
-                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow, step_pass)
+                                 ip, rp, flags, log, heights, start, u, rule, load, g, p, block, law, flow, step_pass,
+                                 base_block, uniform)
 
         _SPECIALIZED[key] = steps
         return steps
@@ -1222,7 +1242,8 @@ def _combination(integrator, breaker, growth, parallel, columns, resin) -> _Comb
     columns = tuple(columns)
     if not set(columns) & {*breaker.reads, *breaker.load_reads, *resin.reads, *resin.writes}:
         columns = ()  # it reads no declared field: one kernel, whatever fields the state carries
-    key = (breaker.reads, breaker.load_reads, resin.reads, resin.writes, columns, *named.items(), bool(parallel))
+    key = (breaker.reads, breaker.load_reads, resin.reads, resin.writes, columns, *named.items(), bool(parallel),
+           bool(growth.uniform))
     helpers = [h for fn in named.values() for h in _helpers(fn)[1:]]
     _make_jitable(helpers)
     return _Combination(key, named, helpers, {k: _importable(fn) for k, fn in named.items()}, breaker, growth, resin,
@@ -1235,12 +1256,14 @@ def _wrapper(combination: _Combination) -> tuple[str, str]:
     compiles it again."""
     named, helpers, names, parallel = combination.named, combination.helpers, combination.names, combination.parallel
     resin, columns, inner = combination.resin, combination.key[4], combination.growth.inner
+    uniform = bool(combination.growth.uniform)
     adapters = _adapters(combination.breaker, columns)
     resin_text = _resin_adapters(resin, columns)
     digest = hashlib.sha256()
-    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), _source(ends_call), *(_source(fn) for fn in named.values()),
-                  *(_source(fn) for fn in helpers), *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters, resin_text,
-                  f"parallel={bool(parallel)}"):
+    for piece in (numba.__version__, _source(sys.modules[__name__]), _source(physics), _source(ends_call),
+                  *(_source(fn) for fn in named.values()), *(_source(fn) for fn in helpers),
+                  *(f"{k}={m}:{q}" for k, (m, q) in names.items()), adapters, resin_text, f"parallel={bool(parallel)}",
+                  f"uniform={uniform}"):
         digest.update(piece.encode())
     imports, refs = [], {}
     for i, (k, (module, qualname)) in enumerate(names.items()):
@@ -1256,15 +1279,17 @@ def _wrapper(combination: _Combination) -> tuple[str, str]:
                            adapters=adapters, parallel=bool(parallel), law=refs["law"],
                            flow=f"inline({refs['flow']})" if "flow" in refs else "None", resin=resin_text,
                            kernel_names=_kernel_names(),
-                           step_pass="_step_split" if parallel else "_step_fused")
+                           step_pass="_step_split" if parallel else "_step_fused", uniform=uniform,
+                           base_block="_uniform_block" if uniform else "_height_block")
     name = f"bark_steps_{digest.hexdigest()[:20]}"
     return name, text.replace("KERNEL", _kernel_source())
 
 
-_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow", "step_pass")
-"""The kernel's last parameters, which a generated module binds by name: the parts' functions, and
-how a step's passes go (``_step_fused`` on one thread, ``_step_split``: only that writing is compiled
-into the kernel)."""
+_PARTS = ("update", "rule", "load", "radius", "prepare", "radii", "law", "flow", "step_pass", "base_block", "uniform")
+"""The kernel's last parameters, which a generated module binds by name: the parts' functions, how a
+step's passes go (``_step_fused`` on one thread, ``_step_split``) and whether the radius is uniform,
+with the base pass that calls for (``_uniform_block``, ``_height_block``): only those writings are
+compiled into the kernel."""
 
 
 def _kernel_source() -> str:
@@ -1846,7 +1871,7 @@ class NumbaBackend(Backend):
         return fr.live
 
     def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
-        """``(weights, stride)`` of the anchors' heights for the kernel (``_base_pass_per_base_radius``):
+        """``(weights, stride)`` of the anchors' heights for the kernel (``_height_block``):
         the growth part's ``weights`` of each anchor's height, taken when its base is first seen (an
         anchor's height never changes) and checked against the part's own radius then, or with the
         next ``CHECK_BATCH`` bases that join; ``(empty, 0)`` for a law without them, or uniform."""
@@ -1984,7 +2009,7 @@ class _NumbaCall(Call):
         """The kernel's arguments for a call of at most ``n`` steps."""
         plan, fr = self.plan, self.frame
         rest, fmax, inv_fmax, own = fr.springs
-        flags = (bool(plan.growth.uniform), plan.breaks == "kernel", int(self.fresh),
+        flags = (plan.breaks == "kernel", int(self.fresh),
                  self.backend.block, int(self.kept), self.resin.evolves)
         return (fr.bases, fr.runs, fr.work, rest, fmax, inv_fmax, own, self.live, self.constants, np.empty(n, np.int64),
                 plan.clock(), plan.growth.params, plan.breaker.params, plan.integrator.params, self.resin.params, flags,
