@@ -552,15 +552,19 @@ def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, 
     heights never change, so a part that gives ``weights`` has each anchor's radius as
     ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once (``weights``: weight k of
     base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
-    (stride 0), the block form at the anchors' heights.  Per base the same operations in the same
-    order as one loop: the same bits.  Returns how many bases went non-finite."""
+    (stride 0), the block form at the anchors' heights, from the same call as the bases' (its
+    inlined copy, compiled once: the anchors' heights and radii are read only after the moves).
+    Per base the same operations in the same order as one loop: the same bits.  Returns how many
+    bases went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
         x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update, ip)
     by_weights = stride > 0
-    r_at = np.empty(n)  # each base's radius at its height
-    radii(t, x2, params, r_at)
+    r_at = np.empty(n)  # each base's radius at its height; then, without weights, each anchor's (into ax)
+    for side in range(1 if by_weights else 2):  # one call of the block form, so that it is compiled once
+        z, out = (x2, r_at) if side == 0 else (az, ax)
+        radii(t, z, params, out)
     bad = 0
     for q in range(n):
         px, py, pz = x0[q], x1[q], x2[q]
@@ -581,8 +585,6 @@ def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, 
             w, coefficient = weights[term * stride + first:term * stride + first + n], params[1 + term]
             for q in range(n):
                 ax[q] = ax[q] + w[q] * coefficient
-    else:
-        radii(t, az, params, ax)
     for q in range(n):
         ra = ax[q]
         ax[q] = ra * dx[q]
