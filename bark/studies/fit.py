@@ -681,7 +681,8 @@ def predictive(result: FitResult, n: int, *, workers: int = 1, client=None, seed
     if client is None and (workers == 1 or n == 1):
         values = [simulate_statistics(sc, names) for sc in scenes]
     else:
-        pool = DaskPool(client) if client is not None else LocalPool(min(workers, n), "fit", (warm_worker, (fit.base,)))
+        # its runs are handed out at once and need no pyabc: a warm-up would only delay them
+        pool = DaskPool(client) if client is not None else LocalPool(min(workers, n), "fit")
         try:
             values = [f.result() for f in [pool.submit(simulate_statistics, sc, names) for sc in scenes]]
         finally:
