@@ -729,6 +729,26 @@ def test_the_benchmarks_plain_numpy_step_is_the_same_model(backend):
     np.testing.assert_array_equal(plain.intact_in_bark_order, sim.state.intact)
 
 
+def test_the_benchmarks_plain_numba_step_is_bark_s_to_the_bit():
+    """``benchmarks/plain_numba.py``'s kernel, which bark's compiled step is timed against, computes
+    what bark computes in the same order: the same positions and breaks to the bit, breaking included."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "plain_numba.py"
+    spec = importlib.util.spec_from_file_location("plain_numba", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sim = build_sim(n_bases=400, G=0.05, dt=0.05, seed=2, backend="numba", fmax_spread=0.05)
+    sim.run(Stop(until_time=1.0))
+    plain = module.PlainNumba(sim)
+    sim.run(Stop(until_time=4.0))
+    plain.steps(60)
+    assert sim.n_broken > 20
+    np.testing.assert_array_equal(plain.x, sim.state.x)
+    np.testing.assert_array_equal(plain.intact_in_bark_order, sim.state.intact)
+
+
 @pytest.mark.parametrize("bound", ["gershgorin", "lanczos"])
 def test_a_lattice_still_to_grow_is_bounded_as_the_whole_lattice_laid_out(bound):
     """The stability limit of a lattice whose bases join during the run is taken on the whole lattice
