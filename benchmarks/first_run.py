@@ -52,6 +52,16 @@ def timed(argvs: list[list[str]], env: dict, cwd: str) -> tuple[float, float]:
     return time.perf_counter() - t0, cpu
 
 
+def linked(checkout: Path, folder: Path) -> Path:
+    """``checkout``'s packages under the names the installed ones have (``bark``, ``bark_plugins``,
+    ``bark_cli``), as links in ``folder``: what to put on ``PYTHONPATH`` to run that checkout's code
+    with this interpreter and its libraries (every script here that compares two checkouts)."""
+    folder.mkdir(exist_ok=True)
+    for name, part in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
+        (folder / name).symlink_to(checkout.resolve() / part)
+    return folder
+
+
 def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path, extra: tuple[str, ...] = (),
                    together: int = 1) -> dict:
     """A first run on empty caches (``together`` processes at once) and a warm one after it, of ``code``
@@ -82,11 +92,7 @@ def main() -> None:
     scenes = args.scene or ["default"]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        links = tmp / "links"
-        links.mkdir()
-        if args.against is not None:
-            for name, folder in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
-                (links / name).symlink_to(args.against.resolve() / folder)
+        links = linked(args.against, tmp / "links") if args.against is not None else tmp
         sides = {"this": None, **({"that": args.against} if args.against is not None else {})}
         got = {(scene, side): [] for scene in scenes for side in sides}
         for _ in range(args.rounds):

@@ -34,6 +34,9 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from first_run import linked  # noqa: E402
+
 
 def _children_cpu() -> float:
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -57,10 +60,7 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        links = tmp / "links"
-        links.mkdir()
-        for name, folder in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
-            (links / name).symlink_to(args.against.resolve() / folder)
+        links = linked(args.against, tmp / "links")
         envs = {"this": dict(os.environ), "that": {**os.environ, "PYTHONPATH": str(links)}}
         _bark(["simulate", "--scene", args.scene, "--seed", "999", "--out", str(tmp / "observed"), "--quiet"], envs["this"])
         records: dict[str, list[dict]] = {side: [] for side in envs}

@@ -26,6 +26,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from first_run import linked  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 
 WORKER = r"""
@@ -89,10 +92,7 @@ def main() -> None:
     args = parser.parse_args()
     seeds = list(range(args.seeds))
     with tempfile.TemporaryDirectory() as tmp:
-        links = Path(tmp)
-        if args.against is not None:
-            for name, folder in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
-                (links / name).symlink_to(args.against.resolve() / folder)
+        links = linked(args.against, Path(tmp)) if args.against is not None else Path(tmp)
         sides = {"this": None, **({"that": args.against} if args.against is not None else {})}
         runs: dict[str, list[list[dict]]] = {side: [] for side in sides}
         for _ in range(args.rounds):

@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from first_run import ROOT, timed  # noqa: E402
+from first_run import ROOT, linked, timed  # noqa: E402
 
 
 def main() -> None:
@@ -34,10 +34,7 @@ def main() -> None:
     options = args.simulate[1:] if args.simulate[:1] == ["--"] else args.simulate
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        links = tmp / "links"
-        links.mkdir()
-        for name, folder in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
-            (links / name).symlink_to(args.against.resolve() / folder)
+        links = linked(args.against, tmp / "links")
         sides = {}
         for side in ("this", "that"):
             caches = tmp / side
