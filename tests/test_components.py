@@ -74,3 +74,41 @@ def test_a_run_labels_its_patches_without_importing_scipy_sparse(tmp_path):
     out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "run")], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout
     assert (tmp_path / "run" / "summary.json").exists()
+
+
+@st.composite
+def lattices(draw):
+    """Springs as the numba kernel holds them: runs ``(position, length, first i, offset o)`` of
+    springs ``(i, i + o)`` (an offset may be negative), free positions between runs, any live mask."""
+    n = draw(st.integers(1, 150))
+    offsets = draw(st.lists(st.integers(-n + 1, n - 1).filter(lambda o: o != 0), max_size=4)) if n > 1 else []
+    starts, lengths, firsts, gaps = [], [], [], 0
+    for o in offsets:
+        first = draw(st.integers(max(0, -o), n - 1 - max(o, 0)))
+        length = draw(st.integers(0, n - max(o, 0) - first))
+        starts.append(gaps)
+        lengths.append(length)
+        firsts.append(first)
+        gaps += length + draw(st.integers(0, 3))
+    live = np.array(draw(st.lists(st.booleans(), min_size=gaps, max_size=gaps)), dtype=bool)
+    runs = tuple(np.array(a, dtype=np.int64) for a in (starts, lengths, firsts, offsets))
+    return n, runs, live
+
+
+@settings(max_examples=300, deadline=None)
+@given(lattices(), st.integers(1, 9))
+def test_the_kernel_counts_patches_as_the_labels_count_them(lattice, min_size):
+    """The count a kernel call takes for a patch-count stop (``_patch_count``, over its runs and live
+    mask) is ``count_patches`` of scipy's labels of the same springs, and the compiled labels
+    (``_components``, which shares its union) are scipy's."""
+    from bark.engine.kernels.numba_backend import _components, _patch_count
+
+    n, runs, live = lattice
+    pairs = [(i + q, i + q + o) for s, length, i, o in zip(*runs) for q in range(length)]
+    kept = [live[s + q] for s, length, i, o in zip(*runs) for q in range(length)]
+    pairs = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+    expected = scipy_labels(n, pairs, kept)
+    assert _patch_count(runs, live, n, min_size) == count_patches(expected, min_size)
+    labels = np.empty(n, np.int32)
+    _components(n, pairs[:, 0], pairs[:, 1], np.array(kept, dtype=bool), labels)
+    np.testing.assert_array_equal(labels, expected)

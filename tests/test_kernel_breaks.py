@@ -89,6 +89,25 @@ def test_a_patch_stop_runs_through_breaks_and_stops_where_watching_every_break_s
     assert len(passes) < steps_with_breaks <= len(watched) and steps_with_breaks > 20
 
 
+@pytest.mark.parametrize("stepping", ["adaptive", "fixed"])
+def test_the_kernel_counts_the_patches_and_goes_on_through_its_budget(make_sim, stepping):
+    """Where the breaks reach the patch-count stop's budget, the numba kernel counts the patches
+    itself and goes on while there are fewer than asked: its calls end at the step budget or at the
+    stop, not at each budget, yet it stops at the same step, with the same bits, as the numpy
+    backend, whose calls end at every budget for Python to count."""
+    from bark.engine.stepping import CHUNK
+
+    kw = dict(n_bases=800, G=0.05, dt=0.05, seed=4, stepping=stepping)
+    stop = Stop(until_patches=40, until_time=80.0)
+    compiled, arrays = make_sim(backend="numba", **kw), make_sim(backend="numpy", **kw)
+    passes = {"numba": [], "numpy": []}
+    assert compiled.run(stop, lambda s: passes["numba"].append(s.step_count)) == "patches"
+    assert arrays.run(stop, lambda s: passes["numpy"].append(s.step_count)) == "patches"
+    _assert_same(compiled, arrays)
+    assert compiled.patch_count(7) >= 40
+    assert len(passes["numba"]) <= math.ceil(compiled.step_count / CHUNK) + 1 < len(passes["numpy"]), passes
+
+
 @settings(max_examples=40, deadline=None)
 @given(ops=st.lists(st.tuples(st.sampled_from(["break", "mend", "count"]), st.integers(0, 10**6)), max_size=40),
        min_size=st.integers(1, 8))

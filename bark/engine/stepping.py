@@ -217,9 +217,10 @@ def plan(sim, stop, most: int | None = None) -> Plan:
 
     Many steps go in one call when the integrator and the growth law have compiled forms and the
     breakers share one part (``Breaker.part``); the call then ends where a stop condition can next
-    hold (a patch count: after as many breaks as patches are missing), a trigger is next due or
-    bases next join, or after a step it refuses; it doubles a halved step itself where the clock
-    would (``Plan``).
+    hold (a patch count: after as many breaks as patches are missing, where a backend that counts
+    patches itself counts them and goes on while there are fewer: ``Plan.patch_goal``), a trigger is
+    next due or bases next join, or after a step it refuses; it doubles a halved step itself where
+    the clock would (``Plan``).
     Springs the part's rule picks break inside the call when the part decides (a step that adaptive
     stepping undoes is taken back, its breaks with it: ``take_steps``); when it names candidates,
     the call ends after the first step in which it names one, and the breakers select in Python.
@@ -243,7 +244,8 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
         over=1.0 + sim.numerics.overshoot_tol if steers else math.inf, t_limit=t_limit, may_double=may_double,
         break_budget=_break_budget(sim, stop), max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
-        threads=sim.numerics.threads,
+        threads=sim.numerics.threads, patch_goal=_patch_goal(sim, stop),
+        min_patch_size=stop.min_patch_size if stop is not None else 7,
     )
 
 
@@ -258,6 +260,14 @@ def _break_budget(sim, stop) -> float:
     if stop is not None and stop.until_patches is not None:
         return float(max(1, stop.until_patches - sim.patches_at_most(stop.min_patch_size)))
     return math.inf
+
+
+def _patch_goal(sim, stop) -> int:
+    """The patch count a call may judge itself (``Plan.patch_goal``): the stop's, where it alone sets
+    the break budget (no trigger watching breaks); else 0."""
+    if stop is None or stop.until_patches is None or any(t.watches_breaks() for t, _ in sim.actions):
+        return 0
+    return int(stop.until_patches)
 
 
 def steers_step(sim) -> bool:

@@ -104,6 +104,13 @@ class Plan:
     patch-count stop (``stepping.plan``), ``inf`` for none."""
     max_batch: float = math.inf
     """End the call after a step that breaks more springs than this (a degenerate event)."""
+    patch_goal: int = 0
+    """The patches a patch-count stop asks (of at least ``min_patch_size`` bases), where that stop
+    alone sets ``break_budget`` (0: none).  A backend that labels patches inside its call may, when
+    the breaks reach the budget, count them and go on to a new budget while there are fewer (each
+    break adds at most one patch); one that does not ends the call there, and Python counts."""
+    min_patch_size: int = 7
+    """The least patch ``patch_goal`` counts."""
     compiled: bool = True
     """Whether the integrator and the growth law have compiled work (else one step in Python)."""
 

@@ -634,10 +634,16 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     instead of a replay of the call (its breaks undone).  Where the step may still be halved it is
     halved and the call goes on, the forces of the bases made again by the pass that begins a
     call; else the call ends, its steps those before it (the forces in ``f`` are then the refused
-    step's, and the next call makes them again)."""
+    step's, and the next call makes them again).
+
+    ``constants`` ends with the patch-count stop's goal and least patch (``Plan.patch_goal``, 0:
+    none): after a kept step at which the call's breaks reach ``break_budget``, the patches the live
+    springs make are counted here (``_patch_count``) and, while fewer than the goal, the budget
+    grows by as many breaks as are missing (each adds at most one patch), so the call goes on where
+    Python would only count and call again; it ends at the step where the goal is reached."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     f = (f0, f1, f2)
-    k, c, b, m, h_min, over, t_limit, max_batch, break_budget = constants
+    k, c, b, m, h_min, over, t_limit, max_batch, break_budget, patch_goal, min_size = constants
     breaking, fresh, block, kept, evolve = flags
     ticks, halvings, levels, may_double = clock[0], clock[1], clock[2], clock[3] != 0
     size = 1 << (levels - halvings)
@@ -707,6 +713,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
                 h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
                 remake, undone, fresh = True, False, 0
                 continue
+        if kept_step and patch_goal > 0 and n_log >= break_budget and n_log > before:
+            have = _patch_count(runs, live, x0.shape[0], min_size)  # the patch-count stop may hold: counted
+            if have < patch_goal:  # here, and while it does not, the call goes on to the breaks that may reach it
+                break_budget = n_log + patch_goal - have
         stop = _ends_call(finite, top, accept_load, report_load, picked, n_log - before, n_log, break_budget,
                           max_batch, t >= t_limit or double and not may_double)
         if double:  # the clock doubles the step, for this call or the next
@@ -1553,26 +1563,31 @@ def _constrain(x, v, anchor, anchor_dir, r_x, r_anchor):
         anchor[q, 1] = ra * anchor_dir[q, 1]
 
 
+@inline
+def _join(parent, a, b):
+    """Union–find's union of bases ``a`` and ``b`` in the forest ``parent``: each root found (the
+    path halved as it goes), the larger root under the smaller, so every root is its tree's smallest
+    base."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    while parent[b] != b:
+        parent[b] = parent[parent[b]]
+        b = parent[b]
+    if a < b:
+        parent[b] = a
+    elif b < a:
+        parent[a] = b
+
+
 @jit
 def _components(n, pi, pj, intact, labels):
     """Connected components of the intact springs by union-find; labels numbered in order of each
     component's smallest base, as scipy.sparse.csgraph.connected_components numbers them."""
     parent = np.arange(n)
     for s in range(pi.shape[0]):
-        if not intact[s]:
-            continue
-        a, b = np.int64(pi[s]), np.int64(pj[s])
-        while parent[a] != a:  # find, halving the path as we go
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        while parent[b] != b:
-            parent[b] = parent[parent[b]]
-            b = parent[b]
-        if a != b:
-            if a < b:
-                parent[b] = a
-            else:
-                parent[a] = b
+        if intact[s]:
+            _join(parent, np.int64(pi[s]), np.int64(pj[s]))
     count = 0
     for q in range(n):  # roots are each component's smallest base, met in increasing order
         r = q
@@ -1583,6 +1598,31 @@ def _components(n, pi, pj, intact, labels):
             count += 1
         else:
             labels[q] = labels[r]
+    return count
+
+
+@jit
+def _patch_count(runs, live, n, min_size):
+    """How many patches of at least ``min_size`` bases the ``live`` springs make among ``n`` bases
+    (``runs`` and ``live`` as the kernel takes them: springs by position), by union–find — what
+    ``Simulation.patch_count`` gives, without the labels.  Compiled once for every kernel (not
+    inlined into each: their compile time)."""
+    r_start, r_len, r_i, r_o = runs
+    parent = np.arange(n)
+    for r in range(r_start.shape[0]):
+        s0, i0, o = r_start[r], r_i[r], r_o[r]
+        for q in range(r_len[r]):
+            if live[s0 + q]:
+                _join(parent, i0 + q, i0 + q + o)
+    size = np.zeros(n, np.int64)
+    for q in range(n):
+        r = q
+        while parent[r] != r:
+            r = parent[r]
+        size[r] += 1
+    count = 0
+    for q in range(n):
+        count += size[q] >= min_size
     return count
 
 
@@ -2000,7 +2040,8 @@ class _NumbaCall(Call):
         self.start = fr.start_columns
         fr.forces = None
         self.constants = (self.k, float(mech.c), float(mech.b), float(mech.m), float(plan.h_min),
-                          float(plan.over), float(plan.t_limit), float(plan.max_batch), float(plan.break_budget))
+                          float(plan.over), float(plan.t_limit), float(plan.max_batch), float(plan.break_budget),
+                          float(plan.patch_goal), float(plan.min_patch_size))
         self.heights = backend._heights(state, plan, fr)
         self.resin = backend.resin
         # a resin that flows changes the frame's rest lengths or own fields: kept to replay from, written back after
