@@ -1564,16 +1564,19 @@ def _constrain(x, v, anchor, anchor_dir, r_x, r_anchor):
 
 
 @inline
-def _join(parent, a, b):
-    """Union–find's union of bases ``a`` and ``b`` in the forest ``parent``: each root found (the
-    path halved as it goes), the larger root under the smaller, so every root is its tree's smallest
-    base."""
+def _root(parent, a):
+    """The root of base ``a``'s tree in the union–find forest ``parent``, the path halved on the way."""
     while parent[a] != a:
         parent[a] = parent[parent[a]]
         a = parent[a]
-    while parent[b] != b:
-        parent[b] = parent[parent[b]]
-        b = parent[b]
+    return a
+
+
+@inline
+def _join(parent, a, b):
+    """Union–find's union of bases ``a`` and ``b`` in the forest ``parent``: the larger root under
+    the smaller, so every root is its tree's smallest base."""
+    a, b = _root(parent, a), _root(parent, b)
     if a < b:
         parent[b] = a
     elif b < a:
@@ -1590,9 +1593,7 @@ def _components(n, pi, pj, intact, labels):
             _join(parent, np.int64(pi[s]), np.int64(pj[s]))
     count = 0
     for q in range(n):  # roots are each component's smallest base, met in increasing order
-        r = q
-        while parent[r] != r:
-            r = parent[r]
+        r = _root(parent, q)
         if r == q:
             labels[q] = count
             count += 1
@@ -1616,10 +1617,7 @@ def _patch_count(runs, live, n, min_size):
                 _join(parent, i0 + q, i0 + q + o)
     size = np.zeros(n, np.int64)
     for q in range(n):
-        r = q
-        while parent[r] != r:
-            r = parent[r]
-        size[r] += 1
+        size[_root(parent, q)] += 1
     count = 0
     for q in range(n):
         count += size[q] >= min_size
