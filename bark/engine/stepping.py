@@ -238,36 +238,29 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     if compiled and breaks != "python":
         n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases + sim.state.n_springs, 1), most or CHUNK))
     n, t_limit, may_double = _bounded(sim, stop, n) if n > 1 else (n, math.inf, True)
+    budget, goal = _break_budget(sim, stop)
     return Plan(
         h_min=clock.h_min, ticks=clock.ticks, n=n, levels=clock.levels, halvings=clock.halvings,
         integrator=integrator if compiled else None, growth=growth if compiled else None,
         breaker=part if breaks != "python" else NO_BREAKING, breaks=breaks,
         over=1.0 + sim.numerics.overshoot_tol if steers else math.inf, t_limit=t_limit, may_double=may_double,
-        break_budget=_break_budget(sim, stop), max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
-        threads=sim.numerics.threads, patch_goal=_patch_goal(sim, stop),
-        min_patch_size=stop.min_patch_size if stop is not None else 7,
+        break_budget=budget, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
+        threads=sim.numerics.threads, patch_goal=goal, min_patch_size=stop.min_patch_size if goal else 1,
     )
 
 
-def _break_budget(sim, stop) -> float:
-    """The breaks a call may make before Python must look: 1 where a trigger watches breaks; with a
-    patch-count stop, as many as the patches that may still be missing
-    (``Simulation.patches_at_most``: each break adds at most one patch), for the stop cannot hold
-    before that many breaks (the call then ends at the same step as one ending at every break
-    would stop at: the result is the same to the bit); else none."""
+def _break_budget(sim, stop) -> tuple[float, int]:
+    """The breaks a call may make before Python must look, and the patch count it may judge itself
+    (``Plan.patch_goal``, 0: none): 1 where a trigger watches breaks; with a patch-count stop, as
+    many as the patches that may still be missing (``Simulation.patches_at_most``: each break adds
+    at most one patch), for the stop cannot hold before that many breaks (the call then ends at the
+    same step as one ending at every break would stop at: the result is the same to the bit), and
+    that stop's count; else none."""
     if any(t.watches_breaks() for t, _ in sim.actions):
-        return 1.0
+        return 1.0, 0
     if stop is not None and stop.until_patches is not None:
-        return float(max(1, stop.until_patches - sim.patches_at_most(stop.min_patch_size)))
-    return math.inf
-
-
-def _patch_goal(sim, stop) -> int:
-    """The patch count a call may judge itself (``Plan.patch_goal``): the stop's, where it alone sets
-    the break budget (no trigger watching breaks); else 0."""
-    if stop is None or stop.until_patches is None or any(t.watches_breaks() for t, _ in sim.actions):
-        return 0
-    return int(stop.until_patches)
+        return float(max(1, stop.until_patches - sim.patches_at_most(stop.min_patch_size))), int(stop.until_patches)
+    return math.inf, 0
 
 
 def steers_step(sim) -> bool:

@@ -110,7 +110,7 @@ class Plan:
     the breaks reach the budget, count them and go on to a new budget while there are fewer (each
     break adds at most one patch); one that does not ends the call there, and Python counts."""
     min_patch_size: int = 7
-    """The least patch ``patch_goal`` counts."""
+    """The least patch ``patch_goal`` counts (read only with a goal)."""
     compiled: bool = True
     """Whether the integrator and the growth law have compiled work (else one step in Python)."""
 
