@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(nogil=True, error_model="numpy")
 def _spring_pass(x0, x1, x2, f0, f1, f2, w0, w1, w2, rest, fmax, intact, offsets, starts, k, breaking):
     """Every intact spring's force added into ``f`` (zeroed first), offset by offset: the springs of
     offset ``o`` join base ``i`` to ``i + o`` and are ``starts[b] + i``; with ``breaking``, a spring
@@ -73,7 +73,7 @@ def _spring_pass(x0, x1, x2, f0, f1, f2, w0, w1, w2, rest, fmax, intact, offsets
             f2[i] += w2[i]
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(nogil=True, error_model="numpy")
 def plain_steps(x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy, w0, w1, w2, rest, fmax, intact, offsets,
                 starts, k, c, b, m, h, r0, g_rate, ticks, n_steps):
     """``n_steps`` fixed steps from tick ``ticks`` (time ``ticks · h``), the forces of the present
@@ -154,7 +154,7 @@ def main() -> None:
     for n in args.n_bases or [3000, 1_000_000]:
         sim = _phase_sim(n, "numba", 0.0, threads=1)  # compiled, and run to its first step
         plain = PlainNumba(sim)
-        plain.steps(0)  # compiled (or loaded) outside the timing
+        plain.steps(0)  # compiled outside the timing (not cached on disk: a few seconds)
         steps = args.steps or max(5, int(0.2 / (2e-8 * n)))
         ns = {"plain numba": [], "bark numba": []}
         for _ in range(args.repeats):
