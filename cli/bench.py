@@ -32,9 +32,10 @@ CASES = {
 
 def _case(n: int, case: str) -> dict:
     if case == "bulge":
-        bulges = [{"z": 0.25 * n * 0.0005, "half_width": 0.1 * n * 0.0005, "magnitude": 0.01, "G": 0.02, "f_max": 0.004},
+        bulges = [{"z": 0.25 * n * 0.0005, "half_width": 0.1 * n * 0.0005, "magnitude": 0.01, "G": 0.02},
                   {"z": 0.7 * n * 0.0005, "half_width": 0.1 * n * 0.0005, "magnitude": 0.005}]
-        return {"lattice": {"n_bases": n}, "growth": {"name": "bulge", "bulges": bulges}}
+        return {"lattice": {"n_bases": n}, "growth": {"name": "bulge", "bulges": bulges},
+                "breaker": {"name": "threshold", "regions": {"bulge": 0.004}}}
     if case == "joining":
         return {"lattice": {"n_bases": n, "n_start": n // 2, "join_rate": n / 80.0, "join_every": 1.0}}
     return {"lattice": {"n_bases": n}}

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from bark_cli.bench import CASES
 from bark_cli.main import cli
 
 from conftest import REPO_ROOT
@@ -299,6 +300,17 @@ def test_bench_json_is_the_table_s_rows_and_the_machine(tmp_path):
     assert result.exit_code == 0, result.output
     rows = json.loads(result.stdout)["rows"]
     assert {r["backend"] for r in rows} == {"numpy", "plain numpy"} and all(r["steps_per_s"] > 0 for r in rows)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_bench_speed_runs_every_case(case):
+    """Every case ``bench speed`` offers is a scene bark accepts and steps (the bulge case once gave
+    a bulge's threshold after it had moved to the breaker's regions, and stopped at its scene)."""
+    result = CliRunner().invoke(cli, ["bench", "speed", "--n-bases", "300", "--backend", "numpy", "--phase", "quiet",
+                                      "--case", case, "--steps", "3", "--repeats", "1", "--json"])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)["rows"]
+    assert {r["case"] for r in rows} == {case} and all(r["steps_per_s"] > 0 for r in rows if r["backend"] == "numpy")
 
 
 @pytest.mark.slow  # whole processes: a fit and the plain runs beside it
