@@ -72,6 +72,16 @@ def build_sim(
     )
 
 
+@pytest.fixture(autouse=True)
+def _own_compile_record(monkeypatch, tmp_path_factory):
+    """Compile timings a test records stay the test's: the user's record (``compile_record``, what
+    decides whether a run compiles its threaded kernel alongside) is never written by the suite —
+    tests that pretend a kernel is not cached would record its load as a compile of 0.1 s, and every
+    later large run on that machine would start a compile alongside that it ends unfinished."""
+    record = tmp_path_factory.mktemp("compile-record") / "compile-seconds.json"
+    monkeypatch.setattr("bark.engine.kernels.numba_backend.compile_record", lambda: record)
+
+
 @pytest.fixture
 def make_sim():
     """Factory fixture: ``make_sim(n_bases=..., G=..., ...)`` → a fresh small :class:`Simulation`."""

@@ -151,6 +151,38 @@ def test_a_run_expected_to_end_before_its_threaded_kernel_compiles_keeps_to_one_
         assert len(started) == 2
 
 
+class _Running:
+    """A compile alongside that has run ``seconds`` (``None``: still running) or ended."""
+
+    def __init__(self, seconds: float, running: bool) -> None:
+        self.seconds, self.running = seconds, running
+
+    def done(self) -> bool | None:
+        return None if self.running else True
+
+    def running_for(self) -> float:
+        return self.seconds
+
+
+@pytest.mark.parametrize("held, running, kept", [
+    (0.1, True, 30.0),  # a record too short (a load timed as a compile): the time it has run, at least
+    (None, True, 30.0),  # no record
+    (90.0, True, 90.0),  # a longer record stands
+    (0.1, False, 0.1),  # a compile that has ended was recorded by its own process
+])
+def test_a_compile_alongside_ended_unfinished_is_recorded_as_the_least_a_compile_takes(monkeypatch, held, running,
+                                                                                        kept):
+    """A threaded compile alongside still running as the run's process leaves has taken at least as
+    long as it ran: the record of threaded compiles (what decides whether the next run starts one)
+    is raised to that, never lowered, so that runs that never outlast it stop starting it."""
+    monkeypatch.setattr(numba_backend, "_WAITING", {("parts",): (None, None, None, None, _Running(30.0, running))})
+    if held is not None:
+        numba_backend.compile_record().write_text(json.dumps({"serial": 20.0, "threaded": held}))
+    numba_backend._unfinished_compiles()
+    assert numba_backend.compile_seconds().get("threaded") == kept
+    assert numba_backend.compile_seconds().get("serial") == (20.0 if held is not None else None)
+
+
 def _env(tmp_path) -> dict:
     return {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache"), "BARK_CACHE_DIR": str(tmp_path / "bark-cache"),
             "NUMBA_NUM_THREADS": "2"}

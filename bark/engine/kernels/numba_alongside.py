@@ -27,6 +27,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 
 try:
@@ -49,6 +50,11 @@ class Job:
 
     def __init__(self, path: Path, process: subprocess.Popen, errors) -> None:
         self.path, self.process, self.errors = path, process, errors
+        self.started = time.monotonic()
+
+    def running_for(self) -> float:
+        """Seconds since it started."""
+        return time.monotonic() - self.started
 
     def done(self) -> bool | None:
         """``None`` while it compiles; then whether the kernel is in the cache."""

@@ -28,6 +28,7 @@ Threads pay on large lattices only (a parallel loop costs a few microseconds to 
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import hashlib
 import importlib
@@ -1188,10 +1189,11 @@ def compile_seconds() -> dict[str, float]:
             and math.isfinite(held[kind]) and held[kind] > 0}
 
 
-def record_compile(kind: str, seconds: float) -> None:
-    """Keep ``seconds`` as the last first compile of a ``kind`` kernel here; a cache folder that
-    cannot be written keeps nothing (an estimate is not worth a warning)."""
-    if not (math.isfinite(seconds) and seconds > 0):
+def record_compile(kind: str, seconds: float, at_least: bool = False) -> None:
+    """Keep ``seconds`` as the last first compile of a ``kind`` kernel here (``at_least``: only if
+    the record is shorter — a compile ended unfinished took longer); a cache folder that cannot be
+    written keeps nothing (an estimate is not worth a warning)."""
+    if not (math.isfinite(seconds) and seconds > 0) or at_least and compile_seconds().get(kind, 0.0) >= seconds:
         return
     with contextlib.suppress(OSError, ValueError):
         compile_record().parent.mkdir(parents=True, exist_ok=True)
@@ -1400,6 +1402,18 @@ def threaded_ready(integrator, breaker, growth, columns, resin, arguments, worth
         LOG.info(f"the threaded stepping kernel could not be compiled alongside ({job.why()}): compiling it in this "
                  "process")
     return True
+
+
+@atexit.register
+def _unfinished_compiles() -> None:
+    """A threaded compile alongside still running as the run's process leaves (``numba_alongside``
+    ends it next: its exit hook was registered first, so runs after this one) took longer than it
+    has run: that is recorded as the least its compile takes (:func:`record_compile`), so that a
+    record that is too short — a compile that was really a load from the cache — cannot start, run
+    after run, a compile that none of them outlasts (:meth:`NumbaBackend.threads_worth_compiling`)."""
+    for *_, job in list(_WAITING.values()):
+        if job.done() is None:
+            record_compile("threaded", job.running_for(), at_least=True)
 
 
 def compile_alongside() -> None:
