@@ -215,9 +215,9 @@ the numbers do (:func:`_extent`)."""
 def _extent(z):
     """The lowest and the highest of the heights ``z`` (a contiguous block), found on integers that
     order as the doubles do (each one's bits, its magnitude bits flipped where it is negative), so
-    that the compiled loop runs in SIMD lanes: numba compares doubles one at a time, and this scan of
-    every block at every step cost as much as the bulges' profiles.  A NaN height may come out as
-    either end (NaN): no bulge is then skipped, which changes no bit; an empty block gives NaN too."""
+    that the compiled loop, run on every block at every step, goes in SIMD lanes (numba compares
+    doubles one at a time).  A NaN height may come out as either end (NaN): no bulge is then
+    skipped, which changes no bit; an empty block gives NaN too."""
     bits = z.view(np.int64)
     low, high = _MAGNITUDE, -_MAGNITUDE - 1
     for i in range(bits.shape[0]):
