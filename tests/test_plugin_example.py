@@ -1,14 +1,16 @@
 """The example plugin (examples/plugin/) round trip: install, list, select, run.
 
-Installed with ``pip install --target`` into a temporary folder put on PYTHONPATH, so the test
-leaves the environment as it found it; entry points are found from that folder's dist-info exactly
-as from site-packages.
+Installed with ``pip install --target`` into a temporary folder put on PYTHONPATH, from a copy of
+the plugin's folder (a build writes ``build/`` and ``*.egg-info`` beside its sources), so the test
+leaves the environment and the checkout as it found them; entry points are found from that folder's
+dist-info exactly as from site-packages.
 """
 
 from __future__ import annotations
 
 import csv
 import os
+import shutil
 import subprocess
 import sys
 from collections import Counter
@@ -23,8 +25,10 @@ PLUGIN = REPO_ROOT / "examples" / "plugin"
 @pytest.fixture(scope="module")
 def plugin_path(tmp_path_factory):
     target = tmp_path_factory.mktemp("plugin-site")
+    source = tmp_path_factory.mktemp("plugin-source") / "plugin"
+    shutil.copytree(PLUGIN, source, ignore=shutil.ignore_patterns("build", "*.egg-info", "__pycache__"))
     # build with the setuptools the test extra installs: no download, no isolated build environment
-    cmd = [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--target", str(target), str(PLUGIN)]
+    cmd = [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation", "--target", str(target), str(source)]
     result = subprocess.run(cmd, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     return target
