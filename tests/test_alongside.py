@@ -152,7 +152,7 @@ def test_a_run_expected_to_end_before_its_threaded_kernel_compiles_keeps_to_one_
 
 
 class _Running:
-    """A compile alongside that has run ``seconds`` (``None``: still running) or ended."""
+    """A compile alongside that has run ``seconds``, still ``running`` or ended."""
 
     def __init__(self, seconds: float, running: bool) -> None:
         self.seconds, self.running = seconds, running
