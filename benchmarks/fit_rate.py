@@ -26,28 +26,18 @@ import argparse
 import json
 import os
 import platform
-import resource
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from first_run import linked  # noqa: E402
+from first_run import linked, timed  # noqa: E402
 
 
-def _children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def _bark(args: list[str], env: dict) -> None:
-    done = subprocess.run([sys.executable, "-m", "bark_cli", *args], capture_output=True, text=True, env=env,
-                          cwd=tempfile.gettempdir())
-    if done.returncode != 0:
-        raise SystemExit(f"bark {args[0]} failed: {(done.stderr.strip().splitlines() or ['no message'])[-1]}")
+def _bark(args: list[str], env: dict) -> tuple[float, float]:
+    """``bark ARGS`` as a process of its own: its wall and CPU seconds (its workers' included)."""
+    return timed([[sys.executable, "-m", "bark_cli", *args]], env, tempfile.gettempdir())
 
 
 def main() -> None:
@@ -67,11 +57,9 @@ def main() -> None:
         for r in range(args.rounds):
             for side, env in envs.items():
                 out = tmp / f"{side}-{r}"
-                cpu0, t0 = _children_cpu(), time.perf_counter()
-                _bark(["fit", str(tmp / "observed"), "--scene", args.scene, "--population", str(args.population),
+                wall, cpu = _bark(["fit", str(tmp / "observed"), "--scene", args.scene, "--population", str(args.population),
                        "--generations", "1", "--predictive", "0", "--seed", str(r), "--workers", str(args.workers),
                        "--out", str(out), "--quiet"], env)
-                wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
                 fit = json.loads((out / "fit.json").read_text())
                 runs = args.population + fit["runs"]
                 records[side].append({"wall": wall, "cpu": cpu, "runs": runs, "rate": 60.0 * runs / wall,
