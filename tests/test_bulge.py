@@ -237,6 +237,50 @@ def test_weights_wrong_only_where_bases_join_later_are_refused_as_they_join():
     assert sim.state.n_bases <= 300 + CHECK_BATCH + 100  # refused with its first batch, not at the end
 
 
+@functools.cache
+def _compiled_weighted_radii():
+    import numba
+
+    from bark.engine.kernels.numba_backend import _weighted_radii
+
+    @numba.njit(error_model="numpy")
+    def weighted(out, q, weights, stride, spans, first):
+        _weighted_radii(out, q, weights, stride, spans, first)
+
+    return weighted
+
+
+_weight = st.one_of(st.just(0.0), st.just(0.0), st.just(-0.0), st.floats(0.0, 1.0), st.sampled_from([np.nan, 1e-308]))
+_coefficient = st.one_of(st.floats(-1.0, 1.0), st.sampled_from([0.0, -0.0, np.inf, -np.inf, np.nan, 1e308, -1e308]))
+
+
+@given(data=st.data(), k=st.integers(1, 4), n=st.integers(0, 24), room=st.integers(0, 5),
+       q0=st.sampled_from([0.35, 1.0, -1.0, 0.0, -0.0, 1e-308, np.inf, np.nan]))
+def test_anchors_summed_over_each_terms_span_are_the_whole_sum_to_the_bit(data, k, n, room, q0):
+    """The kernel sums each weight term only over the bases from its first weight that is not 0 to
+    its last (their spans, widened as bases join); the anchors' radii are those of every term over
+    every base, to the bit — for any block of the bases, weights of ±0, NaN or tiny, a radius
+    ``q[0]`` of ±0 (a sum that could end −0), and coefficients ±0, huge, infinite or NaN (0·inf is
+    NaN: such a term is summed over every base)."""
+    from bark.engine.kernels.numba_backend import _widened
+
+    table = np.zeros((k, n + room))  # capacity for bases still to join, as the backend keeps it
+    table[:, :n] = np.array(data.draw(st.lists(_weight, min_size=k * n, max_size=k * n)), dtype=float).reshape(k, n)
+    joined = data.draw(st.integers(0, n))  # the weights taken in two joins: the spans widened twice
+    spans = _widened(_widened(None, table[:, :joined], 0), table[:, joined:n], joined)
+    q = np.array([q0, *data.draw(st.lists(_coefficient, min_size=k, max_size=k))], dtype=float)
+    first = data.draw(st.integers(0, n))
+    out = np.full(data.draw(st.integers(0, n - first)), -7.0)
+    _compiled_weighted_radii()(out, q, table.ravel(), table.shape[1], spans.ravel(), first)
+    whole = np.full(out.size, q0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for term in range(k):
+            whole = whole + table[term, first:first + out.size] * q[1 + term]
+    number = ~np.isnan(whole)  # a NaN's sign and payload follow the compiler's order of an addition's operands
+    np.testing.assert_array_equal(np.isnan(out), ~number)
+    np.testing.assert_array_equal(out[number].view(np.int64), whole[number].view(np.int64))
+
+
 def test_a_growth_law_that_writes_radius_again_loses_the_inherited_part():
     import attrs
 

@@ -504,11 +504,12 @@ def _height_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_no
                   prev, save):
     """``_base_pass`` on the bases ``lo .. hi``, for a radius that depends on height; returns how
     many went non-finite."""
-    weights, stride = heights
+    weights, stride, spans = heights
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     if save:
         _copy_block((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
-    return _per_base_radius(_slices(bases, lo, hi), c, b, hm, h, t, update, ip, radii, params, weights, stride, lo)
+    return _per_base_radius(_slices(bases, lo, hi), c, b, hm, h, t, update, ip, radii, params, weights, stride, spans,
+                            lo)
 
 
 @inline
@@ -545,14 +546,14 @@ def _uniform_radius(bases, c, b, hm, h, update, ip, r_now, r_before, from_radius
 
 
 @inline
-def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, stride, first):
+def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, stride, spans, first):
     """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
     the forces and the update (no calls: SIMD lanes), the radius at each base's height (the growth
     law's block form, its part's ``radii``, or its ``radius`` called per height), the
     surface at those radii (SIMD lanes again), then the anchors at their sites' radii.  The anchors'
     heights never change, so a part that gives ``weights`` has each anchor's radius as
-    ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once (``weights``: weight k of
-    base i at ``k·stride + i``): sums in SIMD lanes, the same bits as the call; with no weights
+    ``q[0] + w_0 q[1] + w_1 q[2] + ...`` with its weights ``w`` taken once (``_weighted_radii``:
+    sums in SIMD lanes, the same bits as the call); with no weights
     (stride 0), the block form at the anchors' heights, from the same call as the bases' (its
     inlined copy, compiled once: the anchors' heights and radii are read only after the moves).
     Per base the same operations in the same order as one loop: the same bits.  Returns how many
@@ -580,17 +581,36 @@ def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, 
         v0[q] = v0[q] - vr * px
         v1[q] = v1[q] - vr * py
     if by_weights:  # ax holds each anchor's radius while it is summed
-        for q in range(n):
-            ax[q] = params[0]
-        for term in range(weights.shape[0] // stride):
-            w, coefficient = weights[term * stride + first:term * stride + first + n], params[1 + term]
-            for q in range(n):
-                ax[q] = ax[q] + w[q] * coefficient
+        _weighted_radii(ax, params, weights, stride, spans, first)
     for q in range(n):
         ra = ax[q]
         ax[q] = ra * dx[q]
         ay[q] = ra * dy[q]
     return bad
+
+
+@inline
+def _weighted_radii(out, q, weights, stride, spans, first):
+    """The radii ``q[0] + w_0 q[1] + w_1 q[2] + ...`` of the bases ``first .. first + len(out)`` into
+    ``out``, their weights taken once (``weights``: weight k of base i at ``k·stride + i``), added
+    term by term in SIMD lanes — each term only over the bases from its first weight that is not 0 to
+    its last (``spans[2k] .. spans[2k + 1]``, ``_Weights.spans``: a bulge reaches a band of heights).
+    Elsewhere its weight is 0, and ``r + 0·q`` is ``r`` to the bit for a finite ``q`` and an ``r``
+    that is not −0 (no sum that begins at a ``q[0]`` other than 0 is −0): where ``q[0]`` is 0 or
+    a term's ``q`` is not finite, every base takes that term, as a sum over all does."""
+    n = out.shape[0]
+    for i in range(n):
+        out[i] = q[0]
+    spanned = q[0] != 0.0
+    for term in range(weights.shape[0] // stride):
+        coefficient = q[1 + term]
+        lo, hi = 0, n
+        if spanned and abs(coefficient) < np.inf:  # only where the term's weights are not 0
+            lo = min(n, max(0, spans[2 * term] - first))
+            hi = max(lo, min(n, spans[2 * term + 1] - first))
+        w = weights[term * stride + first + lo:term * stride + first + hi]
+        for i in range(hi - lo):
+            out[lo + i] = out[lo + i] + w[i] * coefficient
 
 
 @inline
@@ -1723,17 +1743,34 @@ class _Weights:
     key: tuple
     table: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 0)))
     """Weight k of base i at ``[k, i]``; capacity for more bases in its columns."""
+    spans: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 2), np.int64))
+    """Row k's first base with a weight that is not 0 and one past its last (``first > last``:
+    none), which the kernel sums it over (``_per_base_radius``)."""
     count: int = 0
     """Bases done."""
     checked: int = 0
     """Bases whose weights have been checked against the law's radius (``_check_weights``)."""
 
 
-_NO_WEIGHTS = (np.empty(0), 0)
+_NO_WEIGHTS = (np.empty(0), 0, np.empty(0, np.int64))
 _NO_IDS = np.empty(0, np.int64)
 CHECK_BATCH = 1024
 """The anchors' weights are checked against the growth law's radius when first taken, then in
 batches of this many bases as bases join (a check per join cost 3 % of the whole tree's run)."""
+
+
+def _widened(spans: np.ndarray, weights: np.ndarray, first: int) -> np.ndarray:
+    """``spans`` (``_Weights.spans``; ``None``: none yet, each row's first past any column and its
+    last 0) widened to the columns of ``weights`` (the table's from column ``first``) that are not 0."""
+    if spans is None:
+        spans = np.zeros((len(weights), 2), np.int64)
+        spans[:, 0] = np.iinfo(np.int64).max
+    nonzero = weights != 0.0  # (NaN too)
+    has = nonzero.any(axis=1)
+    if has.any():
+        spans[has, 0] = np.minimum(spans[has, 0], first + nonzero[has].argmax(axis=1))
+        spans[has, 1] = np.maximum(spans[has, 1], first + weights.shape[1] - nonzero[has, ::-1].argmax(axis=1))
+    return spans
 
 
 def _check_weights(growth: GrowthPart, t: float, z: np.ndarray, weights: np.ndarray) -> None:
@@ -1925,10 +1962,11 @@ class NumbaBackend(Backend):
         return fr.live
 
     def _heights(self, state, plan: Plan, fr: _Frame | None = None) -> tuple:
-        """``(weights, stride)`` of the anchors' heights for the kernel (``_height_block``):
+        """``(weights, stride, spans)`` of the anchors' heights for the kernel (``_height_block``):
         the growth part's ``weights`` of each anchor's height, taken when its base is first seen (an
         anchor's height never changes) and checked against the part's own radius then, or with the
-        next ``CHECK_BATCH`` bases that join; ``(empty, 0)`` for a law without them, or uniform."""
+        next ``CHECK_BATCH`` bases that join, and the bases each row's weights are not 0 at (from the
+        first to the last: ``_Weights.spans``); ``(empty, 0, empty)`` for a law without them, or uniform."""
         growth = plan.growth
         if growth.weights is None or growth.uniform:  # only for a radius that depends on height
             return _NO_WEIGHTS
@@ -1947,12 +1985,15 @@ class NumbaBackend(Backend):
                 table = np.zeros((len(new), grown(w.table.shape[1], n)))
                 table[:len(w.table), :w.count] = w.table[:, :w.count]
                 w.table = table
+            if len(w.spans) != len(new):
+                w.spans = _widened(None, w.table[:, :w.count], 0)
             w.table[:, w.count:n] = new
+            w.spans = _widened(w.spans, new, w.count)
             w.count = n
             if w.checked == 0 or n - w.checked >= CHECK_BATCH:
                 _check_weights(growth, state.t, np.ascontiguousarray(state._rows("anchor")[w.checked:n, 2]), w.table[:, w.checked:n])
                 w.checked = n
-        return w.table.ravel(), w.table.shape[1]
+        return w.table.ravel(), w.table.shape[1], w.spans.ravel()
 
     def spring_forces(self, state, mech, x) -> np.ndarray:
         """Compiled for the paper's spring; another resin law's forces on whole arrays (the kernel's bits)."""
