@@ -5,7 +5,7 @@ it the way a signal before the first step does: one line, exit 128 + signal, not
 traceback from the middle of an import.
 
 Leaving takes a moment too: Python's teardown of numba, scipy and the rest of what a run loaded
-(0.17 s measured after the whole tree, on every run and every sweep point).  Once the command has
+(measured after the whole tree: paid on every run and every sweep point).  Once the command has
 finished (its outputs written and closed, its drawing processes ended) and no other thread is left,
 the process runs the exit handlers, flushes its output and leaves without that teardown (``_leave``).
 """

@@ -75,7 +75,7 @@ class PlainNumpy:
     every speed-up is quoted against.  Written as well as numpy allows: the lattice's springs of one
     offset o join every base i to i + o, so each offset's springs are two shifted views of the
     positions and their forces two shifted in-place adds — no gather, no scatter (``bincount`` or
-    a sparse product sum the same forces 4–6× slower at 70 000 bases).  Starts from a copy of a
+    a sparse product sum the same forces several times more slowly at 70 000 bases).  Starts from a copy of a
     simulation's state; ``tests`` hold it to bark's results."""
 
     def __init__(self, sim) -> None:

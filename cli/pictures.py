@@ -1,6 +1,6 @@
 """Drawing a run's pictures without making the user wait for matplotlib.
 
-Importing matplotlib takes about 0.4 s, more than a short run itself.  When a scene asks for a
+Importing matplotlib takes longer than a short run itself (``benchmarks/whole_process.py`` shows it).  When a scene asks for a
 picture, ``Painter`` forks a drawing process at the start of the command: it imports matplotlib on
 the machine's other core while the simulation runs, then forks a second (where the command may use
 two cores) and both wait.  At the end the runner hands them the pictures as plain arrays
@@ -360,7 +360,8 @@ class Painter:
     ``workers`` processes draw (default: two where this process may use two cores or more and there are
     two pictures or more to draw, else one):
     the first imports matplotlib and forks the others, and the pictures a run hands over are shared
-    among them as each becomes free (the whole tree's three pictures took 1.1 s one after another).
+    among them as each becomes free (the whole tree's three pictures, one after another, took longer
+    than its run's other outputs).
     The first imports ahead the modules that draw ``kinds`` (default: every kind; ``PICTURES``).
     Each has a thread of the command that hands it pictures and takes its answers (a picture's data
     are megabytes, more than a pipe holds, and a drawing process reads them only when it has drawn

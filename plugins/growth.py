@@ -96,7 +96,7 @@ def sin2_profile(u):
     1.8e−17).  1 at ``u = 0`` and 0 at ``u = ±1`` exactly, even in ``u`` exactly, within 4e−16 of
     ``sin²`` (closer than ``np.sin`` squared, measured against extended precision).  No call of a
     transcendental function: the compiled kernel evaluates it for every base inside a bulge at every
-    step, where the sine cost a quarter of the whole tree's kernel time."""
+    step, where the sine was measured to cost a large share of the whole tree's kernel time."""
     s = u * u
     g = -3.419461019595456e-15 + s * 1.8278159503151067e-17
     g = 5.26020559053867e-13 + s * g

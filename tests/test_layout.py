@@ -122,13 +122,15 @@ def test_the_core_imports_no_plugin_and_no_front_end():
 
 def builtin_names() -> set[str]:
     """The entry-point names of bark's own strategies (those that bark_plugins provides)."""
-    groups = ("bark.growth", "bark.integrator", "bark.breaker", "bark.analyzer")
+    groups = ("bark.growth", "bark.integrator", "bark.breaker", "bark.resin", "bark.analyzer")
     return {ep.name for g in groups for ep in entry_points(group=g) if ep.value.startswith("bark_plugins.")}
 
 
 DEFAULTS = ("bark.engine.scene", "DEFAULT_STRATEGIES")
 """The one place the core names built-ins: the strategies a scene gets when it names none."""
-HOMONYMS = {("bark.engine.simulation", "patches"): "a stop reason (the run reached its patch count), not the analyzer"}
+HOMONYMS = {("bark.engine.simulation", "patches"): "a stop reason (the run reached its patch count), not the analyzer",
+            **{(module, "hookean"): "the paper's spring law as a function (eq. 1), exported by name, not the resin"
+               for module in ("bark.model.physics", "bark.contract")}}
 """Strings that are a built-in's name by chance, with what they are."""
 
 
@@ -159,6 +161,21 @@ def test_the_rule_is_the_one_architecture_states():
         said = {w.strip("`/ ").removeprefix("bark/") for w in line.split("|")[2].split(",") if w.strip() not in ("", "—")}
         assert said == may, f"bark/{name}/: ARCHITECTURE.md says it may import {said}, the test holds {may}"
 
+
+
+def test_the_loop_architecture_shows_is_run_s_docstring_literally():
+    """ARCHITECTURE.md says ``Simulation.run``'s docstring is the loop, literally, and shows it: the
+    two are the same lines (indentation aside), so that one cannot change without the other."""
+    import inspect
+    import textwrap
+
+    from bark.engine.simulation import Simulation
+
+    doc = inspect.getdoc(Simulation.run)
+    shown = textwrap.dedent(doc.split("::\n", 1)[1].lstrip("\n").split("\n\n", 1)[0])
+    text = (ROOT / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    said = text.split("`Simulation.run`'s docstring is the loop, literally", 1)[1].split("```\n", 2)[1]
+    assert said.rstrip("\n") == shown.rstrip("\n")
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))

@@ -2,7 +2,7 @@
 
 The paper counts a run's "initial fractures" and finds their number a power law of the rate of energy
 dissipation (its Discussion: "behaves like a brittle material") without defining either; bark's
-definitions, used by the ``fracture-history`` effect, ``fracture.csv`` and ``bark figure fractures``:
+definitions, used by the ``fracture-history`` effect, ``fracture.csv`` and ``examples/paper/figures.py fractures``:
 
 * A **crack** is a connected set of broken springs, two broken springs being connected when they are
   sides of one cell of the lattice — the rhombus of bases ``i, i+a, i+b, i+a+b`` for the two spring

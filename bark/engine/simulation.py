@@ -336,8 +336,8 @@ class Simulation:
                                                     #   a refused step it takes back itself: halve h
                 clock = result's ticks and halvings; t = clock.t   # integer ticks: exact time
                 break_springs(what the rule broke)  # the intact flags (the graph sees them); logged
-                if the last step went NaN or a load overshot (adaptive): it was undone;
-                    halve h and go on, or (at the smallest step) raise NonFiniteStateError
+                if the last step went NaN or a load overshot (adaptive): it was undone; halve h and go on
+                    (at the smallest step: NaN raises NonFiniteStateError, an overshoot is kept, recorded)
                 if the breakers act in Python (no one part, or its rule named candidates):
                     break_springs(union of breaker.select(state, tension, rng))
                 if a step broke more than degenerate_fraction of the springs: record a degenerate event

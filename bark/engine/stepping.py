@@ -34,8 +34,8 @@ DEFAULT_DT = 0.3
 """Default (largest) time step.  With adaptive stepping and ``DEFAULT_OVERSHOOT_TOL`` this setting
 was measured by ``bark bench accuracy`` to give pattern statistics within the seed-to-seed spread of
 a fine dt = 0.005 reference, in the vertical and the diamond regime, faster than the paper's fixed
-dt = 0.01 (which ``dt = 0.01, stepping = "fixed"`` reproduces): about 6× in the vertical regime as
-last measured (``bark bench accuracy`` prints the current figure)."""
+dt = 0.01 (which ``dt = 0.01, stepping = "fixed"`` reproduces); ``bark bench accuracy`` prints by
+how much on the machine it runs on."""
 DEFAULT_STEPPING = "adaptive"
 DEFAULT_OVERSHOOT_TOL = 0.002
 SAFETY = 0.9
@@ -43,8 +43,9 @@ SAFETY = 0.9
 CHUNK = 128
 """Most steps in one kernel call (progress, signals and periodic checkpoints are seen between calls)."""
 CHUNK_WORK = 60_000_000
-"""Most base- and spring-steps in one call (a base and a spring cost about as much a step: about
-0.2 s), so that a very large or very dense scene still answers a signal promptly."""
+"""Most base- and spring-steps in one call (a base and a spring cost about as much a step), so
+that a very large or very dense scene still answers a signal promptly: a call's length bounded in
+work, not in steps (``bark bench speed`` prints a base-step's time here)."""
 
 
 @attrs.frozen(kw_only=True)

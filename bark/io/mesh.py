@@ -5,8 +5,8 @@ Written with meshio (imported here only, when a scene asks for the mesh), in met
 ParaView and pyvista (cell data ``patch``, ``patch_size``, ``base``, ``born`` in time units; the point
 data ``colour``, one RGB array, uint8) and ``tree.ply`` for Blender (vertex colours ``red``, ``green``,
 ``blue``, and each vertex's ``patch``).  The VTU file is binary and uncompressed: meshio's zlib
-compression took 15 times as long as the writing itself (0.35 s of every whole-tree run) to make the
-file 45 % smaller.  Each leaf base is a quad of its own — four corners, not shared with its
+compression took many times as long as the writing itself (measured on the whole tree) for a file
+about half as large.  Each leaf base is a quad of its own — four corners, not shared with its
 neighbours — so bases that have moved apart show the crack between them.
 
 A base's rhomboid is fixed when it joins the trunk (:func:`bark.model.tree.leaf_corners`, at the radius it

@@ -2,7 +2,7 @@
 
 Apart from the leaf-base graph (``bark.model.graph``), so that counting patches — what a run's
 patch-count stop and every statistic ask — imports neither networkx nor scipy.sparse (whose
-graph routines import scipy.linalg: a third of a short run's start-up).  The labels are those of
+graph routines import scipy.linalg, a large share of a short run's start-up).  The labels are those of
 ``scipy.sparse.csgraph.connected_components``, the tests' oracle: numbered by each component's
 smallest base.
 """

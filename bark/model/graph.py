@@ -5,11 +5,11 @@ The topology has one owner, the :class:`~bark.model.state.State`: its ``pairs`` 
 is a read-only ``networkx.Graph`` over them, so every networkx algorithm, query and writer works on
 the simulation's leaf bases, and graph and arrays cannot disagree: there is no second copy to keep in
 step.  Its adjacency is a compressed sparse row table made from the state when first read after an
-edit (a few milliseconds at 70 000 bases, about 3 MiB); asking the number of bases or whether ids are
+edit (a pass over the springs); asking the number of bases or whether ids are
 bases (what a joining base asks) reads the state alone.
 
 Its own module so that ``import bark`` (and reading a scene) does not pay for networkx's import:
-a simulation imports it when it is built.
+a simulation imports it when its ``graph`` is first read.
 """
 
 from __future__ import annotations

@@ -118,7 +118,7 @@ class Dome:
 
     def _spline(self):
         """The parametric spline through ``points`` on normalised chord length, tangents clamped."""
-        from scipy.interpolate import CubicSpline  # 0.5 s to import: only for a curve given by points
+        from scipy.interpolate import CubicSpline  # slow to import: only for a curve given by points
         p = np.array(self.points)
         c = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
         length = c[-1]

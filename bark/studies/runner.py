@@ -8,7 +8,7 @@ A run, in order:
 
 1. **Before anything is written**: the scene is built (``Scene.simulation``, which refuses a run
    too large for this machine's memory), the numerics checked against the stop conditions
-   (``Simulation.check``), and the output folder opened (``bark.io.folder``: checked, created,
+   (``Simulation.prepare``), and the output folder opened (``bark.io.folder``: checked, created,
    locked, cleaned).  Bad input stops here, with nothing written.
 2. **The loop**, ``Simulation.run``, with the along-the-way recorders the scene's effects ask for
    (statistics series, animation frames), a checkpoint every ``checkpoint_every`` seconds of wall

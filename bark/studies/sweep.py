@@ -69,8 +69,8 @@ by ``json_extract(regions, '$.straight.circular_sd_deg')``."""
 
 
 MAX_RUNS = 1_000_000
-"""Most runs one sweep (one table) may hold: every point is checked before the first runs (about
-0.2 ms each), and a million runs of even a second are eleven days of one core."""
+"""Most runs one sweep (one table) may hold: every point is checked before the first runs, and a
+million runs of even a second are eleven days of one core."""
 
 
 @attrs.frozen

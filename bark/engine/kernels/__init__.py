@@ -26,7 +26,7 @@ numpy backend's array step with the strategies' verbs, one step a call); the per
 many-step paths are this one algorithm.
 
 Both backends evaluate the physics of :mod:`bark.model.physics` and the strategies' parts, the
-same functions; they differ only in the order sums are taken (results agree to round-off).
+same functions, each base's sums taken in the same order (``bark.model.forces.SpringOrder``).
 ``numpy`` is always there; ``numba`` (compiled, cached on disk) is used when importable and the run
 is long enough to repay its start (``auto``; the results are the same to the bit).  A backend
 holds its own work buffers (derived data, rebuilt when the topology grows); the state is only data.
@@ -286,16 +286,16 @@ class Backend:
 
 AUTO_WORK = 3e6
 """Base-steps below which ``auto`` takes numpy: numba's start in a fresh process (importing it,
-loading its compiled code: about 0.55 s measured) costs more than it saves (about 0.18 µs a
-base-step at 3000 bases, measured with adaptive stepping)."""
+loading its compiled code) costs more than it saves a base-step (at 3000 bases, with adaptive
+stepping) — the break-even point of the two, measured when it was set."""
 
 
 AUTO_COMPILE_WORK = 5e7
 """Expected base-steps (``stepping.expected_work``) below which ``auto`` runs a lone simulation on
-numpy rather than first compile numba's kernel for it.  The compile takes 25–55 s once per
-combination of parts (serial and threaded kernels, 2-core machines); numpy costs 0.2–0.4 µs a
-base-step more than numba; and the estimate can be 3× low (the whole tree: 9.2e7 expected, 2.4e8
-taken), so below this bound numpy costs at most about what the compile would.  A process that runs
+numpy rather than first compile numba's kernel for it.  The compile is paid once per combination
+of parts; numpy costs more than numba a base-step; and the estimate can be several times low (the
+whole tree's is), so below this bound numpy costs at most about what the compile would (the three
+as measured on 2-core machines when it was set; ``bark bench`` measures them).  A process that runs
 many simulations (a sweep's or a fit's worker, :func:`expect_many`) compiles regardless: its runs
 share the cost."""
 
@@ -330,7 +330,7 @@ class KernelParts:
 
 
 def _numba_available() -> bool:
-    return importlib.util.find_spec("numba") is not None  # without importing it (0.2 s, 40 MB)
+    return importlib.util.find_spec("numba") is not None  # without importing it (a noticeable share of a start)
 
 
 def available(name: str) -> bool:

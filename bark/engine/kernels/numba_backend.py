@@ -119,8 +119,8 @@ join) replay; long calls (a trunk segment's, up to 128 steps) copy.  The bits ar
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
 block's loops in SIMD lanes); in a parallel kernel the blocks are shared among threads.  Every base's
-arithmetic is the same whatever the blocks and threads, so the bits are too.  2,048 measured fastest
-on the whole tree's 55,000 bases with two threads (against 1,024, 4,096 and 8,192)."""
+arithmetic is the same whatever the blocks and threads, so the bits are too.  Chosen as the fastest
+of the powers of two tried on the whole tree with two threads."""
 
 
 @inline
@@ -996,8 +996,8 @@ def _helpers(fn, seen=None) -> list:
 def _make_jitable(functions) -> None:
     """Let compiled code call these plain functions (``register_jitable``): a plugin's part
     may call its own helpers without importing numba.  They are inlined where called, as the compiled
-    forms themselves are: a call per base and step otherwise costs more than the helper (a bulge's
-    profile: 3.5x slower measured)."""
+    forms themselves are: a call per base and step otherwise costs more than the helper (measured
+    on a bulge's profile)."""
     for fn in functions:
         if fn not in _JITABLE:
             numba.extending.register_jitable(inline="always")(fn)
@@ -1365,8 +1365,8 @@ the run's calls taking one thread meanwhile (:func:`threaded_ready`); ``False``:
 before its first threaded call (what a measurement of the threaded kernel itself needs)."""
 
 SERIAL_BASE_STEP_S = 2e-8
-"""Seconds a base-step of the serial kernel takes, about (14–34 ns measured from 3,000 to 10⁶ bases):
-what a run's expected work (``Backend.expected_work``) is turned into seconds by, to be weighed
+"""Seconds a base-step of the serial kernel takes, about (``bark bench speed`` measures it: a
+base-step costs more on large lattices, whose bases do not stay in cache): what a run's expected work (``Backend.expected_work``) is turned into seconds by, to be weighed
 against a threaded kernel's compile (:meth:`NumbaBackend.threads_worth_compiling`)."""
 
 THREADED_COMPILE_S = 60.0
@@ -1756,7 +1756,8 @@ _NO_WEIGHTS = (np.empty(0), 0, np.empty(0, np.int64))
 _NO_IDS = np.empty(0, np.int64)
 CHECK_BATCH = 1024
 """The anchors' weights are checked against the growth law's radius when first taken, then in
-batches of this many bases as bases join (a check per join cost 3 % of the whole tree's run)."""
+batches of this many bases as bases join (a check per join was a noticeable share of the whole
+tree's run)."""
 
 
 def _widened(spans: np.ndarray, weights: np.ndarray, first: int) -> np.ndarray:
