@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 import attrs
 import numpy as np
@@ -44,6 +45,9 @@ class Thresholds(Breaker):
     """Thresholds by region of the trunk (force units), e.g. ``{ bulge = 0.006 }`` (the paper's
     Table 1): a spring made in a region moves from its threshold to the region's by the region's
     weight there (1 inside, 0 outside, smooth between); regions not named keep the material's."""
+
+    moved_in: ClassVar[dict] = {("mechanics", "fmax_spread"): ("spread", 0.0),
+                                ("mechanics", "fmax_weibull_shape"): ("weibull_shape", None)}
 
     def __attrs_post_init__(self) -> None:
         if self.weibull_shape is not None and self.spread > 0:

@@ -67,9 +67,22 @@ def _tables_of(cls, key: str, what: str):
         if not isinstance(value, (list, tuple)):
             raise BarkError(f"{{0}}: must be a list of {what} tables ([[growth.{key}]] in a scene file)",
                             Ref(None, key, value))
-        return tuple(v if isinstance(v, cls) else construct(cls, v, f"a {what}", prefix=f"{key}[{i}].")
+        return tuple(v if isinstance(v, cls) else construct(cls, _threshold_moved(v, key, i), f"a {what}",
+                                                            prefix=f"{key}[{i}].")
                      for i, v in enumerate(value))
     return convert
+
+
+def _threshold_moved(table, key: str, i: int):
+    """A bulge's table as an earlier version wrote it: its ``f_max`` (the bulge's threshold) is the
+    breaker's setting now, refused in one line naming the new key; ``None`` (unset, as an earlier
+    run's scene.toml records it) is dropped."""
+    if not (isinstance(table, dict) and "f_max" in table):
+        return table
+    if table["f_max"] is not None:
+        raise BarkError("{0}: a bulge's threshold is the breaker's setting now: give [breaker] regions = "
+                        f"{{{{ bulge = {table['f_max']!r} }}}}", Ref(None, f"{key}[{i}].f_max", table["f_max"]))
+    return {k: v for k, v in table.items() if k != "f_max"}
 
 
 def _base(value):

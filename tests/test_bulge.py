@@ -565,14 +565,36 @@ def test_a_missing_key_in_a_set_table_is_named_without_a_value(item, named):
      "[growth] bulges[0].f_max = 0.006: a bulge's threshold is the breaker's setting now: give [breaker] regions = { bulge = 0.006 }"),
     ({"growth": {"name": "bulge", "series": [{"every": 2.0, "half_width": 0.05, "f_max": 0.007}]}},
      "[growth] series[0].f_max = 0.007: a bulge's threshold is the breaker's setting now: give [breaker] regions = { bulge = 0.007 }"),
-    ({"mechanics": {"fmax_spread": 0.05}}, "[mechanics] fmax_spread = 0.05: the thresholds' spread is the breaker's "
-                                           "setting now: give [breaker] spread = 0.05"),
+    ({"mechanics": {"fmax_spread": 0.05}}, "[mechanics] fmax_spread = 0.05: the breaker's setting now (probabilistic, "
+                                           "threshold): give [breaker] spread = 0.05"),
     ({"mechanics": {"fmax_weibull_shape": 4.0}}, "give [breaker] weibull_shape = 4.0"),
 ])
 def test_a_threshold_setting_of_an_earlier_version_is_refused_naming_its_new_key(old, new):
     with pytest.raises(BarkError) as err:
         Scene.from_dict(old)
     assert new in str(err.value) and "\n" not in str(err.value)
+
+
+class _TookOverTheJitter(ThresholdBreaker):
+    """A third party's breaker that says a lattice setting of an earlier version is its own now."""
+
+    moved_in = {("lattice", "old_jitter"): ("jitter_now", 0.0)}
+
+
+def test_a_third_party_strategy_names_the_settings_it_took_over_and_ordinary_scenes_do_not_ask(monkeypatch):
+    """``Strategy.moved_in`` is the contract's, not the built-ins' alone: a plugin's strategy that
+    took over a setting gets it named as the new key; the installed strategies are asked only when
+    a table holds a key it does not know (an ordinary scene never loads them for this)."""
+    from bark.contract import registry
+
+    asked = []
+    monkeypatch.setattr(registry, "find", lambda test: asked.append(test) or [("breaker", f"{__name__}:_TookOverTheJitter")])
+    Scene.from_dict({"lattice": {"n_bases": 4000}, "mechanics": {"f_max": 0.005}, "run": {"until_time": 10.0}})
+    assert asked == []
+    with pytest.raises(BarkError) as err:
+        Scene.from_dict({"lattice": {"old_jitter": 0.1}})
+    assert str(err.value).endswith("give [breaker] jitter_now = 0.1") and "[lattice] old_jitter = 0.1" in str(err.value)
+    assert Scene.from_dict({"lattice": {"old_jitter": 0.0}}).to_dict() == Scene.from_dict({}).to_dict()
 
 
 def test_an_earlier_run_s_scene_file_with_its_unused_threshold_keys_still_reads():

@@ -96,6 +96,13 @@ class Strategy(abc.ABC):
     fails at once (:class:`~bark.errors.StateWriteError`).  An integrator writes ``x`` and ``v``;
     the other kinds nothing of the state's own."""
 
+    moved_in: ClassVar[dict[tuple[str, str], tuple[str, Any]]] = {}
+    """Settings of earlier versions that lived in another table of a scene and are this strategy's
+    now: ``{(table, key): (its key here, the value that meant "not used")}``, e.g. ``{("mechanics",
+    "fmax_spread"): ("spread", 0.0)}``.  A scene that gives one is refused in one line naming the new
+    key; one that gives the unused value (as an earlier run's scene.toml records it) is read as it
+    meant.  The scene asks the installed strategies only when a table holds a key it does not know."""
+
     declares: ClassVar[tuple[Declared, ...]] = ()
     """Per-spring and per-base fields this strategy owns (``bark.model.state.Declared``: name, per
     spring or base, unit): the state carries them beside its own — grown, snapshot, checkpointed,

@@ -222,28 +222,29 @@ def _same_regions(a: list, b: list) -> bool:
     return len(a) == len(b) and all(n == m and np.array_equal(v, w) for (n, v), (m, w) in zip(a, b))
 
 
-MOVED = {("mechanics", "fmax_spread"): ("breaker", "spread", 0.0),
-         ("mechanics", "fmax_weibull_shape"): ("breaker", "weibull_shape", None)}
-"""Settings of earlier versions that live elsewhere now, with the value that meant "not used"."""
-
-
 def _moved(data: dict) -> None:
-    """Refuse, in one line naming the new key, a setting of an earlier version that moved (a value
-    that meant "not used", as an earlier run's scene.toml records it, is dropped in silence)."""
-    for (section, key), (new_section, new_key, unused) in MOVED.items():
-        table = data.get(section)
-        if isinstance(table, dict) and key in table:
-            if table[key] != unused:
-                raise BarkError("{0}: the thresholds' spread is the breaker's setting now: give {1}",
-                                Ref(section, key, table[key]), Ref(new_section, new_key, table[key]))
-            data[section] = {k: v for k, v in table.items() if k != key}
-    growth = data.get("growth")
-    for key in ("bulges", "series"):
-        items = growth.get(key) if isinstance(growth, dict) else None
-        for i, item in enumerate(items if isinstance(items, list) else []):
-            if isinstance(item, dict) and item.get("f_max") is not None:
-                raise BarkError("{0}: a bulge's threshold is the breaker's setting now: give [breaker] regions = "
-                                f"{{{{ bulge = {item['f_max']!r} }}}}", Ref("growth", f"{key}[{i}].f_max", item["f_max"]))
+    """Refuse, in one line naming the new key, a setting of an earlier version that a strategy took
+    over from one of the scene's own tables (``Strategy.moved_in``: the installed strategies are
+    asked only when a table holds a key it does not know); a value that meant "not used", as an
+    earlier run's scene.toml records it, is dropped in silence."""
+    strange = [(section, key) for section, cls in PARAM_SECTIONS.items() if isinstance(data.get(section), dict)
+               for key in data[section] if key not in {a.alias for a in attrs.fields(cls) if a.init}]
+    if not strange:
+        return
+    claims: dict[tuple, list] = {}
+    for kind, name in registry.find(lambda cls: bool(cls.moved_in)):
+        for old, (new, unused) in registry.load(kind, name).moved_in.items():
+            claims.setdefault(old, []).append((kind, name, new, unused))
+    for section, key in strange:
+        if (section, key) not in claims:
+            continue  # not a setting of the table's: said as such when it is built
+        kind, _, new, unused = claims[(section, key)][0]
+        value = data[section][key]
+        if value != unused:
+            names = ", ".join(sorted({name for _, name, _, _ in claims[(section, key)]}))
+            raise BarkError("{0}: the " + kind + f"'s setting now ({names}): give {{1}}",
+                            Ref(section, key, value), Ref(kind, new, value))
+        data[section] = {k: v for k, v in data[section].items() if k != key}
 
 
 def _analyzer_tables(section: str, value) -> bool:
