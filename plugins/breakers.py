@@ -49,13 +49,17 @@ class Thresholds(Breaker):
     moved_in: ClassVar[dict] = {("mechanics", "fmax_spread"): ("spread", 0.0),
                                 ("mechanics", "fmax_weibull_shape"): ("weibull_shape", None)}
 
-    def __attrs_post_init__(self) -> None:
-        if self.weibull_shape is not None and self.spread > 0:
+    @weibull_shape.validator
+    def _one_way_to_spread(self, attribute, value) -> None:
+        if value is not None and self.spread > 0:
             raise BarkError("{0} and {1} are two ways to spread the thresholds: give one",
-                            Ref(None, "spread", self.spread), Ref(None, "weibull_shape", self.weibull_shape))
-        if self.weibull_scale is not None and self.weibull_shape is None:
+                            Ref(None, "spread", self.spread), Ref(None, "weibull_shape", value))
+
+    @weibull_scale.validator
+    def _scale_of_a_shape(self, attribute, value) -> None:
+        if value is not None and self.weibull_shape is None:
             raise BarkError("{0} is the scale of a Weibull law: give its shape too ({1})",
-                            Ref(None, "weibull_scale", self.weibull_scale), Ref(None, "weibull_shape", None))
+                            Ref(None, "weibull_scale", value), Ref(None, "weibull_shape", None))
 
     def thresholds(self, made: Made, fmax: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Each new spring's threshold: ``fmax`` spread log-normally or drawn from the Weibull law, then moved
