@@ -1366,8 +1366,9 @@ before its first threaded call (what a measurement of the threaded kernel itself
 
 SERIAL_BASE_STEP_S = 2e-8
 """Seconds a base-step of the serial kernel takes, about (``bark bench speed`` measures it: a
-base-step costs more on large lattices, whose bases do not stay in cache): what a run's expected work (``Backend.expected_work``) is turned into seconds by, to be weighed
-against a threaded kernel's compile (:meth:`NumbaBackend.threads_worth_compiling`)."""
+base-step costs more on large lattices, whose bases do not stay in cache): what a run's expected
+work (``Backend.expected_work``) is turned into seconds by, to be weighed against a threaded
+kernel's compile (:meth:`NumbaBackend.threads_worth_compiling`)."""
 
 THREADED_COMPILE_S = 60.0
 """Seconds a threaded kernel's compile is taken to last where none has been timed here yet
@@ -1745,7 +1746,7 @@ class _Weights:
     """Weight k of base i at ``[k, i]``; capacity for more bases in its columns."""
     spans: np.ndarray = attrs.field(factory=lambda: np.zeros((0, 2), np.int64))
     """Row k's first base with a weight that is not 0 and one past its last (``first > last``:
-    none), which the kernel sums it over (``_per_base_radius``)."""
+    none): the bases the kernel sums its term over (``_weighted_radii``)."""
     count: int = 0
     """Bases done."""
     checked: int = 0
@@ -1760,7 +1761,7 @@ batches of this many bases as bases join (a check per join was a noticeable shar
 tree's run)."""
 
 
-def _widened(spans: np.ndarray, weights: np.ndarray, first: int) -> np.ndarray:
+def _widened(spans: np.ndarray | None, weights: np.ndarray, first: int) -> np.ndarray:
     """``spans`` (``_Weights.spans``; ``None``: none yet, each row's first past any column and its
     last 0) widened to the columns of ``weights`` (the table's from column ``first``) that are not 0."""
     if spans is None:
