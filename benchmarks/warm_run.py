@@ -6,7 +6,9 @@ A worker process runs the scene in memory to its stop and measures its statistic
 workers do (``bark.studies.fit.simulate_statistics``), once to warm up (imports, compiled kernels
 loaded — or compiled: the worker says it runs many, as a fit's does, so that ``auto`` takes numba
 even where its kernel is not compiled yet) and then once per seed, timing each run's CPU
-(``time.process_time``) and counting its passes of the loop (``Simulation.advance``: one call of the kernel each). With ``--against DIR`` (a
+(``time.process_time``), the share of it inside its calls' ``take`` (the compiled kernel and the
+building of its arguments: what is not Python per pass of the loop), and counting its passes of the
+loop (``Simulation.advance``: one call of the kernel each). With ``--against DIR`` (a
 checkout of bark, e.g. ``git worktree add /tmp/base <commit>``) the same worker runs that code too,
 the two interleaved round by round so that a change in the machine's load falls on both, and the
 script prints both, the median of the pairwise ratios this / that, and whether the final states and
@@ -42,7 +44,7 @@ if hasattr(kernels, "expect_many"):  # as a fit's worker says: its warm-up compi
     kernels.expect_many()
 
 scene, seeds = sys.argv[1], [int(s) for s in sys.argv[2].split(",")]
-counted = {"advances": 0, "sim": None}
+counted = {"advances": 0, "sim": None, "kernel": 0.0}
 advance, run = Simulation.advance, Simulation.run
 
 def counting(self, *a, **k):
@@ -54,11 +56,26 @@ def keeping(self, *a, **k):
     return run(self, *a, **k)
 
 Simulation.advance, Simulation.run = counting, keeping
+if hasattr(kernels, "take_steps"):  # the CPU inside each call's take (the kernel, and building its arguments)
+    steps_of = kernels.take_steps
+
+    def timed_steps(call, *rest):
+        take = call.take
+
+        def timed(*a):
+            t0 = time.process_time()
+            try:
+                return take(*a)
+            finally:
+                counted["kernel"] += time.process_time() - t0
+        call.take = timed
+        return steps_of(call, *rest)
+    kernels.take_steps = timed_steps
 data = read_toml(scene)
 names = ("orientation", "sd", "anisotropy")  # what a fit compares by default
 simulate_statistics({**data, "run": {**data.get("run", {}), "seed": 10_000}}, names)  # warm: imports, kernels
 for seed in seeds:
-    counted["advances"] = 0
+    counted["advances"], counted["kernel"] = 0, 0.0
     t0 = time.process_time()
     stats = simulate_statistics({**data, "run": {**data.get("run", {}), "seed": seed}}, names)
     cpu = time.process_time() - t0
@@ -66,7 +83,7 @@ for seed in seeds:
     digest = hashlib.sha256()
     for a in (sim.state.x, sim.state.intact, *(sim.breaks.arrays()[k] for k in sorted(sim.breaks.arrays()))):
         digest.update(np.ascontiguousarray(a).tobytes())
-    print(json.dumps({"seed": seed, "cpu": cpu, "advances": counted["advances"], "steps": sim.step_count,
+    print(json.dumps({"seed": seed, "cpu": cpu, "kernel": counted["kernel"], "advances": counted["advances"], "steps": sim.step_count,
                       "t": sim.state.t, "stats": stats, "bits": digest.hexdigest()}), flush=True)
 """
 
@@ -103,7 +120,9 @@ def main() -> None:
     for side, code in sides.items():
         last = runs[side][-1]
         cpu = [r["cpu"] for rnd in runs[side] for r in rnd]
-        print(f"{side} ({code or ROOT}): CPU per run {statistics.median(cpu):.3f} s (median), passes of the loop "
+        share = statistics.median(r["kernel"] / r["cpu"] for rnd in runs[side] for r in rnd) if "kernel" in last[0] else None
+        print(f"{side} ({code or ROOT}): CPU per run {statistics.median(cpu):.3f} s (median), "
+              + (f"{100 * share:.0f} % of it in the kernel's calls, " if share is not None else "") + "passes of the loop "
               f"{[r['advances'] for r in last]}, steps {[r['steps'] for r in last]}, t {[round(r['t'], 3) for r in last]}")
     if "that" in sides:
         ratios = [a["cpu"] / b["cpu"] for ra, rb in zip(runs["this"], runs["that"]) for a, b in zip(ra, rb)]
