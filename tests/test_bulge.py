@@ -340,17 +340,23 @@ def test_the_bulge_laws_block_form_is_its_radius_per_height_to_the_bit(t, height
     np.testing.assert_array_equal(out.view(np.int64), one_by_one.view(np.int64))
 
 
+@functools.cache
+def _compiled_extent():
+    """``_extent`` compiled once for the test's examples (as the kernel compiles it)."""
+    import numba
+
+    from bark_plugins.growth import _extent
+
+    return numba.njit(error_model="numpy")(_extent)
+
+
 @given(heights=st.lists(_odd_heights, min_size=0, max_size=40))
 def test_a_blocks_extent_bounds_its_heights(heights):
     """The lowest and highest height of a block (what decides which bulges it is out of reach of),
     compiled as the kernel compiles it: exactly the least and the greatest where no height is NaN;
     with a NaN, at least one end NaN (so that no bulge is skipped) or both still bounds."""
-    import numba
-
-    from bark_plugins.growth import _extent
-
     z = np.array(heights, dtype=float)
-    lowest, highest = numba.njit(_extent)(z)
+    lowest, highest = _compiled_extent()(z)
     if z.size and not np.isnan(z).any():
         assert (lowest, highest) == (z.min(), z.max())
     elif z.size and not (np.isnan(lowest) or np.isnan(highest)):
