@@ -40,7 +40,7 @@ import numpy as np
 from bark.errors import BarkError
 from bark.contract.parts import spring_inputs
 from bark.contract.strategies import KINDS, Breaker, Growth, Integrator, Made, Resin, Strategy, check_recordable
-from bark.validators import construct
+from bark.validators import construct, keywords
 
 __all__ = ["check_strategy"]
 
@@ -115,7 +115,7 @@ def _validation(cls, params, profile) -> str:
     from hypothesis import given
     from hypothesis import strategies as st
 
-    fields = [a.alias for a in attrs.fields(cls) if a.init]
+    fields = keywords(cls)
     if not fields:
         return "validation (no parameters)"
     values = st.one_of(st.sampled_from(BAD_VALUES), st.floats(allow_nan=True, allow_infinity=True), st.integers(),

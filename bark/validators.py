@@ -26,7 +26,7 @@ from bark.errors import BarkError, Ref
 
 __all__ = [
     "REAL_MIN", "REAL_MAX", "INT_MAX", "positive", "non_negative", "positive_int", "int_in", "in_range", "one_of",
-    "optional", "table_of", "finite", "number", "construct", "MISSING",
+    "optional", "table_of", "finite", "number", "construct", "keywords", "MISSING",
 ]
 
 Validator = Callable[[Any, Any, Any], None]
@@ -157,13 +157,18 @@ MISSING = attrs.NOTHING
 """The value of a :class:`~bark.errors.Ref` to a required setting that was not given."""
 
 
+def keywords(cls) -> list[str]:
+    """The keywords an attrs class takes: the aliases of the fields its ``__init__`` sets."""
+    return [a.alias for a in attrs.fields(cls) if a.init]
+
+
 def construct(cls, params: dict[str, Any], what: str, prefix: str = ""):
     """``cls(**params)`` for an attrs class, every problem a one-line :class:`BarkError` naming the
     key: an unknown key (with the allowed ones), a missing required one, a bad value (the field's
     validator).  ``what`` names the thing built in messages (``"growth 'bulge'"``); ``prefix`` is put
     before each key (``bulges[0].``) for a value nested in another."""
     fields = [a for a in attrs.fields(cls) if a.init]
-    allowed = [a.alias for a in fields]
+    allowed = keywords(cls)
     if not isinstance(params, dict):
         raise BarkError("{0}: must be a table of " + what + " settings (" + ", ".join(allowed) + ")",
                         Ref(None, prefix.rstrip(".") or what, params))

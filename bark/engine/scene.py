@@ -35,7 +35,7 @@ import numpy as np
 
 from bark.model import effects
 from bark.contract import registry
-from bark.validators import MISSING, construct, int_in, one_of, optional, positive
+from bark.validators import MISSING, construct, int_in, keywords, one_of, optional, positive
 from bark.paths import NotARegularFile, open_regular
 from bark.errors import BarkError, BarkWarning, Ref
 from bark.model.forces import Mechanics
@@ -228,7 +228,7 @@ def _moved(data: dict) -> None:
     asked only when a table holds a key it does not know); a value that meant "not used", as an
     earlier run's scene.toml records it, is dropped in silence."""
     strange = [(section, key) for section, cls in PARAM_SECTIONS.items() if isinstance(data.get(section), dict)
-               for key in data[section] if key not in {a.alias for a in attrs.fields(cls) if a.init}]
+               for key in data[section] if key not in keywords(cls)]
     if not strange:
         return
     claims: dict[tuple, list] = {}
