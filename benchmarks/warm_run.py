@@ -71,6 +71,9 @@ if hasattr(kernels, "take_steps"):  # the CPU inside each call's take (the kerne
         call.take = timed
         return steps_of(call, *rest)
     kernels.take_steps = timed_steps
+    from bark.engine import stepping
+    if getattr(stepping, "take_steps", None) is steps_of:  # the Python path's steps take the algorithm by name
+        stepping.take_steps = timed_steps
 data = read_toml(scene)
 names = ("orientation", "sd", "anisotropy")  # what a fit compares by default
 simulate_statistics({**data, "run": {**data.get("run", {}), "seed": 10_000}}, names)  # warm: imports, kernels

@@ -28,7 +28,9 @@ class Thresholds(Breaker):
     made: the material's ``f_max`` (``[mechanics]``), spread log-normally (``spread``) or drawn from a
     Weibull law (``weibull_shape``, ``weibull_scale``), then moved towards each region's own value by
     the region's weight (``regions``; the growth law says where its regions are: a bulge is a
-    ``bulge``).  Quenched disorder: drawn once per spring, never again."""
+    ``bulge``).  Quenched disorder: drawn once per spring, never again.  (The checks that the two
+    ways to spread them are not both given are ``weibull_shape``'s and ``weibull_scale``'s validators:
+    a subclass that defines those fields again gives its own.)"""
 
     spread: float = attrs.field(default=0.0, validator=in_range(0.0, 10.0))
     """Relative spread of the thresholds: each is ``f_max · exp(s·n − s²/2)`` with ``n`` the spring's

@@ -281,6 +281,24 @@ def test_anchors_summed_over_each_terms_span_are_the_whole_sum_to_the_bit(data, 
     np.testing.assert_array_equal(out[number].view(np.int64), whole[number].view(np.int64))
 
 
+@pytest.mark.parametrize("q", [[-0.0, 1.0], [0.0, -1.0], [1.0, np.inf], [1.0, np.nan], [0.35, 2.0]])
+def test_anchors_summed_over_spans_keep_the_sign_of_zero_and_the_nan_of_zero_times_inf(q):
+    """The cases the spans' fallbacks are for, every time (the property test above draws them only
+    now and then): a radius ``q[0]`` of −0, which ``+ 0·q`` turns into +0 at a base outside the span,
+    and a coefficient that is infinite or NaN, which makes ``0·q`` NaN there."""
+    from bark.engine.kernels.numba_backend import _widened
+
+    table = np.array([[0.0, 0.5, 0.0]])  # base 1 in the span, bases 0 and 2 outside it
+    q = np.array(q)
+    out = np.full(3, -7.0)
+    _compiled_weighted_radii()(out, q, table.ravel(), 3, _widened(None, table, 0).ravel(), 0)
+    with np.errstate(invalid="ignore"):
+        whole = q[0] + table[0] * q[1]
+    assert np.array_equal(np.isnan(out), np.isnan(whole))
+    assert np.array_equal(np.signbit(out), np.signbit(whole)) or np.isnan(whole).any()
+    assert np.array_equal(out, whole, equal_nan=True)
+
+
 def test_a_growth_law_that_writes_radius_again_loses_the_inherited_part():
     import attrs
 
@@ -571,8 +589,8 @@ def test_a_missing_key_in_a_set_table_is_named_without_a_value(item, named):
      "[growth] bulges[0].f_max = 0.006: a bulge's threshold is the breaker's setting now: give [breaker] regions = { bulge = 0.006 }"),
     ({"growth": {"name": "bulge", "series": [{"every": 2.0, "half_width": 0.05, "f_max": 0.007}]}},
      "[growth] series[0].f_max = 0.007: a bulge's threshold is the breaker's setting now: give [breaker] regions = { bulge = 0.007 }"),
-    ({"mechanics": {"fmax_spread": 0.05}}, "[mechanics] fmax_spread = 0.05: the breaker's setting now (probabilistic, "
-                                           "threshold): give [breaker] spread = 0.05"),
+    ({"mechanics": {"fmax_spread": 0.05}}, "[mechanics] fmax_spread = 0.05: that setting has moved: give [breaker] "
+                                           "spread = 0.05 ("),
     ({"mechanics": {"fmax_weibull_shape": 4.0}}, "give [breaker] weibull_shape = 4.0"),
 ])
 def test_a_threshold_setting_of_an_earlier_version_is_refused_naming_its_new_key(old, new):
@@ -587,6 +605,12 @@ class _TookOverTheJitter(ThresholdBreaker):
     moved_in = {("lattice", "old_jitter"): ("jitter_now", 0.0)}
 
 
+class _TookItToo(SqrtGrowth):
+    """Another, of another kind, that took the same setting elsewhere, where 1.0 meant unused."""
+
+    moved_in = {("lattice", "old_jitter"): ("wobble", 1.0)}
+
+
 def test_a_third_party_strategy_names_the_settings_it_took_over_and_ordinary_scenes_do_not_ask(monkeypatch):
     """``Strategy.moved_in`` is the contract's, not the built-ins' alone: a plugin's strategy that
     took over a setting gets it named as the new key; the installed strategies are asked only when
@@ -599,8 +623,26 @@ def test_a_third_party_strategy_names_the_settings_it_took_over_and_ordinary_sce
     assert asked == []
     with pytest.raises(BarkError) as err:
         Scene.from_dict({"lattice": {"old_jitter": 0.1}})
-    assert str(err.value).endswith("give [breaker] jitter_now = 0.1") and "[lattice] old_jitter = 0.1" in str(err.value)
+    assert str(err.value).startswith("[lattice] old_jitter = 0.1: ") and "give [breaker] jitter_now = 0.1 (" in str(err.value)
     assert Scene.from_dict({"lattice": {"old_jitter": 0.0}}).to_dict() == Scene.from_dict({}).to_dict()
+    for value in ([0.0], "0", True, float("nan")):  # never "unused" but the value itself: one line, no traceback
+        with pytest.raises(BarkError, match="old_jitter"):
+            Scene.from_dict({"lattice": {"old_jitter": value}})
+    # two strategies that took it, each elsewhere: both places named, and unused only where both say so
+    monkeypatch.setattr(registry, "find", lambda test: [("breaker", f"{__name__}:_TookOverTheJitter"),
+                                                        ("growth", f"{__name__}:_TookItToo")])
+    for value in (0.0, 1.0):
+        with pytest.raises(BarkError) as err:
+            Scene.from_dict({"lattice": {"old_jitter": value}})
+        assert f"give [breaker] jitter_now = {value} (" in str(err.value) and f"or [growth] wobble = {value} (" in str(err.value)
+
+
+def test_a_moved_setting_declared_wrongly_is_refused_when_its_class_is_made():
+    """``moved_in`` maps (table, key) to (its key, the unused value): anything else is the plugin
+    author's mistake, said when the class is defined rather than as a traceback in every user's scene."""
+    for wrong in ({("lattice", "old"): "jitter"}, {"lattice.old": ("jitter", 0.0)}, [("lattice", "old")]):
+        with pytest.raises(TypeError, match="moved_in"):
+            type("Wrong", (ThresholdBreaker,), {"moved_in": wrong})
 
 
 def test_an_earlier_run_s_scene_file_with_its_unused_threshold_keys_still_reads():

@@ -162,7 +162,6 @@ def test_the_rule_is_the_one_architecture_states():
         assert said == may, f"bark/{name}/: ARCHITECTURE.md says it may import {said}, the test holds {may}"
 
 
-
 def test_the_loop_architecture_shows_is_run_s_docstring_literally():
     """ARCHITECTURE.md says ``Simulation.run``'s docstring is the loop, literally, and shows it: the
     two are the same lines (indentation aside), so that one cannot change without the other."""
@@ -176,6 +175,7 @@ def test_the_loop_architecture_shows_is_run_s_docstring_literally():
     text = (ROOT / "ARCHITECTURE.md").read_text(encoding="utf-8")
     said = text.split("`Simulation.run`'s docstring is the loop, literally", 1)[1].split("```\n", 2)[1]
     assert said.rstrip("\n") == shown.rstrip("\n")
+
 
 if __name__ == "__main__":
     sys.exit(pytest.main([__file__, "-q"]))

@@ -97,11 +97,13 @@ class Strategy(abc.ABC):
     the other kinds nothing of the state's own."""
 
     moved_in: ClassVar[dict[tuple[str, str], tuple[str, Any]]] = {}
-    """Settings of earlier versions that lived in another table of a scene and are this strategy's
-    now: ``{(table, key): (its key here, the value that meant "not used")}``, e.g. ``{("mechanics",
-    "fmax_spread"): ("spread", 0.0)}``.  A scene that gives one is refused in one line naming the new
-    key; one that gives the unused value (as an earlier run's scene.toml records it) is read as it
-    meant.  The scene asks the installed strategies only when a table holds a key it does not know."""
+    """Settings of earlier versions that lived in one of a scene's own tables (``lattice``,
+    ``mechanics``, ``run``, ``dome``, ``leaves``) and are this strategy's now: ``{(table, key): (its
+    key here, the value that meant "not used")}``, e.g. ``{("mechanics", "fmax_spread"): ("spread",
+    0.0)}`` (checked when the class is defined).  A scene that gives one is refused in one line
+    naming the new key; one that gives the unused value (as an earlier run's scene.toml records it)
+    is read as it meant.  The scene asks the installed strategies only when a table holds a key it
+    does not know."""
 
     declares: ClassVar[tuple[Declared, ...]] = ()
     """Per-spring and per-base fields this strategy owns (``bark.model.state.Declared``: name, per
@@ -133,6 +135,12 @@ class Strategy(abc.ABC):
         super().__init_subclass__(**kwargs)
         if cls.verb and cls.verb in vars(cls) and "part" not in vars(cls):
             cls.part = Strategy.part
+        moved = vars(cls).get("moved_in", {})
+        if not (isinstance(moved, dict) and all(
+                isinstance(old, tuple) and len(old) == 2 and all(isinstance(k, str) for k in old)
+                and isinstance(new, tuple) and len(new) == 2 and isinstance(new[0], str) for old, new in moved.items())):
+            raise TypeError(f"{cls.__name__}.moved_in must map (table, key) to (its key, the unused value), "
+                            f"e.g. {{('mechanics', 'fmax_spread'): ('spread', 0.0)}}: got {moved!r}")
 
     def part(self):
         """This strategy's compiled work (a :mod:`bark.contract.parts` value), or ``None``: its verb

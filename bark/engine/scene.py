@@ -233,18 +233,30 @@ def _moved(data: dict) -> None:
         return
     claims: dict[tuple, list] = {}
     for kind, name in registry.find(lambda cls: bool(cls.moved_in)):
-        for old, (new, unused) in registry.load(kind, name).moved_in.items():
+        try:
+            cls = registry.load(kind, name)
+        except BarkError:  # registered under another kind: said when a scene names it
+            continue
+        for old, (new, unused) in cls.moved_in.items():
             claims.setdefault(old, []).append((kind, name, new, unused))
     for section, key in strange:
         if (section, key) not in claims:
             continue  # not a setting of the table's: said as such when it is built
-        kind, _, new, unused = claims[(section, key)][0]
         value = data[section][key]
-        if value != unused:
-            names = ", ".join(sorted({name for _, name, _, _ in claims[(section, key)]}))
-            raise BarkError("{0}: the " + kind + f"'s setting now ({names}): give {{1}}",
-                            Ref(section, key, value), Ref(kind, new, value))
+        if any(not _same_value(value, unused) for *_, unused in claims[(section, key)]):
+            where: dict[tuple, list] = {}  # each new place, with the strategies that took it there
+            for kind, name, new, _ in claims[(section, key)]:
+                where.setdefault((kind, new), []).append(name)
+            refs = [Ref(kind, new, value) for kind, new in where]
+            said = " or ".join(f"{{{i + 1}}} ({', '.join(sorted(names))})" for i, names in enumerate(where.values()))
+            raise BarkError("{0}: that setting has moved: give " + said, Ref(section, key, value), *refs)
         data[section] = {k: v for k, v in data[section].items() if k != key}
+
+
+def _same_value(a, b) -> bool:
+    """Whether a scene's value ``a`` is ``b`` (of any type: a list or a table is never a number)."""
+    return type(a) is type(b) and a == b or isinstance(a, (int, float)) and isinstance(b, (int, float)) \
+        and not isinstance(a, bool) and a == b
 
 
 def _analyzer_tables(section: str, value) -> bool:
