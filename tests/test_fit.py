@@ -175,6 +175,107 @@ def test_the_same_seed_gives_the_same_posterior_on_any_number_of_workers_and_aft
     assert one.hpd_level({"growth.G": 1.0, "mechanics.f_max": 1.0}) == pytest.approx(1.0)
 
 
+class _HereAndNow:
+    """A pool that runs what it is given at once, in the caller's thread, which keeps its turn: a fit's
+    runs one at a time, none of pyabc's draws of one between another's."""
+
+    slots = 1
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+
+        done = Future()
+        done.set_result(fn(*args))
+        return done
+
+    @staticmethod
+    def died(error) -> bool:
+        return False
+
+
+HAS_PYABC = "'pyabc' in __import__('sys').modules"
+"""Asked of a worker by ``eval`` (a function of this module would import it there, and pyabc with it)."""
+
+
+@pytest.mark.slow  # worker processes started: seconds
+def test_runs_that_take_turns_draw_what_each_draws_alone_and_workers_need_no_pyabc(tmp_path):
+    """pyabc's code for each run draws from numpy's global generator in the fit's process while the
+    runs are away on the workers, in whatever order they come back: the posterior is the one of runs
+    made one at a time; and the workers, which run bark only, never import pyabc."""
+    from bark.studies.pool import LocalPool
+
+    alone = run_fit(_fit(), tmp_path / "alone.db", pool=_HereAndNow())
+    pool = LocalPool(2, "test")
+    try:
+        together = run_fit(_fit(), tmp_path / "together.db", pool=pool)
+        assert not any(pool.submit(eval, HAS_PYABC).result(timeout=240) for _ in range(4))
+    finally:
+        pool.close()
+    assert together.generations == alone.generations
+    for a, b in zip(alone.posterior(), together.posterior()):
+        np.testing.assert_array_equal(a, b)
+
+
+class _HeldBack:
+    """A pool that keeps every run it is given until ``let_go``, then lets them come back in reverse."""
+
+    slots = 2
+
+    def __init__(self) -> None:
+        import threading
+
+        self.given, self.changed = [], threading.Condition()
+
+    def submit(self, fn, *args):
+        from concurrent.futures import Future
+
+        with self.changed:
+            self.given.append(Future())
+            self.changed.notify_all()
+            return self.given[-1]
+
+    def let_go(self, count: int) -> None:
+        with self.changed:
+            self.changed.wait_for(lambda: len(self.given) == count)
+        for future in reversed(self.given):
+            future.set_result({})
+
+
+def test_a_run_draws_what_it_draws_alone_before_and_after_its_simulation():
+    """Each run's draws from numpy's and Python's global generators, before its simulation and after
+    it, are those it makes alone, however the runs taking turns come back."""
+    import random
+    from concurrent.futures import ThreadPoolExecutor
+
+    def draws():  # one at a time, so that another thread could come between any two
+        return [(np.random.random(), random.random()) for _ in range(300)]
+
+    def simulate_one():  # as pyabc's: draws, the model's run, draws again
+        before = draws()
+        F._AWAY.turns.run({}, ())
+        return before, draws()
+
+    def alone(k):
+        state = np.random.SeedSequence([5, 2, k]).generate_state(4)
+        np.random.seed(state)
+        random.seed(int(state[0]))
+        return draws(), draws()
+
+    pool = _HeldBack()
+    turns = F._Turns(pool, 5, 1)
+    was = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads switched as often as the interpreter can: any two runs' draws would mix
+    try:
+        with ThreadPoolExecutor(4) as threads:
+            runs = [threads.submit(turns.one, simulate_one, k) for k in range(4)]
+            pool.let_go(4)
+            got = [r.result(timeout=240) for r in runs]
+    finally:
+        sys.setswitchinterval(was)
+        turns.close()
+    assert got == [alone(k) for k in range(4)]
+
+
 def test_a_database_of_other_settings_or_of_another_program_is_refused(tmp_path):
     import sqlite3
 

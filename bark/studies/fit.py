@@ -29,17 +29,19 @@ same file (table ``bark_fit``): a database of other settings is refused, not con
 
 **What a run costs**: a fit's run builds its scene and runs it in memory, and measures only the
 statistics the fit compares (the crack network only where a network statistic is fitted); it writes
-nothing.  Workers are started once for the whole fit and stay warm.
+nothing.  Workers are started once for the whole fit and stay warm, and run bark only: pyabc's code for
+each run (its proposal, distance and acceptance) runs in this process, a thread per run in flight
+taking turns (:class:`_Turns`), so a worker never imports pyabc.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
-import hashlib
 import json
 import math
 import sqlite3
+import threading
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -309,28 +311,28 @@ def simulate_statistics(scene: dict, names: Iterable[str]) -> dict[str, float | 
 @attrs.frozen
 class RunModel:
     """pyabc's model: one run of the fit's scene at the proposed settings, its seed drawn from the
-    generator the sampler seeded for this run; returns what the distance compares."""
+    generator the sampler seeded for this run; returns what the distance compares.  In a sampler's
+    thread the run itself goes to the fit's workers (:class:`_Turns`); else it runs here."""
 
     fit: Fit
 
     def __call__(self, parameters) -> dict:
         seed = int(np.random.randint(0, 2**31 - 1))
         settings = {k: float(parameters[k]) for k in self.fit.keys}
-        return compared(simulate_statistics(self.fit.scene(settings, seed), self.fit.compared), self.fit.compared)
+        scene, names = self.fit.scene(settings, seed), self.fit.compared
+        away = getattr(_AWAY, "turns", None)
+        return compared(away.run(scene, names) if away is not None else simulate_statistics(scene, names), names)
 
 
 def warm_worker(base: dict) -> None:
-    """A fit's worker made ready while the fit starts: pyabc imported (a generation's run function
-    is pyabc's, unpickled in the worker), and the ``base`` scene built for its stop — the backend a
-    run takes chosen as for a run — and one step of it taken in memory and its patches labelled,
-    which loads (or compiles) the compiled code its runs take: a prior's settings change a scene's
-    numbers, not its parts."""
-    import cloudpickle  # noqa: F401  (what unpickles the run function)
-
+    """A fit's worker made ready while the fit starts: the ``base`` scene built for its stop — the
+    backend a run takes chosen as for a run — and one step of it taken in memory and its patches
+    labelled, which loads (or compiles) the compiled code its runs take: a prior's settings change a
+    scene's numbers, not its parts.  A worker runs bark's runs only (pyabc stays in the fit's
+    process), so it imports no pyabc."""
     from bark.analysis.pattern import Pattern  # noqa: F401  (what measures each run)
     from bark.engine.scene import Scene
 
-    needs_pyabc()
     scene = Scene.from_dict(base)
     sim, stop = scene.simulation(), scene.stop()
     sim.prepare(stop)
@@ -338,52 +340,105 @@ def warm_worker(base: dict) -> None:
     sim.patch_labels()
 
 
-_UNPICKLED: dict[str, Callable] = {}
-"""A worker's last generation's run function, by its digest: unpickled once a generation."""
-
-
-def _evaluate(blob: bytes, digest: str, seed: int, t: int, ids: list[int]) -> list[tuple[int, Any]]:
-    """In a worker: the runs ``ids`` of generation ``t``, each with the generators seeded by
-    ``(seed, t, id)`` (numpy's legacy global one, which pyabc's proposals and scipy's priors draw from)."""
-    import random
-
+def run_away(scene: dict, names: tuple[str, ...]) -> dict[str, float | None]:
+    """In a worker (local or Dask): one run of a fit, :func:`simulate_statistics`, its kernels'
+    compile shared with the worker's other runs."""
     from bark.engine import kernels
 
     kernels.expect_many()  # a worker's runs (local or Dask) share its kernels' compile
-    simulate_one = _UNPICKLED.get(digest)
-    if simulate_one is None:
-        import cloudpickle
+    return simulate_statistics(scene, names)
 
-        _UNPICKLED.clear()
-        simulate_one = _UNPICKLED[digest] = cloudpickle.loads(blob)
-    out = []
-    for k in ids:
-        state = np.random.SeedSequence([seed, t + 1, k]).generate_state(4)
-        np.random.seed(state)
-        random.seed(int(state[0]))
-        out.append((k, simulate_one()))
-    return out
+
+_AWAY = threading.local()
+"""In a sampler's thread: ``turns``, the :class:`_Turns` its run goes through (else none: runs here)."""
+
+
+class _Abandoned(Exception):
+    """A run of a generation that has ended: its thread leaves pyabc's code without going on."""
+
+
+class _Turns:
+    """The runs of one generation, each in a thread of the fit's process, taking turns.
+
+    pyabc's code for a run (its proposal, its distance, its acceptance) draws from numpy's legacy
+    global generator and Python's ``random``, each seeded by ``(seed, t, k)`` for run k; so at most
+    one thread runs it at a time (``lock``), and a thread gives its turn up only while its run is
+    away on a worker, its generators' states kept and put back when it takes its turn again: each
+    run draws what it would draw alone, in whatever order the runs end.  Once the generation has
+    ended (``close``, which takes the turn itself, so that no thread is in pyabc's code then), a
+    thread whose run comes back leaves without taking its turn again: the fit's own code (the next
+    generation's kernel, the database) has the generators to itself."""
+
+    def __init__(self, pool, seed: int, t: int) -> None:
+        self.pool, self.seed, self.t = pool, seed, t
+        self.lock = threading.Lock()
+        self.ended = False
+        self.away: dict[int, Any] = {}  # run k → its future on the pool, while it is away
+
+    def one(self, simulate_one: Callable, k: int):
+        """Run k of the generation: pyabc's ``simulate_one`` with the generators seeded by ``(seed, t, k)``."""
+        import random
+
+        with self.lock:
+            if self.ended:
+                raise _Abandoned
+            state = np.random.SeedSequence([self.seed, self.t + 1, k]).generate_state(4)
+            np.random.seed(state)
+            random.seed(int(state[0]))
+            _AWAY.turns, _AWAY.k = self, k
+            try:
+                return simulate_one()
+            finally:
+                _AWAY.turns = None
+
+    def run(self, scene: dict, names: tuple[str, ...]) -> dict[str, float | None]:
+        """The run of the calling thread's turn, on the pool, its turn given up while it is away."""
+        import random
+
+        k = _AWAY.k
+        kept = np.random.get_state(), random.getstate()
+        future = self.pool.submit(run_away, scene, names)
+        self.away[k] = future
+        self.lock.release()
+        try:
+            return future.result()
+        finally:
+            self.lock.acquire()
+            self.away.pop(k, None)
+            if self.ended:
+                raise _Abandoned  # noqa: B012 (the generation has ended: whatever came back is not wanted)
+            np.random.set_state(kept[0])
+            random.setstate(kept[1])
+
+    def close(self) -> None:
+        """The generation has ended: no thread goes on in pyabc's code; the runs still waiting or
+        away are cancelled where they can be (a run a worker has begun ends there, unread)."""
+        with self.lock:
+            self.ended = True
+            for future in list(self.away.values()):
+                future.cancel()
 
 
 @functools.cache
 def _sampler_class():
     """The sampler (a subclass of pyabc's ``Sampler``, made when pyabc is first needed)."""
     class SeededSampler(needs_pyabc().sampler.Sampler):
-        """Runs of a generation numbered k = 0, 1, ..., each seeded by ``(seed, t, k)``, handed to
-        ``pool`` in batches; the generation is the first ``n`` accepted runs in the order of k, with
-        every run before the n-th accepted one (those rejected too: the distance's scales use them)."""
+        """Runs of a generation numbered k = 0, 1, ..., each seeded by ``(seed, t, k)``, pyabc's code
+        for each run in a thread of this process (:class:`_Turns`), its simulation on ``pool``; the
+        generation is the first ``n`` accepted runs in the order of k, with every run before the
+        n-th accepted one (those rejected too: the distance's scales use them)."""
 
-        def __init__(self, pool, seed: int, observe: Callable | None = None, batch: int = 1) -> None:
+        def __init__(self, pool, seed: int, observe: Callable | None = None) -> None:
             super().__init__()
-            self.pool, self.seed, self.observe, self.batch = pool, seed, observe, batch
+            self.pool, self.seed, self.observe = pool, seed, observe
 
         def sample_until_n_accepted(self, n, simulate_one, t, *, max_eval=np.inf, all_accepted=False, ana_vars=None):
-            import cloudpickle
+            from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
-            blob = cloudpickle.dumps(simulate_one)
-            digest = hashlib.sha256(blob).hexdigest()
+            turns = _Turns(self.pool, self.seed, t)
+            threads = ThreadPoolExecutor(2 * self.pool.slots, thread_name_prefix="bark-fit")
             results: dict[int, Any] = {}
-            running: dict = {}  # future → its first id
+            running: dict = {}  # future → its run's k
             next_id, accepted_ids = 0, []
             try:
                 while True:
@@ -391,19 +446,17 @@ def _sampler_class():
                     if nth is not None and all(k in results for k in range(nth)):
                         break
                     while nth is None and len(running) < 2 * self.pool.slots:
-                        ids = list(range(next_id, next_id + self.batch))
-                        running[self.pool.submit(_evaluate, blob, digest, self.seed, t, ids)] = next_id
-                        next_id += self.batch
+                        running[threads.submit(turns.one, simulate_one, next_id)] = next_id
+                        next_id += 1
                     if nth is not None:  # runs after the n-th accepted one are not needed
-                        for f in [f for f, first in running.items() if first > nth]:
+                        for f in [f for f, k in running.items() if k > nth]:
                             f.cancel()
                             del running[f]
-                    for f in self.pool.wait_any(running):
-                        del running[f]
-                        for k, particle in f.result():
-                            results[k] = particle
-                            if particle.accepted:
-                                accepted_ids.append(k)
+                    for f in wait(running, return_when=FIRST_COMPLETED).done:
+                        k = running.pop(f)
+                        results[k] = particle = f.result()
+                        if particle.accepted:
+                            accepted_ids.append(k)
                         accepted_ids.sort()
                     if self.observe is not None:
                         self.observe(t, min(len(accepted_ids), n), n, len(results))
@@ -413,8 +466,8 @@ def _sampler_class():
                                      "are in the database; the same fit run again goes on from there") from None
                 raise
             finally:
-                for f in running:
-                    f.cancel()
+                turns.close()
+                threads.shutdown(wait=False, cancel_futures=True)
             sample = self._create_empty_sample()
             last = accepted_ids[n - 1]
             for k in range(last + 1):
@@ -610,7 +663,7 @@ def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None, po
     again gives the posterior an uninterrupted one gives.  ``client``: a ``distributed.Client`` to
     run on; else ``pool`` (a started ``LocalPool`` or ``DaskPool``, left open: several fits share its warm
     workers); else ``workers`` local processes.  ``progress(t, accepted, population, runs)`` after
-    each batch of runs, ``generation_done(generation)`` after each generation stored."""
+    each run that comes back, ``generation_done(generation)`` after each generation stored."""
     database = Path(database)
     if workers < 1:
         raise BarkError(f"fit: workers must be at least 1, given {workers}")
