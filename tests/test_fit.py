@@ -235,44 +235,62 @@ class _HeldBack:
             return self.given[-1]
 
     def let_go(self, count: int) -> None:
-        with self.changed:
-            self.changed.wait_for(lambda: len(self.given) == count)
+        with self.changed:  # the bound is for a failure, not a time the test waits
+            assert self.changed.wait_for(lambda: len(self.given) == count, timeout=240), "the runs never came"
         for future in reversed(self.given):
             future.set_result({})
 
 
 def test_a_run_draws_what_it_draws_alone_before_and_after_its_simulation():
     """Each run's draws from numpy's and Python's global generators, before its simulation and after
-    it, are those it makes alone, however the runs taking turns come back."""
+    it, are those it makes alone, however the runs taking turns come back; no two runs are in their
+    draws at once; and after the generation the generators are the caller's again."""
     import random
-    from concurrent.futures import ThreadPoolExecutor
+    import threading
 
-    def draws():  # one at a time, so that another thread could come between any two
-        return [(np.random.random(), random.random()) for _ in range(300)]
+    inside, most, count = [0], [0], threading.Lock()
+
+    def draws(turns):  # one at a time, so that another thread could come between any two
+        with count:
+            inside[0] += 1
+            most[0] = max(most[0], inside[0])
+        assert turns.lock.locked()  # only in its turn
+        out = [(np.random.random(), random.random()) for _ in range(300)]
+        with count:
+            inside[0] -= 1
+        return out
 
     def simulate_one():  # as pyabc's: draws, the model's run, draws again
-        before = draws()
+        before = draws(F._AWAY.turns)
         F._AWAY.turns.run({}, ())
-        return before, draws()
+        return before, draws(F._AWAY.turns)
 
     def alone(k):
         state = np.random.SeedSequence([5, 2, k]).generate_state(4)
         np.random.seed(state)
         random.seed(int(state[0]))
-        return draws(), draws()
+        return ([(np.random.random(), random.random()) for _ in range(300)],
+                [(np.random.random(), random.random()) for _ in range(300)])
 
+    np.random.seed(11)
+    random.seed(11)
+    callers = np.random.get_state(), random.getstate()
     pool = _HeldBack()
     turns = F._Turns(pool, 5, 1)
     was = sys.getswitchinterval()
     sys.setswitchinterval(1e-6)  # threads switched as often as the interpreter can: any two runs' draws would mix
     try:
-        with ThreadPoolExecutor(4) as threads:
-            runs = [threads.submit(turns.one, simulate_one, k) for k in range(4)]
-            pool.let_go(4)
-            got = [r.result(timeout=240) for r in runs]
+        runs = [F._in_thread(turns.one, simulate_one, k) for k in range(4)]
+        pool.let_go(4)
+        got = [r.result(timeout=240) for r in runs]
     finally:
         sys.setswitchinterval(was)
         turns.close()
+    after = np.random.random(), random.random()
+    np.random.set_state(callers[0])
+    random.setstate(callers[1])
+    assert after == (np.random.random(), random.random())  # the caller's generators, as it left them
+    assert most[0] == 1
     assert got == [alone(k) for k in range(4)]
 
 

@@ -42,6 +42,7 @@ import json
 import math
 import sqlite3
 import threading
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -361,19 +362,23 @@ class _Turns:
     """The runs of one generation, each in a thread of the fit's process, taking turns.
 
     pyabc's code for a run (its proposal, its distance, its acceptance) draws from numpy's legacy
-    global generator and Python's ``random``, each seeded by ``(seed, t, k)`` for run k; so at most
-    one thread runs it at a time (``lock``), and a thread gives its turn up only while its run is
-    away on a worker, its generators' states kept and put back when it takes its turn again: each
-    run draws what it would draw alone, in whatever order the runs end.  Once the generation has
-    ended (``close``, which takes the turn itself, so that no thread is in pyabc's code then), a
-    thread whose run comes back leaves without taking its turn again: the fit's own code (the next
-    generation's kernel, the database) has the generators to itself."""
+    global generator, seeded by ``(seed, t, k)`` for run k (and Python's ``random`` with it, for
+    whatever else a run's code draws); so at most one thread runs it at a time (``lock``), and a
+    thread gives its turn up only while its run is away on a worker, its generators' states kept
+    and put back when it takes its turn again: each run draws what it would draw alone, in whatever
+    order the runs end.  Once the generation has ended (``close``, which then takes the turn itself,
+    so that no thread is in pyabc's code after it) a thread whose run comes back leaves without
+    going on, and the generators are as the fit's own code left them before the generation (which
+    draws from them as it would with the runs in other processes)."""
 
     def __init__(self, pool, seed: int, t: int) -> None:
+        import random
+
         self.pool, self.seed, self.t = pool, seed, t
         self.lock = threading.Lock()
         self.ended = False
         self.away: dict[int, Any] = {}  # run k → its future on the pool, while it is away
+        self.callers = np.random.get_state(), random.getstate()  # the fit's own, put back by ``close``
 
     def one(self, simulate_one: Callable, k: int):
         """Run k of the generation: pyabc's ``simulate_one`` with the generators seeded by ``(seed, t, k)``."""
@@ -411,12 +416,35 @@ class _Turns:
             random.setstate(kept[1])
 
     def close(self) -> None:
-        """The generation has ended: no thread goes on in pyabc's code; the runs still waiting or
-        away are cancelled where they can be (a run a worker has begun ends there, unread)."""
+        """The generation has ended: no thread goes on in pyabc's code (one in it now ends its
+        part first), the generators are the caller's again, and the runs still waiting or away
+        are cancelled where they can be (a run a worker has begun ends there, unread)."""
+        import random
+
+        self.ended = True  # first: a thread that comes back while this waits for its turn leaves
         with self.lock:
-            self.ended = True
-            for future in list(self.away.values()):
-                future.cancel()
+            np.random.set_state(self.callers[0])
+            random.setstate(self.callers[1])
+            away = list(self.away.values())
+        for future in away:
+            future.cancel()
+
+
+def _in_thread(fn: Callable, *args) -> Future:
+    """``fn(*args)`` in a daemon thread of its own; a future of its result.  Not an executor's
+    thread: one left waiting on a run that never comes back (a cluster gone) must not hold the
+    interpreter at its exit, where an executor joins its threads."""
+    future: Future = Future()
+
+    def body() -> None:
+        future.set_running_or_notify_cancel()
+        try:
+            future.set_result(fn(*args))
+        except BaseException as err:  # noqa: BLE001 (the future's to report)
+            future.set_exception(err)
+
+    threading.Thread(target=body, name="bark-fit-run", daemon=True).start()
+    return future
 
 
 @functools.cache
@@ -433,10 +461,9 @@ def _sampler_class():
             self.pool, self.seed, self.observe = pool, seed, observe
 
         def sample_until_n_accepted(self, n, simulate_one, t, *, max_eval=np.inf, all_accepted=False, ana_vars=None):
-            from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+            from concurrent.futures import FIRST_COMPLETED, wait
 
             turns = _Turns(self.pool, self.seed, t)
-            threads = ThreadPoolExecutor(2 * self.pool.slots, thread_name_prefix="bark-fit")
             results: dict[int, Any] = {}
             running: dict = {}  # future → its run's k
             next_id, accepted_ids = 0, []
@@ -446,11 +473,10 @@ def _sampler_class():
                     if nth is not None and all(k in results for k in range(nth)):
                         break
                     while nth is None and len(running) < 2 * self.pool.slots:
-                        running[threads.submit(turns.one, simulate_one, next_id)] = next_id
+                        running[_in_thread(turns.one, simulate_one, next_id)] = next_id
                         next_id += 1
-                    if nth is not None:  # runs after the n-th accepted one are not needed
+                    if nth is not None:  # runs after the n-th accepted one are not needed (``close`` drops them)
                         for f in [f for f, k in running.items() if k > nth]:
-                            f.cancel()
                             del running[f]
                     for f in wait(running, return_when=FIRST_COMPLETED).done:
                         k = running.pop(f)
@@ -467,7 +493,6 @@ def _sampler_class():
                 raise
             finally:
                 turns.close()
-                threads.shutdown(wait=False, cancel_futures=True)
             sample = self._create_empty_sample()
             last = accepted_ids[n - 1]
             for k in range(last + 1):
@@ -663,7 +688,7 @@ def run_fit(fit: Fit, database: str | Path, *, workers: int = 1, client=None, po
     again gives the posterior an uninterrupted one gives.  ``client``: a ``distributed.Client`` to
     run on; else ``pool`` (a started ``LocalPool`` or ``DaskPool``, left open: several fits share its warm
     workers); else ``workers`` local processes.  ``progress(t, accepted, population, runs)`` after
-    each run that comes back, ``generation_done(generation)`` after each generation stored."""
+    each run or runs that come back, ``generation_done(generation)`` after each generation stored."""
     database = Path(database)
     if workers < 1:
         raise BarkError(f"fit: workers must be at least 1, given {workers}")
