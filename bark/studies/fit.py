@@ -40,6 +40,7 @@ import contextlib
 import functools
 import json
 import math
+import random
 import sqlite3
 import threading
 from concurrent.futures import Future
@@ -372,25 +373,21 @@ class _Turns:
     draws from them as it would with the runs in other processes)."""
 
     def __init__(self, pool, seed: int, t: int) -> None:
-        import random
-
         self.pool, self.seed, self.t = pool, seed, t
         self.lock = threading.Lock()
         self.ended = False
-        self.away: dict[int, Any] = {}  # run k → its future on the pool, while it is away
+        self.away: set = set()  # the runs' futures on the pool, while they are away
         self.callers = np.random.get_state(), random.getstate()  # the fit's own, put back by ``close``
 
     def one(self, simulate_one: Callable, k: int):
         """Run k of the generation: pyabc's ``simulate_one`` with the generators seeded by ``(seed, t, k)``."""
-        import random
-
         with self.lock:
             if self.ended:
                 raise _Abandoned
             state = np.random.SeedSequence([self.seed, self.t + 1, k]).generate_state(4)
             np.random.seed(state)
             random.seed(int(state[0]))
-            _AWAY.turns, _AWAY.k = self, k
+            _AWAY.turns = self
             try:
                 return simulate_one()
             finally:
@@ -398,18 +395,15 @@ class _Turns:
 
     def run(self, scene: dict, names: tuple[str, ...]) -> dict[str, float | None]:
         """The run of the calling thread's turn, on the pool, its turn given up while it is away."""
-        import random
-
-        k = _AWAY.k
         kept = np.random.get_state(), random.getstate()
         future = self.pool.submit(run_away, scene, names)
-        self.away[k] = future
+        self.away.add(future)
         self.lock.release()
         try:
             return future.result()
         finally:
             self.lock.acquire()
-            self.away.pop(k, None)
+            self.away.discard(future)
             if self.ended:
                 raise _Abandoned  # noqa: B012 (the generation has ended: whatever came back is not wanted)
             np.random.set_state(kept[0])
@@ -419,13 +413,11 @@ class _Turns:
         """The generation has ended: no thread goes on in pyabc's code (one in it now ends its
         part first), the generators are the caller's again, and the runs still waiting or away
         are cancelled where they can be (a run a worker has begun ends there, unread)."""
-        import random
-
         self.ended = True  # first: a thread that comes back while this waits for its turn leaves
         with self.lock:
             np.random.set_state(self.callers[0])
             random.setstate(self.callers[1])
-            away = list(self.away.values())
+            away = list(self.away)
         for future in away:
             future.cancel()
 
