@@ -424,6 +424,47 @@ def test_a_killed_worker_loses_no_finished_run_and_the_rerun_finishes(tmp_path):
     assert len(_rows(out / "sweep.sqlite")) == 6
 
 
+def _die_while_sending() -> None:
+    """In a local worker: what a kill in the middle of sending a run's result leaves — the result
+    pipe's lock held and a message begun but not ended (a sweep's results, patterns of some 100 kB,
+    take more than the pipe holds) — and then the kill."""
+    import struct
+
+    frame = sys._getframe()
+    while frame.f_code.co_name != "_process_worker":
+        frame = frame.f_back
+    results = frame.f_locals["result_queue"]
+    results._wlock.acquire()
+    results._writer._send(struct.pack("!i", 1 << 20) + b"x" * 1000)
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+@pytest.mark.slow  # worker processes started: seconds
+@pytest.mark.skipif(sys.platform != "linux", reason="the executor's pipes and locks as Linux has them")
+def test_a_worker_killed_while_it_sends_a_result_is_a_death_not_a_hang():
+    """The executor's reader waited for the rest of the message for ever, the other worker for the
+    lock, and the sweep with them (seen once in 25–150 killed workers under load). Now the pool
+    sees the dead worker, and the runs in flight fail as a worker's death."""
+    import threading
+
+    from bark.studies.pool import LocalPool
+
+    pool = LocalPool(2, "test")
+    got: list = []
+    try:
+        dying, other = pool.submit(_die_while_sending), pool.submit(os.getpid)
+        waiting = threading.Thread(target=lambda: got.append(pool.wait_any({dying})), daemon=True)
+        waiting.start()
+        waiting.join(240)  # a bound for a failure, not a time the test waits
+        assert got, "the wait never ended"
+        assert pool.died(dying.exception(timeout=240))
+        other.exception(timeout=240)  # ended too: its result or the death
+    finally:
+        pool.close()
+    manager = getattr(pool.pool, "_executor_manager_thread", None)
+    assert manager is None or not manager.is_alive()  # nothing left to hold the process at its exit
+
+
 @pytest.mark.slow  # seconds of whole processes: the quick subset (-m "not slow") leaves it out
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_a_sweep_stopped_halfway_goes_on_without_running_a_finished_point_again(tmp_path, sig):

@@ -42,6 +42,10 @@ workers are ended (it ends as soon as it sees them gone; the bound is for a work
 not yet let die)."""
 
 
+WATCH_S = 1.0
+"""How often a wait on local workers looks whether one died unseen (:meth:`LocalPool._unstick`)."""
+
+
 class LocalPool:
     """``workers`` local processes, spawned (a clean interpreter: no threads or locks inherited from
     the caller) and started once for the whole study; each takes its share of the cores for its
@@ -83,10 +87,31 @@ class LocalPool:
             raise self._cannot_start(err) from None
 
     def wait_any(self, futures) -> set:
-        """The futures among ``futures`` that are done, waiting until at least one is."""
+        """The futures among ``futures`` that are done, waiting until at least one is — looking every
+        ``WATCH_S`` whether a worker died where its executor cannot see it (:meth:`_unstick`)."""
         from concurrent.futures import FIRST_COMPLETED, wait
 
-        return wait(futures, return_when=FIRST_COMPLETED)[0]
+        while True:
+            done = wait(futures, timeout=WATCH_S, return_when=FIRST_COMPLETED)[0]
+            if done:
+                return done
+            self._unstick()
+
+    def _unstick(self) -> None:
+        """If a worker has died: the others ended, and this process's end of the pipe the workers
+        send their results through closed.  A worker killed while it sent a result (its run's
+        pattern, more than the pipe holds) leaves the rest of that message unsent and the pipe's
+        lock held: the executor's reader waits for the rest for ever, and every other worker for
+        the lock.  With no writer left the reader meets the pipe's end instead, and the executor
+        fails the runs in flight as a worker's death (:meth:`died`)."""
+        processes = list((getattr(self.pool, "_processes", None) or {}).values())
+        if not any(p.exitcode is not None for p in processes):
+            return
+        for p in processes:
+            p.terminate()
+        writer = getattr(getattr(self.pool, "_result_queue", None), "_writer", None)
+        if writer is not None:
+            writer.close()
 
     @staticmethod
     def died(error: BaseException | None) -> bool:
