@@ -104,7 +104,7 @@ class LocalPool:
         lock held: the executor's reader waits for the rest for ever, and every other worker for
         the lock.  With no writer left the reader meets the pipe's end instead, and the executor
         fails the runs in flight as a worker's death (:meth:`died`)."""
-        processes = list((getattr(self.pool, "_processes", None) or {}).values())
+        processes = self._workers()
         if not any(p.exitcode is not None for p in processes):
             return
         for p in processes:
@@ -112,6 +112,11 @@ class LocalPool:
         writer = getattr(getattr(self.pool, "_result_queue", None), "_writer", None)
         if writer is not None:
             writer.close()
+
+    def _workers(self) -> list:
+        """The executor's worker processes now (a private attribute of CPython's executor: none
+        where a later Python drops it, and then nothing is ended early)."""
+        return list((getattr(self.pool, "_processes", None) or {}).values())
 
     @staticmethod
     def died(error: BaseException | None) -> bool:
@@ -128,7 +133,7 @@ class LocalPool:
         ``OSError: [Errno 9] Bad file descriptor`` traceback after bark's one line (CPython
         gh-125451, fixed in 3.12.8 and 3.13.1, not in 3.11)."""
         manager = getattr(self.pool, "_executor_manager_thread", None)
-        for worker in list((getattr(self.pool, "_processes", None) or {}).values()):
+        for worker in self._workers():
             worker.terminate()
         self.pool.shutdown(wait=False, cancel_futures=True)
         if manager is not None:
