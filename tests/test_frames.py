@@ -121,6 +121,47 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
     _same(serial, shared)
 
 
+def _taking_back(threads: int, block: int, growth: str, monkeypatch) -> tuple:
+    """Adaptive steps in long calls (no joins), so that the kernel takes each refused step back itself
+    (``numba_backend.IN_PLACE_STEPS``), from its copy of the bases before the step; and how many calls
+    halved a step and went on."""
+    from bark.engine import kernels
+
+    law = SqrtGrowth(G=0.08) if growth == "sqrt" else \
+        BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
+    halved, take_steps = [], kernels.take_steps
+
+    def recording(call, plan):
+        result = take_steps(call, plan)
+        sizes = np.diff(np.r_[plan.ticks, result.ends])
+        halved.append(not call.undone and bool((np.diff(sizes) < 0).any()))
+        return result
+
+    monkeypatch.setattr(kernels, "take_steps", recording)
+    sim = build_sim(n_bases=2000, G=0.08, dt=0.3, seed=2, stepping="adaptive", backend="numba", fmax_spread=0.05,
+                    growth=law, threads=threads)
+    sim.build().backend.block = block
+    sim.run(Stop(until_time=6.0))
+    return sim, sum(halved)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
+@pytest.mark.parametrize("growth", ["sqrt", "bulge"])
+def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, growth):
+    """The threaded kernel's base pass (``_base_pass``), in blocks of 16 shared between two threads,
+    copies each block's bases before it moves them, and a refused step is taken back from those copies
+    (with the anchors, at per-base radii): the serial kernel's bits, breaks and steps.  Slow: each
+    threaded kernel compiles for a minute or two."""
+    monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
+    (serial, _), (shared, halved) = (_taking_back(1, numba_backend.BLOCK, growth, monkeypatch),
+                                     _taking_back(2, 16, growth, monkeypatch))
+    assert (serial.backend.threads, shared.backend.threads) == (1, 2)
+    assert halved > 0 and shared.n_broken > 20  # refused steps taken back inside calls that went on
+    _same(serial, shared)
+    assert serial.step_count == shared.step_count
+
+
 @pytest.mark.parametrize("growth", ["bulge", "sqrt"])
 def test_one_thread_sweeps_in_small_blocks_to_the_same_bits(growth):
     """The serial kernel's one sweep over blocks of bases (``_step_fused``) in blocks of 16: its base
