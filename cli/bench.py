@@ -157,6 +157,15 @@ def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int
     return {b: float(np.median(r)) for b, r in rates.items()}
 
 
+def _call_steps(n: int) -> int:
+    """The steps of one kernel call at ``n`` bases of the default lattice (two springs a base): a
+    timed stretch at least that long weighs the passes a call makes once (its start and end) as a
+    run does, not more."""
+    from bark.engine.stepping import CHUNK, CHUNK_WORK
+
+    return max(1, min(CHUNK, CHUNK_WORK // (3 * n)))
+
+
 def _peak_memory(n: int, backend: tuple, start_t: float, steps: int, case: str = "default") -> float:
     """Peak memory (MiB, numpy and Python allocations as traced by tracemalloc) of building the
     simulation with ``(backend, threads)`` and running it through the phase; measured apart from the
@@ -205,7 +214,8 @@ def _emit(table, document: dict, as_json: bool, width: int = 140) -> None:
 @click.option("--phase", "phases", type=click.Choice(list(PHASES)), multiple=True, default=("quiet", "cracking"),
               show_default=True, help="cracking is measured only up to 10000 bases (reaching it takes long).")
 @click.option("--steps", type=click.IntRange(1, 10_000_000), default=None,
-              help="Steps per timed stretch (default: about 0.3 s of numpy work).")
+              help="Steps per timed stretch (default: about 0.3 s of numpy work, and at least one kernel call's "
+                   "steps).")
 @click.option("--repeats", type=click.IntRange(1, 1000), default=5, show_default=True,
               help="Timed stretches per backend, interleaved.")
 @click.option("--case", "cases", type=click.Choice(list(CASES)), multiple=True, default=("default",), show_default=True,
@@ -233,7 +243,7 @@ def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_pat
                 start_t, end_t, _ = PHASES[phase]
                 if phase == "cracking" and n > 10000:
                     continue
-                k = steps or max(10, int(0.3 / (1.3e-7 * n)))  # numpy takes ~0.13 µs per base per step
+                k = steps or max(10, int(0.3 / (1.3e-7 * n)), _call_steps(n))  # numpy: ~0.13 µs a base-step
                 k = min(k, int((end_t - start_t) / 0.01 / repeats))  # stay inside the phase
                 rates = _steps_per_second(n, backends, start_t, k, repeats, case)
                 peaks = {b: _peak_memory(n, b, start_t, k, case) for b in backends}
