@@ -157,15 +157,6 @@ def _steps_per_second(n: int, backends, start_t: float, steps: int, repeats: int
     return {b: float(np.median(r)) for b, r in rates.items()}
 
 
-def _call_steps(n: int) -> int:
-    """The steps of one kernel call at ``n`` bases of the default lattice (two springs a base): a
-    timed stretch at least that long weighs the passes a call makes once (its start and end) as a
-    run does, not more."""
-    from bark.engine.stepping import CHUNK, CHUNK_WORK
-
-    return max(1, min(CHUNK, CHUNK_WORK // (3 * n)))
-
-
 def _peak_memory(n: int, backend: tuple, start_t: float, steps: int, case: str = "default") -> float:
     """Peak memory (MiB, numpy and Python allocations as traced by tracemalloc) of building the
     simulation with ``(backend, threads)`` and running it through the phase; measured apart from the
@@ -233,6 +224,7 @@ def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_pat
 
     backends = (("numpy", 1), *[(b, t) for b in dict.fromkeys(backends) if b != "numpy" for t in dict.fromkeys(thread_counts)])
     from bark.engine.scene import Scene
+    from bark.engine.stepping import call_steps
 
     for n in sizes:  # every size is a valid scene that fits in memory, before any work
         Scene.from_dict({"lattice": {"n_bases": n}, "run": {"until_time": 1e6}}).memory_estimate()
@@ -243,7 +235,9 @@ def speed(sizes, backends, phases, steps, repeats, cases, thread_counts, csv_pat
                 start_t, end_t, _ = PHASES[phase]
                 if phase == "cracking" and n > 10000:
                     continue
-                k = steps or max(10, int(0.3 / (1.3e-7 * n)), _call_steps(n))  # numpy: ~0.13 µs a base-step
+                # about 0.3 s of numpy work (~0.13 µs a base-step), and at least one kernel call, so that a call's
+                # start and end weigh as in a run (the default lattice has two springs a base)
+                k = steps or max(10, int(0.3 / (1.3e-7 * n)), call_steps(n, 2 * n))
                 k = min(k, int((end_t - start_t) / 0.01 / repeats))  # stay inside the phase
                 rates = _steps_per_second(n, backends, start_t, k, repeats, case)
                 peaks = {b: _peak_memory(n, b, start_t, k, case) for b in backends}

@@ -237,7 +237,7 @@ def plan(sim, stop, most: int | None = None) -> Plan:
     breaks = "python" if part is None else "kernel" if part.decides else "candidates"  # the Python path's too
     n = 1
     if compiled and breaks != "python":
-        n = max(1, min(CHUNK, CHUNK_WORK // max(sim.state.n_bases + sim.state.n_springs, 1), most or CHUNK))
+        n = min(call_steps(sim.state.n_bases, sim.state.n_springs), most or CHUNK)
     n, t_limit, may_double = _bounded(sim, stop, n) if n > 1 else (n, math.inf, True)
     budget, goal = _break_budget(sim, stop)
     return Plan(
@@ -248,6 +248,12 @@ def plan(sim, stop, most: int | None = None) -> Plan:
         break_budget=budget, max_batch=sim.degenerate_fraction * sim.state.n_springs, compiled=compiled,
         threads=sim.numerics.threads, patch_goal=goal, min_patch_size=stop.min_patch_size if goal else 1,
     )
+
+
+def call_steps(n_bases: int, n_springs: int) -> int:
+    """The most steps one call of a compiled kernel takes on this many bases and springs: ``CHUNK``,
+    or fewer on a scene so large that ``CHUNK_WORK`` base- and spring-steps come first (at least one)."""
+    return max(1, min(CHUNK, CHUNK_WORK // max(n_bases + n_springs, 1)))
 
 
 def _break_budget(sim, stop) -> tuple[float, int]:
