@@ -121,14 +121,13 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
     _same(serial, shared)
 
 
-def _taking_back(threads: int, block: int, growth: str, monkeypatch) -> tuple:
+def _taking_back(threads: int, block: int, monkeypatch) -> tuple:
     """Adaptive steps in long calls (no joins), so that the kernel takes each refused step back itself
-    (``numba_backend.IN_PLACE_STEPS``), from its copy of the bases before the step; and how many calls
-    halved a step and went on."""
+    (``numba_backend.IN_PLACE_STEPS``), from its copy of the bases before the step, at per-base radii;
+    and how many calls halved a step and went on."""
     from bark.engine import kernels
 
-    law = SqrtGrowth(G=0.08) if growth == "sqrt" else \
-        BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
+    law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
     halved, take_steps = [], kernels.take_steps
 
     def recording(call, plan):
@@ -147,15 +146,15 @@ def _taking_back(threads: int, block: int, growth: str, monkeypatch) -> tuple:
 
 @pytest.mark.slow
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
-@pytest.mark.parametrize("growth", ["sqrt", "bulge"])
-def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, growth):
+def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
     """The threaded kernel's base pass (``_base_pass``), in blocks of 16 shared between two threads,
     copies each block's bases before it moves them, and a refused step is taken back from those copies
-    (with the anchors, at per-base radii): the serial kernel's bits, breaks and steps.  Slow: each
-    threaded kernel compiles for a minute or two."""
+    (with the anchors, at per-base radii): the serial kernel's bits, breaks and steps.  Per-base radii
+    only: the blocks' own pass is the serial kernel's (``tests/test_adaptive.py`` takes a refused step
+    back at both kinds of radius), and each threaded kernel compiles for a minute or two."""
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
-    (serial, _), (shared, halved) = (_taking_back(1, numba_backend.BLOCK, growth, monkeypatch),
-                                     _taking_back(2, 16, growth, monkeypatch))
+    (serial, _), (shared, halved) = (_taking_back(1, numba_backend.BLOCK, monkeypatch),
+                                     _taking_back(2, 16, monkeypatch))
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
     assert halved > 0 and shared.n_broken > 20  # refused steps taken back inside calls that went on
     _same(serial, shared)
