@@ -1,24 +1,25 @@
-"""Whether a base pass that writes other vectors than it reads still runs in SIMD lanes, per layout.
+"""Whether a base pass that writes other vectors than it reads keeps its speed, per layout and alignment.
 
-    python benchmarks/base_pass_layout.py [--n 3000] [--sweeps 5000] [--rounds 5]
+    python benchmarks/base_pass_layout.py [--n 3000] [--sweeps 5000] [--rounds 5] [--offset 0]
 
 Adaptive stepping takes a refused step back from a copy of the bases made before every step
 (``numba_backend.IN_PLACE_STEPS``).  Two buffers would spare that copy: each step read from one and
 written into the other, and a refused step left untaken.  That pays only if the base pass's loop
-stays vectorised once the vectors it writes are not those it reads.  The compiler cannot know they
-do not overlap, so it checks at run time, one check per pair of arrays, and gives up past a few.
+stays as fast once the vectors it writes are not those it reads.  The compiler cannot know they do
+not overlap, so it checks at run time and takes its vectorised loop where they do not.
 
 This script times the base pass's arithmetic (the forces of eq. 4, Euler–Cromer, the surface
 constraint, the finiteness count), compiled with the kernel's options, on three layouts:
 
 - in place on column vectors (the kernel's layout now);
 - read from six column vectors, written into six others;
-- read from one (n, 6) array, written into another (the accesses grouped per array: few checks).
+- read from one (n, 6) array, written into another.
 
 It prints ns per base for each, the median of ``--rounds`` rounds taken in turn, and each layout's
-time over the in-place one measured in the same rounds.  The two layouts that write apart vary from
-one process to the next with where their arrays fall in memory, by up to half: run it a few times.
-A loop in place must be given the very same vectors to read and write (``in_place`` here, and the
+time over the in-place one measured in the same rounds.  Every array begins on a 64-byte boundary,
+except the vectors written apart with ``--offset``: a target misaligned against its source costs the
+vectorised loop split loads and stores, which numpy's own placement of arrays does at random.  A
+loop in place must be given the very same vectors to read and write (``in_place`` here, and the
 kernel's in-place calls): given two views of the same memory, the run-time check finds them
 overlapping and the loop runs one base at a time.
 """
@@ -113,15 +114,22 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=3000, help="bases (default 3000: the reticulate scene's)")
     parser.add_argument("--sweeps", type=int, default=5000, help="passes over the bases a timing")
     parser.add_argument("--rounds", type=int, default=5, help="timings of each layout, taken in turn")
+    parser.add_argument("--offset", type=int, default=0, choices=range(0, 64, 8),
+                        help="bytes past a 64-byte boundary the vectors written apart begin at (the others begin on one)")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     n, numbers = args.n, (0.1, 0.1, 0.01, 0.01)
 
-    def columns(k):
-        return np.asfortranarray(rng.random((n, k)))
+    def columns(k, offset=0, shift=0.0):
+        """An (n, k) array, columns contiguous, ``offset`` bytes past a 64-byte boundary, of random numbers."""
+        raw = np.empty(n * k + 16)
+        first = (-raw.ctypes.data % 64 + offset) // 8
+        out = raw[first:first + n * k].reshape((n, k), order="F")
+        out[:] = rng.random((n, k)) + shift
+        return out
 
-    x, v, y, u, f, d, az = columns(3) + 1.0, columns(3), columns(3), columns(3), columns(3), columns(2), rng.random(n)
-    s_in, t_out = columns(6) + 1.0, columns(6)
+    x, v, f, d, az = columns(3, shift=1.0), columns(3), columns(3), columns(2), columns(1)[:, 0]
+    y, u, s_in, t_out = columns(3, args.offset), columns(3, args.offset), columns(6, shift=1.0), columns(6, args.offset)
     layouts = {
         "in place, column vectors": lambda k: in_place(x, v, f, d, az, k, *numbers),
         "apart, column vectors": lambda k: apart_columns(x, v, y, u, f, d, az, k, *numbers),
@@ -136,7 +144,8 @@ def main() -> None:
             run(args.sweeps)
             times[name].append((time.perf_counter() - t0) / args.sweeps / n * 1e9)
     base = times["in place, column vectors"]
-    print(f"{platform.processor() or platform.machine()}, {n} bases, {args.sweeps} sweeps, {args.rounds} rounds")
+    print(f"{platform.processor() or platform.machine()}, {n} bases, {args.sweeps} sweeps, {args.rounds} rounds, "
+          f"written apart {args.offset} bytes past a 64-byte boundary")
     for name, ns in times.items():
         ratio = statistics.median(a / b for a, b in zip(ns, base))
         print(f"{name:26s} {statistics.median(ns):6.2f} ns a base   {ratio:5.2f}x in place")
