@@ -123,7 +123,7 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
 
 def _taking_back(threads: int, block: int, monkeypatch) -> tuple:
     """Adaptive steps in long calls (no joins), so that the kernel takes each refused step back itself
-    (``numba_backend.IN_PLACE_STEPS``), by not taking the buffer it wrote the step into, at per-base radii;
+    (``numba_backend.IN_PLACE_STEPS``), from its copy of the bases before the step, at per-base radii;
     and how many calls halved a step and went on."""
     from bark.engine import kernels
 
@@ -148,11 +148,10 @@ def _taking_back(threads: int, block: int, monkeypatch) -> tuple:
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
 def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
     """The threaded kernel's base pass (``_base_pass``), in blocks of 16 shared between two threads,
-    reads each step from one buffer and writes it into the other, and a refused step is taken back
-    by not taking that one (with the anchors, at per-base radii): the serial kernel's bits, breaks
-    and steps.  Per-base radii only: the blocks' own pass is the serial kernel's
-    (``tests/test_adaptive.py`` takes a refused step back at both kinds of radius), and each
-    threaded kernel compiles for a minute or two."""
+    copies each block's bases before it moves them, and a refused step is taken back from those copies
+    (with the anchors, at per-base radii): the serial kernel's bits, breaks and steps.  Per-base radii
+    only: the blocks' own pass is the serial kernel's (``tests/test_adaptive.py`` takes a refused step
+    back at both kinds of radius), and each threaded kernel compiles for a minute or two."""
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
     (serial, _), (shared, halved) = (_taking_back(1, numba_backend.BLOCK, monkeypatch),
                                      _taking_back(2, 16, monkeypatch))

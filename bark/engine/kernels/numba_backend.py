@@ -110,13 +110,11 @@ def _no_flow(length, rest, own, q, h, params):
 
 
 IN_PLACE_STEPS = 8
-"""Steps a call must be allowed to take before a step adaptive stepping refuses is taken back in the
-call (each step written into the other of two buffers, the state before it kept in the one it was
-read from) rather than by replaying the call to it.  A replay costs the steps before the refused
-one, at most ``Plan.n − 1``, and only when a step is refused; two buffers cost a copy of the bases
-into the state's vectors at the end of a call that ends in the other one.  Calls of a few steps
-(the whole tree's, ended by every join) replay; long calls (a trunk segment's, up to 128 steps)
-keep two buffers.  The bits are the same."""
+"""Steps a call must be allowed to take before a step adaptive stepping refuses is taken back from a
+copy (kept of every step's bases) rather than by replaying the call to it.  A replay costs the
+steps before the refused one, at most ``Plan.n − 1``, and only when a step is refused; the copy
+costs a pass over the bases every step.  Calls of a few steps (the whole tree's, ended by every
+join) replay; long calls (a trunk segment's, up to 128 steps) copy.  The bits are the same."""
 
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
@@ -317,22 +315,21 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, br
 
 
 @inline
-def _step_split(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii,
-                heights, block, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
+def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
+                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
     """One step (``move``; without, only the forces of the bases from ``first`` on as they are, added
     into ``f``: the step's spring pass without its base pass, its loads or its breaks): the base pass over
-    every base (``_base_pass``, its numbers ``motion``, a block at a time by ``base_block``), from
-    ``bases`` into ``to`` (the same vectors, or the kernel's other buffer: ``_steps_kernel``), then the
-    spring pass over every spring, on the positions in ``to``, each a block at a time, the blocks
-    shared among threads (the parallel kernel's).  Returns ``(bases finite, largest load, tensions
-    finite, log length, whether the rule picked a spring)``."""
+    every base (``_base_pass``, its numbers ``motion``, a block at a time by ``base_block``), then the
+    spring pass over every spring, each a block at a time, the blocks shared among threads (the
+    parallel kernel's).  Returns ``(bases finite, largest load, tensions finite, log length, whether
+    the rule picked a spring)``."""
     c, b, hm, h, t, ip, q, r_now, r_before, from_radius = motion
     log_id, log_step, log_t = log
     finite = True
     if move:
-        finite = _base_pass(bases, to, c, b, hm, h, t, update, ip, radii, q, r_now, r_before, from_radius, heights,
-                            block, base_block)
-    x, f = (to[0], to[1], to[2]), (bases[6], bases[7], bases[8])
+        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, r_now, r_before, from_radius, heights, block,
+                            prev, save, base_block)
+    x, f = (bases[0], bases[1], bases[2]), (bases[6], bases[7], bases[8])
     top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move,
                                                       breaking and move, rule, load, bp, log_id, log_step, log_t, n_log,
                                                       step, block, law, flow, resin, first)
@@ -340,8 +337,8 @@ def _step_split(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move,
 
 
 @inline
-def _step_fused(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii,
-                heights, block, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
+def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
+                block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
     """``_step_split`` on one thread, the same bits, in one sweep over blocks of bases: a block's
     forces are gathered as soon as the springs that reach it are made, and those springs are made as
     soon as the base pass has moved both their ends, so that the bases' positions and forces, and
@@ -355,8 +352,7 @@ def _step_fused(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move,
     the split pass's; the backend sorts it by step and spring id)."""
     c, b, hm, h, t, ip, q, r_now, r_before, from_radius = motion
     log_id, log_step, log_t = log
-    x0, x1, x2 = to[0], to[1], to[2]  # the positions the base pass leaves, the springs' ends
-    f0, f1, f2 = bases[6], bases[7], bases[8]
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     r_start, r_len, r_i, r_o = runs
     n, runs_n = x0.shape[0], r_start.shape[0]
     reach = 0
@@ -379,8 +375,8 @@ def _step_fused(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move,
     for blk in range(first // block, _blocks(n, block)):
         lo, hi = max(first, blk * block), min(n, (blk + 1) * block)
         while moved < min(n, hi + reach):  # the base pass, ahead of the springs that reach this block
-            bad += base_block(bases, to, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, r_now,
-                              r_before, from_radius, heights)
+            bad += base_block(bases, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, r_now,
+                              r_before, from_radius, heights, prev, save)
             moved = min(n, moved + block)
         for r in range(runs_n):
             s0, nr, i0, o = r_start[r], r_len[r], r_i[r], r_o[r]
@@ -468,8 +464,8 @@ def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip):
 
 
 @inline
-def _base_pass(bases, to, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights, block,
-               base_block):
+def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights, block, prev,
+               save, base_block):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
@@ -481,37 +477,39 @@ def _base_pass(bases, to, c, b, hm, h, t, update, ip, radii, params, r_now, r_be
     A block of bases at a time (``base_block``: ``_uniform_block`` or ``_height_block``, the one the
     growth part's radius calls for, bound in the kernel's module so that only it is compiled), shared
     among threads in a parallel kernel, each block on slices of the vectors, one coordinate per
-    vector, so its loops run in SIMD lanes.  The bases are read from ``bases`` and their new positions
-    and velocities (and anchors, where the radius depends on height) written into ``to``: the same
-    vectors, or the kernel's other buffer, which leaves ``bases`` as they were before the step, so
-    that a step adaptive stepping refuses is taken back by not taking ``to`` (``_steps_kernel``)."""
+    vector, so its loops run in SIMD lanes.  With ``save`` each block's positions and velocities (and
+    anchors, where the radius depends on height) are first copied into ``prev``, while the block is
+    in cache, so that the step can be taken back."""
     n = bases[0].shape[0]
     block_bad = np.zeros(_blocks(n, block), np.int64)
     for blk in prange(_blocks(n, block)):
-        block_bad[blk] = base_block(bases, to, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip,
-                                    radii, params, r_now, r_before, from_radius, heights)
+        block_bad[blk] = base_block(bases, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip, radii,
+                                    params, r_now, r_before, from_radius, heights, prev, save)
     return block_bad.sum() == 0
 
 
 @inline
-def _uniform_block(bases, to, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius,
-                   heights):
+def _uniform_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights,
+                   prev, save):
     """``_base_pass`` on the bases ``lo .. hi``, for a radius that does not depend on height (which
     leaves the anchors as they are until the call ends); returns how many went non-finite."""
-    here = _slices(bases, lo, hi)
-    if to[0] is bases[0]:  # in place: one set of slices, so that the compiler sees the loop write what it reads
-        return _uniform_radius(here, here, c, b, hm, h, update, ip, r_now, r_before, from_radius)
-    return _uniform_radius(here, _slices(to, lo, hi), c, b, hm, h, update, ip, r_now, r_before, from_radius)
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    if save:
+        _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
+    return _uniform_radius(_slices(bases, lo, hi), c, b, hm, h, update, ip, r_now, r_before, from_radius)
 
 
 @inline
-def _height_block(bases, to, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius,
-                  heights):
+def _height_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights,
+                  prev, save):
     """``_base_pass`` on the bases ``lo .. hi``, for a radius that depends on height; returns how
     many went non-finite."""
     weights, stride, spans = heights
-    return _per_base_radius(_slices(bases, lo, hi), _slices(to, lo, hi), c, b, hm, h, t, update, ip, radii, params,
-                            weights, stride, spans, lo)
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    if save:
+        _copy_block((x0, x1, x2, v0, v1, v2, ax, ay, az), prev, lo, hi)
+    return _per_base_radius(_slices(bases, lo, hi), c, b, hm, h, t, update, ip, radii, params, weights, stride, spans,
+                            lo)
 
 
 @inline
@@ -523,39 +521,33 @@ def _slices(bases, lo, hi):
 
 
 @inline
-def _uniform_radius(bases, to, c, b, hm, h, update, ip, r_now, r_before, from_radius):
-    """``_base_pass`` on a block, for a radius that does not depend on height, from ``bases`` into
-    ``to``; returns how many bases went non-finite."""
+def _uniform_radius(bases, c, b, hm, h, update, ip, r_now, r_before, from_radius):
+    """``_base_pass`` on a block, for a radius that does not depend on height; returns how many bases
+    went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
-    y0, y1, y2, u0_, u1_, u2_ = to[0], to[1], to[2], to[3], to[4], to[5]
-    # the anchors: r_before times the directions, or as they are (times 1.0: the same bits), chosen
-    # once, so that the loop reads one vector per axis (a choice per base reads both, and a loop that
-    # writes other vectors than it reads then has too many to check for overlap to run in SIMD lanes)
-    s, wx, wy = (r_before, dx, dy) if from_radius else (1.0, ax, ay)
     bad = 0
     for q in range(x0.shape[0]):
-        anchor_x = s * wx[q]
-        anchor_y = s * wy[q]
+        anchor_x = r_before * dx[q] if from_radius else ax[q]
+        anchor_y = r_before * dy[q] if from_radius else ay[q]
         px, py, pz, u0, u1, u2 = _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip)
         r = r_now
         scale = _surface_scale(px, py, r)
         px *= scale
         py *= scale
-        y0[q] = px
-        y1[q] = py
-        y2[q] = pz
+        x0[q] = px
+        x1[q] = py
+        x2[q] = pz
         bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
         vr = _radial_speed(u0, u1, px, py, 1.0 / (r * r))
-        u0_[q] = u0 - vr * px
-        u1_[q] = u1 - vr * py
-        u2_[q] = u2
+        v0[q] = u0 - vr * px
+        v1[q] = u1 - vr * py
+        v2[q] = u2
     return bad
 
 
 @inline
-def _per_base_radius(bases, to, c, b, hm, h, t, update, ip, radii, params, weights, stride, spans, first):
-    """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, from
-    ``bases`` into ``to`` (its positions, velocities and anchors), in loops:
+def _per_base_radius(bases, c, b, hm, h, t, update, ip, radii, params, weights, stride, spans, first):
+    """``_base_pass`` on a block (bases ``first ..``), for a radius that depends on height, in loops:
     the forces and the update (no calls: SIMD lanes), the radius at each base's height (the growth
     law's block form, its part's ``radii``, or its ``radius`` called per height), the
     surface at those radii (SIMD lanes again), then the anchors at their sites' radii.  The anchors'
@@ -566,10 +558,10 @@ def _per_base_radius(bases, to, c, b, hm, h, t, update, ip, radii, params, weigh
     inlined copy, compiled once: the anchors' heights and radii are read only after the moves).
     Per base the same operations in the same order as one loop: the same bits.  Returns how many
     bases went non-finite."""
-    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = to  # the new bases; ``bases`` read only here:
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     n = x0.shape[0]
     for q in range(n):
-        x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, bases[9][q], bases[10][q], c, b, hm, h, update, ip)
+        x0[q], x1[q], x2[q], v0[q], v1[q], v2[q] = _moved(bases, q, ax[q], ay[q], c, b, hm, h, update, ip)
     by_weights = stride > 0
     r_at = np.empty(n)  # each base's radius at its height; then, without weights, each anchor's (into ax)
     for side in range(1 if by_weights else 2):  # one call of the block form, so that it is compiled once
@@ -657,12 +649,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
 
     ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
     step is replayed from them), and, when the last step is accepted, receives the positions it ends
-    with (for the next call's comparison); its vectors from the tenth on, where adaptive stepping may
-    refuse a step, the resin does not flow and the call may take more than ``IN_PLACE_STEPS`` steps,
-    the second of two buffers of positions, velocities and anchors (``_joined``): each step is read
-    from one and written into the other, and taken when it is kept, so that a refused step is taken
-    back here by not taking it (its breaks undone) instead of by a replay of the call; a call that
-    ends in the second buffer copies it into the state's vectors.  Where the step may still be halved it is
+    with (for the next call's comparison); its last nine vectors, where adaptive stepping may refuse
+    a step, the resin does not flow and the call may take more than ``IN_PLACE_STEPS`` steps, the
+    bases before each step, so that a refused step is taken back here at the cost of a copy a step
+    instead of a replay of the call (its breaks undone).  Where the step may still be halved it is
     halved and the call goes on, the forces of the bases made again by the pass that begins a
     call; else the call ends, its steps those before it (the forces in ``f`` are then the refused
     step's, and the next call makes them again).
@@ -680,14 +670,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     size = 1 << (levels - halvings)
     h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
     log_id, log_step, log_t = log
-    # a step adaptive stepping may refuse is taken back here by not taking it: each step is written into the
-    # other of two buffers, the state before it left in the one it is read from (a resin that flows changes
-    # its springs too: that call is replayed from its start by the caller instead)
+    # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
+    # that flows changes its springs too: that call is replayed from its start by the caller instead)
     in_place = over < np.inf and levels > 0 and not evolve and ends.shape[0] > IN_PLACE_STEPS
-    here = (x0, x1, x2, v0, v1, v2, ax, ay)  # the state's: positions, velocities, anchors' x and y
-    cur = here  # the buffer holding the state now
-    flipped = False  # whether that is the other buffer
-    nxt = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16]) if in_place else here
+    prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
     remake = fresh < x0.shape[0]  # the forces of the bases from ``fresh`` on made again, in the loop (one place)
@@ -716,11 +702,10 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         from_radius = uniform and done > 0  # (outside the call: numba takes no branch among its arguments)
         resin = (rp, h, evolve and step)
         motion = (c, b, hm, h, t, ip, q, r_now, r_before, from_radius)
-        now = _joined(cur, bases, uniform)
         finite, top, springs_finite, n_log, picked = step_pass(  # one place for it, so that it is compiled once
-            now, _joined(nxt, bases, uniform) if step else now, runs, rest, k, live, fmax, inv_fmax, own, work, step,
-            0 if step else fresh, motion, update, radii, heights, block, breaking, rule, load, bp, log, n_log,
-            done + 1, law, flow, resin, base_block)
+            bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, 0 if step else fresh, motion, update, radii,
+            heights, block, prev, in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin,
+            base_block)
         if remake:
             remake = False
             continue
@@ -735,11 +720,11 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             ends[done] = ticks
             done += 1
             tried = 0
-            cur, nxt = nxt, cur  # the step taken (the same buffer, unless in_place)
-            flipped = in_place and not flipped
-        elif in_place:  # refused: the step not taken (its bases were written into the other buffer) and
-            for s in log_id[before:n_log]:  # the springs it broke intact again
-                live[s] = True
+        elif in_place:  # refused: the step taken back, from the copy of the bases before it
+            if uniform:
+                _take_back(prev[:6], (x0, x1, x2, v0, v1, v2), live, log_id[before:n_log])
+            else:
+                _take_back(prev, (x0, x1, x2, v0, v1, v2, ax, ay, az), live, log_id[before:n_log])
             n_log = before
             r_before = r_kept
             undone, tried = True, 0
@@ -763,11 +748,6 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             break
     done += tried  # a refused last step the state still holds counts (the caller replays the call to it)
     clock[0], clock[1] = ticks, halvings
-    if flipped:  # the state in the other buffer: into the state's vectors
-        if uniform:
-            _copy_blocks((cur[0], cur[1], cur[2], cur[3], cur[4], cur[5]), (x0, x1, x2, v0, v1, v2), 0, block)
-        else:
-            _copy_blocks(cur, here, 0, block)
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
             ax[q] = r_before * dx[q]
@@ -802,15 +782,13 @@ def _kept_and_started(bases, start, kept, block):
     return same
 
 
-@inline
-def _joined(xv, bases, uniform):
-    """The 14 base vectors ``bases`` with the positions and velocities of the buffer ``xv`` (and its
-    anchors' x and y where the radius depends on height: with a uniform radius a call writes them only
-    at its end, into the state's)."""
-    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
-    if uniform:
-        return (xv[0], xv[1], xv[2], xv[3], xv[4], xv[5], f0, f1, f2, ax, ay, az, dx, dy)
-    return (xv[0], xv[1], xv[2], xv[3], xv[4], xv[5], f0, f1, f2, xv[6], xv[7], az, dx, dy)
+@jit
+def _take_back(prev, bases, live, broke):
+    """A refused step taken back: the bases from ``prev`` (as the base pass saved them) and the
+    springs it broke (``broke``) intact again.  Compiled once for every kernel (not inlined)."""
+    _copy_block(prev, bases, 0, bases[0].shape[0])
+    for s in broke:
+        live[s] = True
 
 
 @jit
@@ -1741,8 +1719,8 @@ class _Frame:
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
-    from them; after an accepted call, x is the positions it ended with.  Then the kernel's second
-    buffer of x, v and anchor, for a call that takes a refused step back itself (``IN_PLACE_STEPS``)."""
+    from them; after an accepted call, x is the positions it ended with.  Then those of the bases
+    before the last step (a refused step is taken back from them)."""
     log: tuple
     start_columns: tuple = ()
     """``start`` as the kernel takes it: one vector per coordinate (made with the views)."""
@@ -1950,7 +1928,7 @@ class NumbaBackend(Backend):
                     *(a[:, i] for i in range(3)), d[:, 0], d[:, 1])
         longest = int(fr.runs[1].max(initial=1))
         fr.work = (*(self._space(f"work{i}", (longest,)) for i in range(5)), self._space("picks", (longest,), np.bool_))
-        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(6))  # the call's start, the second buffer
+        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(6))  # the call's start, the last step's
         fr.start_columns = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
 
