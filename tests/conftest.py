@@ -41,6 +41,13 @@ def slow_cases(*values) -> list:
     return [pytest.param(v, marks=pytest.mark.slow) for v in values]
 
 
+def halved_inside(plan, result) -> bool:
+    """Whether a kernel call (its ``Plan`` and ``Steps``) halved a step and went on: the sizes of the
+    steps it kept shrink somewhere."""
+    sizes = np.diff(np.r_[plan.ticks, result.ends])
+    return bool((np.diff(sizes) < 0).any())
+
+
 def build_sim(
     *,
     n_bases: int = 300,

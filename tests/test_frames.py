@@ -14,7 +14,7 @@ from bark.engine.kernels import numba_backend
 from bark.model.lattice import Lattice
 from bark_plugins.breakers import ProbabilisticBreaker
 from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
-from conftest import build_sim
+from conftest import build_sim, halved_inside
 
 
 def _run(n_start: int, breakers=None, stepping="adaptive"):
@@ -90,19 +90,22 @@ def test_positions_changed_between_calls_are_seen():
     assert np.array_equal(runs[0].state.intact, runs[1].state.intact)
 
 
-def _threaded(threads: int, block: int, growth: str):
-    """Bases joining and springs breaking — in the kernel (threshold, adaptive steps, per-base radii)
-    or in Python (probabilistic, fixed steps) — with the kernel's loops in blocks of ``block``."""
+JOINING = Lattice(n_bases=2000, n_start=1500, join_rate=150.0, join_every=0.1, jitter=0.05)
+
+
+def _threaded(threads: int, block: int, growth: str, lattice: Lattice = JOINING, until_time: float = 4.0):
+    """Bases joining (on ``JOINING``) and springs breaking — in the kernel (threshold, adaptive steps,
+    per-base radii) or in Python (probabilistic, fixed steps) — with the kernel's loops in blocks of
+    ``block``."""
     if growth == "bulge":
         law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
         breakers, stepping, dt = None, "adaptive", 0.3
     else:
         law, breakers, stepping, dt = SqrtGrowth(G=0.08), [ProbabilisticBreaker()], "fixed", 0.05
-    lattice = Lattice(n_bases=2000, n_start=1500, join_rate=150.0, join_every=0.1, jitter=0.05)
     sim = build_sim(G=0.08, dt=dt, seed=2, stepping=stepping, backend="numba", fmax_spread=0.05, growth=law,
                     lattice=lattice, breakers=breakers, threads=threads)
     sim.build().backend.block = block
-    sim.run(Stop(until_time=4.0))
+    sim.run(Stop(until_time=until_time))
     return sim
 
 
@@ -121,29 +124,6 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
     _same(serial, shared)
 
 
-def _taking_back(threads: int, block: int, monkeypatch) -> tuple:
-    """Adaptive steps in long calls (no joins), so that the kernel takes each refused step back itself
-    (``numba_backend.IN_PLACE_STEPS``), from its copy of the bases before the step, at per-base radii;
-    and how many calls halved a step and went on."""
-    from bark.engine import kernels
-
-    law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
-    halved, take_steps = [], kernels.take_steps
-
-    def recording(call, plan):
-        result = take_steps(call, plan)
-        sizes = np.diff(np.r_[plan.ticks, result.ends])
-        halved.append(not call.undone and bool((np.diff(sizes) < 0).any()))
-        return result
-
-    monkeypatch.setattr(kernels, "take_steps", recording)
-    sim = build_sim(n_bases=2000, G=0.08, dt=0.3, seed=2, stepping="adaptive", backend="numba", fmax_spread=0.05,
-                    growth=law, threads=threads)
-    sim.build().backend.block = block
-    sim.run(Stop(until_time=6.0))
-    return sim, sum(halved)
-
-
 @pytest.mark.slow
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
 def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
@@ -152,11 +132,23 @@ def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
     (with the anchors, at per-base radii): the serial kernel's bits, breaks and steps.  Per-base radii
     only: the blocks' own pass is the serial kernel's (``tests/test_adaptive.py`` takes a refused step
     back at both kinds of radius), and each threaded kernel compiles for a minute or two."""
+    from bark.engine import kernels
+
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
-    (serial, _), (shared, halved) = (_taking_back(1, numba_backend.BLOCK, monkeypatch),
-                                     _taking_back(2, 16, monkeypatch))
+    halved, take_steps = [], kernels.take_steps
+
+    def recording(call, plan):
+        result = take_steps(call, plan)
+        halved.append(not call.undone and halved_inside(plan, result))
+        return result
+
+    monkeypatch.setattr(kernels, "take_steps", recording)
+    long_calls = Lattice(n_bases=2000, jitter=0.05)  # no joins: the kernel takes refused steps back itself
+    serial = _threaded(1, numba_backend.BLOCK, "bulge", long_calls, until_time=6.0)
+    halved.clear()
+    shared = _threaded(2, 16, "bulge", long_calls, until_time=6.0)
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
-    assert halved > 0 and shared.n_broken > 20  # refused steps taken back inside calls that went on
+    assert any(halved) and shared.n_broken > 20  # refused steps taken back inside calls that went on
     _same(serial, shared)
     assert serial.step_count == shared.step_count
 
