@@ -109,7 +109,7 @@ def test_adaptive_numpy_and_numba_agree(make_sim):
 
 def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monkeypatch):
     """A call allowed only a few steps (bases joining every 0.1 time units end many) is replayed up to
-    a refused step, its bases never copied every step (``IN_PLACE_STEPS``): the same bits as the numpy
+    a refused step, not taken back in the call (``IN_PLACE_STEPS``): the same bits as the numpy
     backend."""
     from bark.engine import kernels
     from bark.engine.kernels.numba_backend import IN_PLACE_STEPS
@@ -143,8 +143,9 @@ def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monk
 
 @pytest.mark.parametrize("bulged", [False, True])
 def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, monkeypatch, bulged):
-    """Under adaptive stepping the numba kernel takes a refused step back from its copy of the bases
-    before it (the anchors too, where the radius depends on height), halves it and goes on: the
+    """Under adaptive stepping the numba kernel takes a refused step back — at a uniform radius by not
+    taking the buffer it wrote the step into, where the radius depends on height from its copy of
+    the bases and anchors before it — halves it and goes on: the
     same bits, steps and breaks as the numpy backend, which ends the call there and replays it up
     to that step."""
     from bark.engine import kernels

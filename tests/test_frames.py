@@ -93,15 +93,17 @@ def test_positions_changed_between_calls_are_seen():
 JOINING = Lattice(n_bases=2000, n_start=1500, join_rate=150.0, join_every=0.1, jitter=0.05)
 
 
-def _threaded(threads: int, block: int, growth: str, lattice: Lattice = JOINING, until_time: float = 4.0):
-    """Bases joining (on ``JOINING``) and springs breaking — in the kernel (threshold, adaptive steps,
-    per-base radii) or in Python (probabilistic, fixed steps) — with the kernel's loops in blocks of
-    ``block``."""
-    if growth == "bulge":
-        law = BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
+def _threaded(threads: int, block: int, growth: str, lattice: Lattice = JOINING, until_time: float = 4.0,
+              in_kernel: bool | None = None):
+    """Bases joining (on ``JOINING``) and springs breaking — in the kernel (threshold, adaptive steps;
+    by default at per-base radii, ``growth`` "bulge") or in Python (probabilistic, fixed steps; by
+    default at a uniform radius, "sqrt") — with the kernel's loops in blocks of ``block``."""
+    law = SqrtGrowth(G=0.08) if growth == "sqrt" else \
+        BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
+    if growth == "bulge" if in_kernel is None else in_kernel:
         breakers, stepping, dt = None, "adaptive", 0.3
     else:
-        law, breakers, stepping, dt = SqrtGrowth(G=0.08), [ProbabilisticBreaker()], "fixed", 0.05
+        breakers, stepping, dt = [ProbabilisticBreaker()], "fixed", 0.05
     sim = build_sim(G=0.08, dt=dt, seed=2, stepping=stepping, backend="numba", fmax_spread=0.05, growth=law,
                     lattice=lattice, breakers=breakers, threads=threads)
     sim.build().backend.block = block
@@ -126,12 +128,14 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
-def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
-    """The threaded kernel's base pass (``_base_pass``), in blocks of 16 shared between two threads,
-    copies each block's bases before it moves them, and a refused step is taken back from those copies
-    (with the anchors, at per-base radii): the serial kernel's bits, breaks and steps.  Per-base radii
-    only: the blocks' own pass is the serial kernel's (``tests/test_adaptive.py`` takes a refused step
-    back at both kinds of radius), and each threaded kernel compiles for a minute or two."""
+@pytest.mark.parametrize("growth", ["sqrt", "bulge"])
+def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, growth):
+    """The threaded kernel's passes, in blocks of 16 shared between two threads, ready to take a step
+    back: at a uniform radius the base pass writes each block into the second buffer and the spring
+    pass reads the positions there, a refused step left untaken; at per-base radii the base pass
+    copies each block's bases and anchors before it moves them, and a refused step is taken back
+    from those copies — the serial kernel's bits, breaks and steps.  Slow: each threaded kernel
+    compiles for a minute or two."""
     from bark.engine import kernels
 
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
@@ -144,9 +148,9 @@ def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
 
     monkeypatch.setattr(kernels, "take_steps", recording)
     long_calls = Lattice(n_bases=2000, jitter=0.05)  # no joins: the kernel takes refused steps back itself
-    serial = _threaded(1, numba_backend.BLOCK, "bulge", long_calls, until_time=6.0)
+    serial = _threaded(1, numba_backend.BLOCK, growth, long_calls, until_time=6.0, in_kernel=True)
     halved.clear()
-    shared = _threaded(2, 16, "bulge", long_calls, until_time=6.0)
+    shared = _threaded(2, 16, growth, long_calls, until_time=6.0, in_kernel=True)
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
     assert any(halved) and shared.n_broken > 20  # refused steps taken back inside calls that went on
     _same(serial, shared)

@@ -110,11 +110,14 @@ def _no_flow(length, rest, own, q, h, params):
 
 
 IN_PLACE_STEPS = 8
-"""Steps a call must be allowed to take before a step adaptive stepping refuses is taken back from a
-copy (kept of every step's bases) rather than by replaying the call to it.  A replay costs the
-steps before the refused one, at most ``Plan.n − 1``, and only when a step is refused; the copy
-costs a pass over the bases every step.  Calls of a few steps (the whole tree's, ended by every
-join) replay; long calls (a trunk segment's, up to 128 steps) copy.  The bits are the same."""
+"""Steps a call must be allowed to take before a step adaptive stepping refuses is taken back in the
+call rather than by replaying the call to it.  A replay costs the steps before the refused one, at
+most ``Plan.n − 1``, and only when a step is refused.  Taken back in the call, with a uniform radius
+each step is written into the other of two buffers (the state before it left in the one it is read
+from), which costs a copy into the state's vectors at the end of a call that ends in the other one;
+with a radius that depends on height each step's bases are first copied (a pass over them every
+step).  Calls of a few steps (the whole tree's, ended by every join) replay; long calls (a trunk
+segment's, up to 128 steps) take back in the call.  The bits are the same."""
 
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
@@ -315,21 +318,23 @@ def _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, loads, br
 
 
 @inline
-def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
+def _step_split(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
                 block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
     """One step (``move``; without, only the forces of the bases from ``first`` on as they are, added
     into ``f``: the step's spring pass without its base pass, its loads or its breaks): the base pass over
-    every base (``_base_pass``, its numbers ``motion``, a block at a time by ``base_block``), then the
-    spring pass over every spring, each a block at a time, the blocks shared among threads (the
-    parallel kernel's).  Returns ``(bases finite, largest load, tensions finite, log length, whether
+    every base (``_base_pass``, its numbers ``motion``, a block at a time by ``base_block``), from
+    ``bases`` into ``to`` (the kernel's other buffer, or vectors of ``bases``' own: ``_base_pass``), then
+    the spring pass over every spring, on the positions in ``to``, each a block at a time, the blocks
+    shared among threads (the parallel kernel's).  Returns ``(bases finite, largest load, tensions
+    finite, log length, whether
     the rule picked a spring)``."""
     c, b, hm, h, t, ip, q, r_now, r_before, from_radius = motion
     log_id, log_step, log_t = log
     finite = True
     if move:
-        finite = _base_pass(bases, c, b, hm, h, t, update, ip, radii, q, r_now, r_before, from_radius, heights, block,
-                            prev, save, base_block)
-    x, f = (bases[0], bases[1], bases[2]), (bases[6], bases[7], bases[8])
+        finite = _base_pass(bases, to, c, b, hm, h, t, update, ip, radii, q, r_now, r_before, from_radius, heights,
+                            block, prev, save, base_block)
+    x, f = (to[0], to[1], to[2]), (bases[6], bases[7], bases[8])
     top, springs_finite, n_log, picked = _spring_pass(x, runs, rest, k, live, fmax, inv_fmax, own, f, work, move,
                                                       breaking and move, rule, load, bp, log_id, log_step, log_t, n_log,
                                                       step, block, law, flow, resin, first)
@@ -337,7 +342,7 @@ def _step_split(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, fir
 
 
 @inline
-def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
+def _step_fused(bases, to, runs, rest, k, live, fmax, inv_fmax, own, work, move, first, motion, update, radii, heights,
                 block, prev, save, breaking, rule, load, bp, log, n_log, step, law, flow, resin, base_block):
     """``_step_split`` on one thread, the same bits, in one sweep over blocks of bases: a block's
     forces are gathered as soon as the springs that reach it are made, and those springs are made as
@@ -352,7 +357,8 @@ def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, fir
     the split pass's; the backend sorts it by step and spring id)."""
     c, b, hm, h, t, ip, q, r_now, r_before, from_radius = motion
     log_id, log_step, log_t = log
-    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    x0, x1, x2, f0, f1, f2 = to[0], to[1], to[2], bases[6], bases[7], bases[8]  # the springs' ends: where the
+    # base pass leaves the positions
     r_start, r_len, r_i, r_o = runs
     n, runs_n = x0.shape[0], r_start.shape[0]
     reach = 0
@@ -375,7 +381,7 @@ def _step_fused(bases, runs, rest, k, live, fmax, inv_fmax, own, work, move, fir
     for blk in range(first // block, _blocks(n, block)):
         lo, hi = max(first, blk * block), min(n, (blk + 1) * block)
         while moved < min(n, hi + reach):  # the base pass, ahead of the springs that reach this block
-            bad += base_block(bases, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, r_now,
+            bad += base_block(bases, to, moved, min(n, moved + block), c, b, hm, h, t, update, ip, radii, q, r_now,
                               r_before, from_radius, heights, prev, save)
             moved = min(n, moved + block)
         for r in range(runs_n):
@@ -464,8 +470,8 @@ def _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip):
 
 
 @inline
-def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights, block, prev,
-               save, base_block):
+def _base_pass(bases, to, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights, block,
+               prev, save, base_block):
     """One step of every base on the spring forces in ``f`` (zeroed as consumed): the total force
     (eq. 4), the integrator's update, the surface constraint (eq. 9: radially onto the trunk, radial
     velocity removed), the anchors moved with the surface.  With a uniform radius, after a call's first
@@ -477,33 +483,38 @@ def _base_pass(bases, c, b, hm, h, t, update, ip, radii, params, r_now, r_before
     A block of bases at a time (``base_block``: ``_uniform_block`` or ``_height_block``, the one the
     growth part's radius calls for, bound in the kernel's module so that only it is compiled), shared
     among threads in a parallel kernel, each block on slices of the vectors, one coordinate per
-    vector, so its loops run in SIMD lanes.  With ``save`` each block's positions and velocities (and
-    anchors, where the radius depends on height) are first copied into ``prev``, while the block is
-    in cache, so that the step can be taken back."""
+    vector, so its loops run in SIMD lanes.  With ``save`` the step can be taken back: with a uniform
+    radius the bases are read from ``bases`` and their new positions and velocities written into
+    ``to`` (the kernel's other buffer), which leaves ``bases`` as they were; with a radius that depends
+    on height each block's positions, velocities and anchors are first copied into ``prev``, while
+    the block is in cache, and moved in place (``to`` unused).  Without, the bases move in place."""
     n = bases[0].shape[0]
     block_bad = np.zeros(_blocks(n, block), np.int64)
     for blk in prange(_blocks(n, block)):
-        block_bad[blk] = base_block(bases, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip, radii,
-                                    params, r_now, r_before, from_radius, heights, prev, save)
+        block_bad[blk] = base_block(bases, to, blk * block, min(n, (blk + 1) * block), c, b, hm, h, t, update, ip,
+                                    radii, params, r_now, r_before, from_radius, heights, prev, save)
     return block_bad.sum() == 0
 
 
 @inline
-def _uniform_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights,
-                   prev, save):
+def _uniform_block(bases, to, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius,
+                   heights, prev, save):
     """``_base_pass`` on the bases ``lo .. hi``, for a radius that does not depend on height (which
-    leaves the anchors as they are until the call ends); returns how many went non-finite."""
-    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    leaves the anchors as they are until the call ends), into ``to`` with ``save``, else in place;
+    returns how many went non-finite."""
+    here = _slices(bases, lo, hi)
     if save:
-        _copy_block((x0, x1, x2, v0, v1, v2), prev[:6], lo, hi)
-    return _uniform_radius(_slices(bases, lo, hi), c, b, hm, h, update, ip, r_now, r_before, from_radius)
+        return _uniform_radius(here, _slices(to, lo, hi), c, b, hm, h, update, ip, r_now, r_before, from_radius)
+    # in place, one set of slices: two views of the same vectors fail the compiler's run-time overlap check,
+    # and the loop runs one base at a time
+    return _uniform_radius(here, here, c, b, hm, h, update, ip, r_now, r_before, from_radius)
 
 
 @inline
-def _height_block(bases, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius, heights,
-                  prev, save):
-    """``_base_pass`` on the bases ``lo .. hi``, for a radius that depends on height; returns how
-    many went non-finite."""
+def _height_block(bases, to, lo, hi, c, b, hm, h, t, update, ip, radii, params, r_now, r_before, from_radius,
+                  heights, prev, save):
+    """``_base_pass`` on the bases ``lo .. hi``, for a radius that depends on height, in place (``to``
+    unused: written into other vectors, its loops ran slower); returns how many went non-finite."""
     weights, stride, spans = heights
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
     if save:
@@ -521,27 +532,30 @@ def _slices(bases, lo, hi):
 
 
 @inline
-def _uniform_radius(bases, c, b, hm, h, update, ip, r_now, r_before, from_radius):
-    """``_base_pass`` on a block, for a radius that does not depend on height; returns how many bases
-    went non-finite."""
+def _uniform_radius(bases, to, c, b, hm, h, update, ip, r_now, r_before, from_radius):
+    """``_base_pass`` on a block, for a radius that does not depend on height, from ``bases`` into
+    ``to`` (the same slices, or another buffer's); returns how many bases went non-finite."""
     x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    y0, y1, y2, w0, w1, w2 = to[0], to[1], to[2], to[3], to[4], to[5]
+    # the anchors: r_before times the directions, or as they are (times 1.0: the same bits), chosen once, so
+    # that the loop reads one vector an axis (a choice per base reads both, and a loop that writes vectors
+    # other than those it reads then has too many to check for overlap to run in SIMD lanes)
+    s, wx, wy = (r_before, dx, dy) if from_radius else (1.0, ax, ay)
     bad = 0
     for q in range(x0.shape[0]):
-        anchor_x = r_before * dx[q] if from_radius else ax[q]
-        anchor_y = r_before * dy[q] if from_radius else ay[q]
-        px, py, pz, u0, u1, u2 = _moved(bases, q, anchor_x, anchor_y, c, b, hm, h, update, ip)
+        px, py, pz, u0, u1, u2 = _moved(bases, q, s * wx[q], s * wy[q], c, b, hm, h, update, ip)
         r = r_now
         scale = _surface_scale(px, py, r)
         px *= scale
         py *= scale
-        x0[q] = px
-        x1[q] = py
-        x2[q] = pz
+        y0[q] = px
+        y1[q] = py
+        y2[q] = pz
         bad += not abs(px + py + pz) < np.inf  # NaN or inf in any coordinate shows here
         vr = _radial_speed(u0, u1, px, py, 1.0 / (r * r))
-        v0[q] = u0 - vr * px
-        v1[q] = u1 - vr * py
-        v2[q] = u2
+        w0[q] = u0 - vr * px
+        w1[q] = u1 - vr * py
+        w2[q] = u2
     return bad
 
 
@@ -649,10 +663,15 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
 
     ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
     step is replayed from them), and, when the last step is accepted, receives the positions it ends
-    with (for the next call's comparison); its last nine vectors, where adaptive stepping may refuse
-    a step, the resin does not flow and the call may take more than ``IN_PLACE_STEPS`` steps, the
-    bases before each step, so that a refused step is taken back here at the cost of a copy a step
-    instead of a replay of the call (its breaks undone).  Where the step may still be halved it is
+    with (for the next call's comparison).  Where adaptive stepping may refuse a step, the resin does
+    not flow and the call may take more than ``IN_PLACE_STEPS`` steps, a refused step is taken back
+    here (its breaks undone) instead of by a replay of the call.  ``start``'s vectors from the tenth on
+    then serve: with a uniform radius, its first six are the second of two buffers of positions and
+    velocities (``_joined``), each step read from one and written into the other and taken when it is
+    kept, a refused one taken back by not taking it, and a call that ends in the second buffer copies
+    it into the state's vectors; with a radius that depends on height, they receive each step's bases
+    (and anchors) before it moves them in place, and a refused step is copied back from them
+    (``_take_back``).  Where the step may still be halved it is
     halved and the call goes on, the forces of the bases made again by the pass that begins a
     call; else the call ends, its steps those before it (the forces in ``f`` are then the refused
     step's, and the next call makes them again).
@@ -670,10 +689,16 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     size = 1 << (levels - halvings)
     h, hm, accept_load, report_load = _step_of(size, h_min, m, over, halvings, levels)
     log_id, log_step, log_t = log
-    # a step adaptive stepping may refuse is taken back from a copy of the state before it (a resin
-    # that flows changes its springs too: that call is replayed from its start by the caller instead)
+    # a step adaptive stepping may refuse is taken back here (a resin that flows changes its springs too: that
+    # call is replayed from its start by the caller instead): with a uniform radius by not taking it (each step
+    # written into the other of two buffers), else from a copy of the bases before it
     in_place = over < np.inf and levels > 0 and not evolve and ends.shape[0] > IN_PLACE_STEPS
+    apart = in_place and uniform  # two buffers
     prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
+    here = (x0, x1, x2, v0, v1, v2)  # the state's positions and velocities
+    cur = here  # the buffer holding them now
+    nxt = prev[:6] if apart else here  # the one a step writes into
+    flipped = False  # whether the state is in the other buffer
     if not _kept_and_started(bases, start, kept, block):
         fresh = 0
     remake = fresh < x0.shape[0]  # the forces of the bases from ``fresh`` on made again, in the loop (one place)
@@ -702,10 +727,11 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
         from_radius = uniform and done > 0  # (outside the call: numba takes no branch among its arguments)
         resin = (rp, h, evolve and step)
         motion = (c, b, hm, h, t, ip, q, r_now, r_before, from_radius)
+        now = _joined(cur, bases)
         finite, top, springs_finite, n_log, picked = step_pass(  # one place for it, so that it is compiled once
-            bases, runs, rest, k, live, fmax, inv_fmax, own, work, step, 0 if step else fresh, motion, update, radii,
-            heights, block, prev, in_place, breaking, rule, load, bp, log, n_log, done + 1, law, flow, resin,
-            base_block)
+            now, _joined(nxt, bases) if step else now, runs, rest, k, live, fmax, inv_fmax, own, work, step,
+            0 if step else fresh, motion, update, radii, heights, block, prev, in_place, breaking, rule, load, bp, log,
+            n_log, done + 1, law, flow, resin, base_block)
         if remake:
             remake = False
             continue
@@ -720,10 +746,14 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             ends[done] = ticks
             done += 1
             tried = 0
-        elif in_place:  # refused: the step taken back, from the copy of the bases before it
-            if uniform:
-                _take_back(prev[:6], (x0, x1, x2, v0, v1, v2), live, log_id[before:n_log])
-            else:
+            if apart:  # the step taken: the buffer it was written into holds the state
+                cur, nxt = nxt, cur
+                flipped = not flipped
+        elif in_place:  # refused: the step taken back (its breaks undone)
+            if apart:  # by not taking the buffer it was written into
+                for spring in log_id[before:n_log]:
+                    live[spring] = True
+            else:  # from the copy of the bases before it
                 _take_back(prev, (x0, x1, x2, v0, v1, v2, ax, ay, az), live, log_id[before:n_log])
             n_log = before
             r_before = r_kept
@@ -748,6 +778,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
             break
     done += tried  # a refused last step the state still holds counts (the caller replays the call to it)
     clock[0], clock[1] = ticks, halvings
+    if flipped:  # the state in the other buffer: into the state's vectors
+        _copy_blocks(cur, here, 0, block)
     if uniform and done > 0:  # the anchors at the last step's radius (the same products as above)
         for q in range(ax.shape[0]):
             ax[q] = r_before * dx[q]
@@ -780,6 +812,13 @@ def _kept_and_started(bases, start, kept, block):
         same = same & block_same[blk]
     _copy_blocks((x0, x1, x2), start[:3], kept if same else 0, block)
     return same
+
+
+@inline
+def _joined(xv, bases):
+    """The 14 base vectors ``bases`` with the positions and velocities of the buffer ``xv``."""
+    x0, x1, x2, v0, v1, v2, f0, f1, f2, ax, ay, az, dx, dy = bases
+    return (xv[0], xv[1], xv[2], xv[3], xv[4], xv[5], f0, f1, f2, ax, ay, az, dx, dy)
 
 
 @jit
