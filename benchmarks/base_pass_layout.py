@@ -2,11 +2,12 @@
 
     python benchmarks/base_pass_layout.py [--n 3000] [--sweeps 5000] [--rounds 5] [--offset 0]
 
-Adaptive stepping takes a refused step back from a copy of the bases made before every step
-(``numba_backend.IN_PLACE_STEPS``).  Two buffers would spare that copy: each step read from one and
-written into the other, and a refused step left untaken.  That pays only if the base pass's loop
-stays as fast once the vectors it writes are not those it reads.  The compiler cannot know they do
-not overlap, so it checks at run time and takes its vectorised loop where they do not.
+To take a refused step back in a long call (``numba_backend.IN_PLACE_STEPS``), adaptive stepping
+at a uniform radius reads each step from one of two buffers and writes it into the other, leaving
+a refused step untaken; at per-base radii it copies the bases before every step.  Two buffers pay
+only if the base pass's loop stays as fast once the vectors it writes are not those it reads.  The
+compiler cannot know they do not overlap, so it checks at run time and takes its vectorised loop
+where they do not.
 
 This script times the base pass's arithmetic (the forces of eq. 4, Euler–Cromer, the surface
 constraint, the finiteness count), compiled with the kernel's options, on three layouts:
