@@ -192,8 +192,8 @@ class Call:
     """One call of :meth:`Backend.steps` as a backend computes it; :func:`take_steps` drives it."""
 
     undone = False
-    """Whether the last :meth:`take` took its last step back itself (from a copy of the state before
-    it), so that no replay is needed."""
+    """Whether the last :meth:`take` took its last step back itself (the state before it kept: the
+    numba kernel's second buffer or copy), so that no replay is needed."""
     refused = False
     """Whether the last :meth:`take`'s last step was refused (``Plan.over`` at the clock's halvings
     then, or non-finite)."""
@@ -217,8 +217,8 @@ class Call:
 
 def take_steps(call: Call, plan: Plan) -> Steps:
     """The one step algorithm: the call's steps; a last step that is refused (over the load the
-    clock accepts where it was taken, or non-finite) is taken back — by the call itself, from a copy
-    of the state before it (``Call.undone``), or by replaying the call up to it from its start —
+    clock accepts where it was taken, or non-finite) is taken back — by the call itself, which kept
+    the state before it (``Call.undone``), or by replaying the call up to it from its start —
     exact either way, because a step's arithmetic does not depend on where calls begin and end."""
     done, load, picked = call.take(plan.n)
     refused = call.refused
