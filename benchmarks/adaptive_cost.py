@@ -18,17 +18,15 @@ checkouts' final states are the same to the bit.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from first_run import linked  # noqa: E402
+from first_run import linked, worker_records  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -65,14 +63,7 @@ print(json.dumps({"fixed": min(ns["fixed"]), "adaptive": min(ns["adaptive"]), "s
 
 def worker(code: Path | None, args: argparse.Namespace, links: Path) -> dict:
     """One worker process on ``code`` (``None``: this checkout as installed): its record."""
-    env = dict(os.environ)
-    if code is not None:
-        env["PYTHONPATH"] = str(links)
-    done = subprocess.run([sys.executable, "-c", WORKER, str(args.n_bases), args.case, str(args.steps)],
-                          capture_output=True, text=True, env=env, cwd=tempfile.gettempdir())
-    if done.returncode != 0:
-        raise SystemExit(f"worker on {code or 'this checkout'} failed: {done.stderr.strip()[-2000:]}")
-    return next(json.loads(line) for line in done.stdout.splitlines() if line.startswith("{"))
+    return worker_records(code, links, WORKER, str(args.n_bases), args.case, str(args.steps))[0]
 
 
 def main() -> None:

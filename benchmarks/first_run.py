@@ -18,6 +18,7 @@ workers, a shell loop), its wall until the last ends and its CPU theirs summed; 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import subprocess
@@ -60,6 +61,21 @@ def linked(checkout: Path, folder: Path) -> Path:
     for name, part in (("bark", "bark"), ("bark_plugins", "plugins"), ("bark_cli", "cli")):
         (folder / name).symlink_to(checkout.resolve() / part)
     return folder
+
+
+def worker_records(code: Path | None, links: Path, source: str, *argv: str) -> list[dict]:
+    """The JSON records (the lines that begin with ``{``) printed by the Python ``source``, run as
+    ``python -c source argv...`` in a process of its own, from the temporary folder, on ``code``
+    (``None``: this checkout as installed; else that checkout's packages, linked in ``links``): the
+    warm workers of every script here that times code inside a process."""
+    env = dict(os.environ)
+    if code is not None:  # the other checkout's packages under the names the installed ones have
+        env["PYTHONPATH"] = str(links)
+    done = subprocess.run([sys.executable, "-c", source, *argv], capture_output=True, text=True, env=env,
+                          cwd=tempfile.gettempdir())
+    if done.returncode != 0:
+        raise SystemExit(f"worker on {code or 'this checkout'} failed: {done.stderr.strip()[-2000:]}")
+    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
 
 
 def first_and_warm(code: Path | None, scene: str, links: Path, tmp: Path, extra: tuple[str, ...] = (),

@@ -23,13 +23,12 @@ import json
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from first_run import linked  # noqa: E402
+from first_run import linked, worker_records  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -93,14 +92,7 @@ for seed in seeds:
 
 def worker(code: Path | None, scene: str, seeds: list[int], links: Path) -> list[dict]:
     """One worker process on ``code`` (``None``: this checkout as installed): its runs' records."""
-    env = dict(os.environ)
-    if code is not None:  # the other checkout's packages under the names the installed ones have
-        env["PYTHONPATH"] = str(links)
-    done = subprocess.run([sys.executable, "-c", WORKER, scene, ",".join(map(str, seeds))], capture_output=True,
-                          text=True, env=env, cwd=tempfile.gettempdir())
-    if done.returncode != 0:
-        raise SystemExit(f"worker on {code or 'this checkout'} failed: {done.stderr.strip()[-2000:]}")
-    return [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    return worker_records(code, links, WORKER, scene, ",".join(map(str, seeds)))
 
 
 def main() -> None:
