@@ -100,7 +100,9 @@ def _threaded(threads: int, block: int, growth: str, lattice: Lattice = JOINING,
     default at a uniform radius, "sqrt") — with the kernel's loops in blocks of ``block``."""
     law = SqrtGrowth(G=0.08) if growth == "sqrt" else \
         BulgeGrowth(base=SqrtGrowth(G=0.08), bulges=[Bulge(z=0.4, half_width=0.2, magnitude=0.01, G=0.03)])
-    if growth == "bulge" if in_kernel is None else in_kernel:
+    if in_kernel is None:
+        in_kernel = growth == "bulge"
+    if in_kernel:
         breakers, stepping, dt = None, "adaptive", 0.3
     else:
         breakers, stepping, dt = [ProbabilisticBreaker()], "fixed", 0.05
