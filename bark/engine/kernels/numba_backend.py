@@ -1758,8 +1758,9 @@ class _Frame:
     work: tuple
     start: tuple
     """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
-    from them; after an accepted call, x is the positions it ended with.  Then those of the bases
-    before the last step (a refused step is taken back from them)."""
+    from them; after an accepted call, x is the positions it ended with.  Then, for a call that takes
+    a refused step back itself (``IN_PLACE_STEPS``), the kernel's second buffer of x and v (a uniform
+    radius), or the bases and anchors before the last step (per-base radii)."""
     log: tuple
     start_columns: tuple = ()
     """``start`` as the kernel takes it: one vector per coordinate (made with the views)."""
@@ -1967,7 +1968,8 @@ class NumbaBackend(Backend):
                     *(a[:, i] for i in range(3)), d[:, 0], d[:, 1])
         longest = int(fr.runs[1].max(initial=1))
         fr.work = (*(self._space(f"work{i}", (longest,)) for i in range(5)), self._space("picks", (longest,), np.bool_))
-        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(6))  # the call's start, the last step's
+        fr.start = tuple(self._space(f"start{i}", (n, 3)) for i in range(6))  # the call's start; then the second
+        # buffer or the last step's copy (``_Frame.start``)
         fr.start_columns = tuple(a[:, i] for a in fr.start for i in range(3))
         fr.log = (self._space("log_id", (m,), np.int64), self._space("log_step", (m,), np.int64), self._space("log_t", (m,)))
 
