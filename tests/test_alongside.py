@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
@@ -226,7 +227,10 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     from the cache (the types the compile was given are the call's, the helpers made jitable: no
     compile of its own) — in blocks of 16 bases or springs shared between two threads, to the bits
     of the serial kernel in its usual blocks (``tests/test_frames.py`` checks this of a uniform
-    radius, breaks judged in Python; here per-base radii and breaks in the kernel)."""
+    radius, breaks judged in Python; here per-base radii and breaks in the kernel): with bases
+    joining, and in long calls without joins, where the threaded base pass copies each block before
+    it moves it and a refused step is taken back from those copies inside the call (some calls
+    halve a step and go on).  The threaded kernel is this test's, compiled once for both."""
     (tmp_path / "scene.toml").write_text(SCENE)
     env = _env(tmp_path)
     done = subprocess.run([sys.executable, "-m", "bark_cli", "compile", str(tmp_path / "scene.toml")], cwd=tmp_path,
@@ -237,32 +241,56 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
     timed = json.loads((tmp_path / "bark-cache" / "kernels" / "compile-seconds.json").read_text())
     assert set(timed) == {"serial", "threaded"} and min(timed.values()) > 0, timed  # what the next notices say
     check = textwrap.dedent(f"""
-        import json
+        import json, sys
         import numpy as np
         from bark import Stop
+        from bark.engine import kernels
         from bark.engine.scene import Scene, merge, read_toml
+        sys.path.insert(0, {str(Path(__file__).parent)!r})
+        from conftest import halved_inside
         data = read_toml({str(tmp_path / 'scene.toml')!r})
-        shared = Scene.from_dict(data).simulation()
-        shared.build().backend.block = 16
-        shared.run(Stop(until_time=4.0))
-        serial = Scene.from_dict(merge(data, {{"run": {{"threads": 1}}}})).simulation()
-        serial.run(Stop(until_time=4.0))
+
+        def pair(data, until):
+            shared = Scene.from_dict(data).simulation()
+            shared.build().backend.block = 16
+            shared.run(Stop(until_time=until))
+            serial = Scene.from_dict(merge(data, {{"run": {{"threads": 1}}}})).simulation()
+            serial.run(Stop(until_time=until))
+            return shared, serial
+
+        def same(shared, serial):
+            return [name for name in ("x", "v", "anchor", "intact", "rest", "fmax")
+                    if np.array_equal(getattr(shared.state, name), getattr(serial.state, name))]
+
+        shared, serial = pair(data, 4.0)
+        halved, take_steps = [], kernels.take_steps
+
+        def recording(call, plan):
+            result = take_steps(call, plan)
+            halved.append(not call.undone and halved_inside(plan, result))
+            return result
+
+        kernels.take_steps = recording  # long calls: no joins, so that the kernel takes refused steps back itself
+        long_shared, long_serial = pair(merge(data, {{"lattice": {{"n_start": 2000}}}}), 6.0)
         from bark.engine.kernels import numba_backend
         threaded = [k for k in numba_backend._SPECIALIZED.values() if k.targetoptions.get("parallel")]
         print(json.dumps({{"threads": (shared.backend.threads, serial.backend.threads), "kernels": len(threaded),
                            "hits": sum(k.stats.cache_hits.get(s, 0) for k in threaded for s in k.stats.cache_hits),
                            "misses": sum(k.stats.cache_misses.get(s, 0) for k in threaded for s in k.stats.cache_misses),
-                           "same": [name for name in ("x", "v", "anchor", "intact", "rest", "fmax")
-                                    if np.array_equal(getattr(shared.state, name), getattr(serial.state, name))],
-                           "broken": shared.n_broken, "joined": shared.state.n_bases > 1500}}))
+                           "same": same(shared, serial), "broken": shared.n_broken, "joined": shared.state.n_bases > 1500,
+                           "long_same": same(long_shared, long_serial) if long_shared.step_count == long_serial.step_count
+                           else "steps differ", "long_broken": long_shared.n_broken, "halved": any(halved),
+                           "long_threads": (long_shared.backend.threads, long_serial.backend.threads)}}))
     """)
     later = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert later.returncode == 0, later.stderr
     got = json.loads(later.stdout.splitlines()[-1])
     assert got["broken"] > 100 and got["joined"], got  # breaks, and joins, happened
-    del got["broken"], got["joined"]
-    assert got == {"threads": [2, 1], "kernels": 1, "hits": 1, "misses": 0,
-                   "same": ["x", "v", "anchor", "intact", "rest", "fmax"]}, (got, later.stderr)
+    assert got["long_broken"] > 20 and got["halved"], got  # refused steps taken back inside calls that went on
+    del got["broken"], got["joined"], got["long_broken"], got["halved"]
+    every = ["x", "v", "anchor", "intact", "rest", "fmax"]
+    assert got == {"threads": [2, 1], "kernels": 1, "hits": 1, "misses": 0, "same": every,
+                   "long_same": every, "long_threads": [2, 1]}, (got, later.stderr)
 
 
 def _alive(pid: int) -> bool:

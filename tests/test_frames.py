@@ -130,14 +130,13 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
-@pytest.mark.parametrize("growth", ["sqrt", "bulge"])
-def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, growth):
+def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
     """The threaded kernel's passes, in blocks of 16 shared between two threads, ready to take a step
-    back: at a uniform radius the base pass writes each block into the second buffer and the spring
-    pass reads the positions there, a refused step left untaken; at per-base radii the base pass
-    copies each block's bases and anchors before it moves them, and a refused step is taken back
-    from those copies — the serial kernel's bits, breaks and steps.  Slow: each threaded kernel
-    compiles for a minute or two."""
+    back at a uniform radius: the base pass writes each block into the second buffer, the spring
+    pass reads the positions there, and a refused step is left untaken — the serial kernel's bits,
+    breaks and steps.  At per-base radii (the base pass copies each block before it moves it) the
+    same is checked by ``tests/test_alongside.py``'s ``bark compile`` test, on the threaded kernel it
+    compiles.  Slow: a threaded kernel compiles for a minute or two."""
     from bark.engine import kernels
 
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
@@ -150,9 +149,9 @@ def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, growth
 
     monkeypatch.setattr(kernels, "take_steps", recording)
     long_calls = Lattice(n_bases=2000, jitter=0.05)  # no joins: the kernel takes refused steps back itself
-    serial = _threaded(1, numba_backend.BLOCK, growth, long_calls, until_time=6.0, in_kernel=True)
+    serial = _threaded(1, numba_backend.BLOCK, "sqrt", long_calls, until_time=6.0, in_kernel=True)
     halved.clear()
-    shared = _threaded(2, 16, growth, long_calls, until_time=6.0, in_kernel=True)
+    shared = _threaded(2, 16, "sqrt", long_calls, until_time=6.0, in_kernel=True)
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
     assert any(halved) and shared.n_broken > 20  # refused steps taken back inside calls that went on
     _same(serial, shared)
