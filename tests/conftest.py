@@ -41,11 +41,64 @@ def slow_cases(*values) -> list:
     return [pytest.param(v, marks=pytest.mark.slow) for v in values]
 
 
-def halved_inside(plan, result) -> bool:
-    """Whether a kernel call (its ``Plan`` and ``Steps``) halved a step and went on: the sizes of the
-    steps it kept shrink somewhere."""
-    sizes = np.diff(np.r_[plan.ticks, result.ends])
-    return bool((np.diff(sizes) < 0).any())
+@attrs.frozen
+class KernelCall:
+    """One call of a backend's steps (``bark.engine.kernels.take_steps``), as :func:`recorded_calls`
+    keeps it: what it was asked (``plan``), what it did (``result``) and whether it took its refused
+    last step back itself (``undone``: the numba kernel's second buffer or copy)."""
+
+    plan: object
+    result: object
+    undone: bool
+
+    @property
+    def replayed(self) -> bool:
+        """Whether its refused last step was taken back by replaying the call up to it."""
+        return self.result.refused and not self.undone
+
+    @property
+    def sizes(self) -> np.ndarray:
+        """The sizes of the steps it kept, in ticks of the clock."""
+        return np.diff(np.r_[self.plan.ticks, self.result.ends])
+
+    @property
+    def halved(self) -> bool:
+        """Whether it halved a step and went on: the sizes of the steps it kept shrink somewhere."""
+        return bool((np.diff(self.sizes) < 0).any())
+
+    @property
+    def doubled(self) -> bool:
+        """Whether it doubled a step and went on: the sizes of the steps it kept grow somewhere."""
+        return bool((np.diff(self.sizes) > 0).any())
+
+
+@contextlib.contextmanager
+def recorded_calls():
+    """Every kernel call made inside the block, in order, in the list it yields (a test may clear it
+    between runs).  A plain context manager, so that a script a test runs in a process of its own
+    can record its calls too; in-process tests take the ``kernel_calls`` fixture."""
+    from bark.engine import kernels
+
+    calls: list[KernelCall] = []
+    take_steps = kernels.take_steps
+
+    def recording(call, plan):
+        result = take_steps(call, plan)
+        calls.append(KernelCall(plan, result, call.undone))
+        return result
+
+    kernels.take_steps = recording
+    try:
+        yield calls
+    finally:
+        kernels.take_steps = take_steps
+
+
+@pytest.fixture
+def kernel_calls():
+    """The test's kernel calls (:func:`recorded_calls`), recorded from here to the test's end."""
+    with recorded_calls() as calls:
+        yield calls
 
 
 def build_sim(

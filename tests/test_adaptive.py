@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from bark import Stop
 from bark.engine.kernels import Call
 from bark.errors import BarkError
-from conftest import build_sim, halved_inside
+from conftest import build_sim
 
 
 def _overshoots(sim) -> np.ndarray:
@@ -107,34 +107,22 @@ def test_adaptive_numpy_and_numba_agree(make_sim):
     np.testing.assert_allclose(runs["numpy"].state.x, runs["numba"].state.x, rtol=0, atol=1e-12)
 
 
-def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monkeypatch):
+def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, kernel_calls):
     """A call allowed only a few steps (bases joining every 0.1 time units end many) is replayed up to
     a refused step, not taken back in the call (``IN_PLACE_STEPS``): the same bits as the numpy
     backend."""
-    from bark.engine import kernels
     from bark.engine.kernels.numba_backend import IN_PLACE_STEPS
     from bark.model.lattice import Lattice
 
-    calls, replays = [], []
-    take_steps = kernels.take_steps
-
-    def recording(call, plan):
-        undo = call.undo
-        call.undo = lambda: (replays.append(plan.n), undo())[1]
-        result = take_steps(call, plan)
-        calls.append((plan.n, call.undone))
-        return result
-
-    monkeypatch.setattr(kernels, "take_steps", recording)
     lattice = Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
     runs = {}
     for backend in ("numpy", "numba"):
-        calls.clear()
-        replays.clear()
+        kernel_calls.clear()
         runs[backend] = make_sim(backend=backend, lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive")
         runs[backend].run(Stop(until_time=5.0))
-    assert all(not undone for n, undone in calls if n <= IN_PLACE_STEPS)
-    assert any(n <= IN_PLACE_STEPS for n in replays)  # refused steps of short calls there were, replayed
+    short = [c for c in kernel_calls if c.plan.n <= IN_PLACE_STEPS]  # the numba run's
+    assert not any(c.undone for c in short)
+    assert any(c.replayed for c in short)  # refused steps of short calls there were, replayed
     a, b = runs["numpy"], runs["numba"]
     assert a.n_broken > 20 and a.step_count == b.step_count
     for name in ("x", "v", "anchor", "intact"):
@@ -142,31 +130,21 @@ def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, monk
 
 
 @pytest.mark.parametrize("bulged", [False, True])
-def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, monkeypatch, bulged):
+def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, kernel_calls, bulged):
     """Under adaptive stepping the numba kernel takes a refused step back — at a uniform radius by not
     taking the buffer it wrote the step into, where the radius depends on height from its copy of
     the bases and anchors before it — halves it and goes on: the
     same bits, steps and breaks as the numpy backend, which ends the call there and replays it up
     to that step."""
-    from bark.engine import kernels
     from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 
-    taken_back = []
-    take_steps = kernels.take_steps
-
-    def recording(call, plan):
-        result = take_steps(call, plan)
-        taken_back.append(call.undone or halved_inside(plan, result))  # ended there, or halved and went on
-        return result
-
-    monkeypatch.setattr(kernels, "take_steps", recording)
     growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
     kw = dict(n_bases=300, G=0.05, dt=0.3, seed=3, stepping="adaptive", **({"growth": growth} if bulged else {}))
     runs = {}
     for backend in ("numpy", "numba"):
         runs[backend] = make_sim(backend=backend, **kw)
         runs[backend].run(Stop(until_time=8.0))
-    assert any(taken_back)
+    assert any(c.undone or c.halved for c in kernel_calls)  # ended there, or halved and went on
     a, b = runs["numpy"], runs["numba"]
     for name in ("x", "v", "anchor", "intact"):
         assert np.array_equal(getattr(a.state, name), getattr(b.state, name)), name
@@ -295,22 +273,15 @@ def test_one_rule_doubles_the_step(halvings, load, end_tick, size, doubled):
 
 
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_calls_that_double_the_step_inside_give_the_bits_of_one_step_calls(make_sim, backend):
+def test_calls_that_double_the_step_inside_give_the_bits_of_one_step_calls(make_sim, kernel_calls, backend):
     """The clock doubles a halved step inside a call and the call goes on (no call ends for it), and
     where the call takes a refused step back itself (numba's long calls) it halves it and goes on:
     the steps, their times and sizes, and so every bit, are those of a run whose calls take one step
     each (where the simulation's clock does everything)."""
     kw = dict(n_bases=400, G=0.05, dt=0.3, seed=3, stepping="adaptive", overshoot_tol=0.002, backend=backend)
     whole, single = make_sim(**kw).build(), make_sim(**kw)
-    sizes, steps = [], whole.backend.steps
-
-    def watching(state, mech, plan, tension):
-        result = steps(state, mech, plan, tension)
-        sizes.append(np.diff(np.r_[plan.ticks, result.ends]))  # the step sizes inside one call
-        return result
-
-    whole.backend.steps = watching
     whole.run(Stop(until_time=6.0))
+    calls = list(kernel_calls)  # the whole run's
     while single.state.t < whole.state.t - 1e-12:
         single.step()
     assert whole.step_count == single.step_count and whole.clock.ticks == single.clock.ticks
@@ -319,6 +290,6 @@ def test_calls_that_double_the_step_inside_give_the_bits_of_one_step_calls(make_
         assert np.array_equal(a, b)
     for key, a in whole.breaks.arrays().items():
         assert np.array_equal(a, single.breaks.arrays()[key]), key
-    assert sum((np.diff(s) > 0).any() for s in sizes) > 3  # calls that doubled the step and went on
-    halved_inside = sum((np.diff(s) < 0).any() for s in sizes)  # and that halved it and went on
-    assert halved_inside > 3 if backend == "numba" else halved_inside == 0
+    assert sum(c.doubled for c in calls) > 3  # calls that doubled the step and went on
+    halved = sum(c.halved for c in calls)  # and that halved it and went on
+    assert halved > 3 if backend == "numba" else halved == 0

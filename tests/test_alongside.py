@@ -244,10 +244,9 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
         import json, sys
         import numpy as np
         from bark import Stop
-        from bark.engine import kernels
         from bark.engine.scene import Scene, merge, read_toml
         sys.path.insert(0, {str(Path(__file__).parent)!r})
-        from conftest import halved_inside
+        from conftest import recorded_calls
         data = read_toml({str(tmp_path / 'scene.toml')!r})
 
         def pair(data, until):
@@ -263,15 +262,8 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
                     if np.array_equal(getattr(shared.state, name), getattr(serial.state, name))]
 
         shared, serial = pair(data, 4.0)
-        halved, take_steps = [], kernels.take_steps
-
-        def recording(call, plan):
-            result = take_steps(call, plan)
-            halved.append(not call.undone and halved_inside(plan, result))
-            return result
-
-        kernels.take_steps = recording  # long calls: no joins, so that the kernel takes refused steps back itself
-        long_shared, long_serial = pair(merge(data, {{"lattice": {{"n_start": 2000}}}}), 6.0)
+        with recorded_calls() as calls:  # long calls: no joins, so that the kernel takes refused steps back itself
+            long_shared, long_serial = pair(merge(data, {{"lattice": {{"n_start": 2000}}}}), 6.0)
         from bark.engine.kernels import numba_backend
         threaded = [k for k in numba_backend._SPECIALIZED.values() if k.targetoptions.get("parallel")]
         print(json.dumps({{"threads": (shared.backend.threads, serial.backend.threads), "kernels": len(threaded),
@@ -279,7 +271,8 @@ def test_bark_compile_waits_for_the_threaded_kernel_and_a_later_run_loads_both(t
                            "misses": sum(k.stats.cache_misses.get(s, 0) for k in threaded for s in k.stats.cache_misses),
                            "same": same(shared, serial), "broken": shared.n_broken, "joined": shared.state.n_bases > 1500,
                            "long_same": same(long_shared, long_serial) if long_shared.step_count == long_serial.step_count
-                           else "steps differ", "long_broken": long_shared.n_broken, "halved": any(halved),
+                           else "steps differ", "long_broken": long_shared.n_broken,
+                           "halved": any(c.halved and not c.undone for c in calls),
                            "long_threads": (long_shared.backend.threads, long_serial.backend.threads)}}))
     """)
     later = subprocess.run([sys.executable, "-c", check], cwd=tmp_path, env=env, capture_output=True, text=True)

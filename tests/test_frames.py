@@ -14,7 +14,7 @@ from bark.engine.kernels import numba_backend
 from bark.model.lattice import Lattice
 from bark_plugins.breakers import ProbabilisticBreaker
 from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
-from conftest import build_sim, halved_inside
+from conftest import build_sim
 
 
 def _run(n_start: int, breakers=None, stepping="adaptive"):
@@ -130,30 +130,20 @@ def test_threads_share_the_blocks_and_the_bits_stay_the_same(monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.skipif(numba_backend.numba.config.NUMBA_NUM_THREADS < 2, reason="numba may use one thread here")
-def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch):
+def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, kernel_calls):
     """The threaded kernel's passes, in blocks of 16 shared between two threads, ready to take a step
     back at a uniform radius: the base pass writes each block into the second buffer, the spring
     pass reads the positions there, and a refused step is left untaken — the serial kernel's bits,
     breaks and steps.  At per-base radii (the base pass copies each block before it moves it) the
     same is checked by ``tests/test_alongside.py``'s ``bark compile`` test, on the threaded kernel it
     compiles.  Slow: a threaded kernel compiles for a minute or two."""
-    from bark.engine import kernels
-
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
-    halved, take_steps = [], kernels.take_steps
-
-    def recording(call, plan):
-        result = take_steps(call, plan)
-        halved.append(not call.undone and halved_inside(plan, result))
-        return result
-
-    monkeypatch.setattr(kernels, "take_steps", recording)
     long_calls = Lattice(n_bases=2000, jitter=0.05)  # no joins: the kernel takes refused steps back itself
     serial = _threaded(1, numba_backend.BLOCK, "sqrt", long_calls, until_time=6.0, in_kernel=True)
-    halved.clear()
+    kernel_calls.clear()
     shared = _threaded(2, 16, "sqrt", long_calls, until_time=6.0, in_kernel=True)
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
-    assert any(halved) and shared.n_broken > 20  # refused steps taken back inside calls that went on
+    assert any(c.halved and not c.undone for c in kernel_calls) and shared.n_broken > 20  # refused steps taken back inside calls that went on
     _same(serial, shared)
     assert serial.step_count == shared.step_count
 

@@ -626,35 +626,25 @@ def test_nan_inside_a_quiet_chunk_leaves_last_finite_state(bad_step):
 
 
 @pytest.mark.parametrize("bad_step", [41, 30])
-def test_nan_inside_a_long_adaptive_call_leaves_the_numpy_backends_last_finite_state(bad_step, monkeypatch):
+def test_nan_inside_a_long_adaptive_call_leaves_the_numpy_backends_last_finite_state(bad_step, kernel_calls):
     """Adaptive steps at a uniform radius in one long call (no joins): the numba kernel reads each
     step from one of two buffers and writes it into the other, and takes a refused one back by not
     taking it.  A NaN radius met there is halved down to the smallest step, then refused for good:
     the simulation holds the last finite state, whichever buffer held it (an odd or even count of
     kept steps: two bad steps), to the bit of the numpy backend, which replays its calls instead."""
-    from bark.engine import kernels
-
     dt = 0.05
-    undone, take_steps = [], kernels.take_steps
-
-    def recording(call, plan):
-        result = take_steps(call, plan)
-        undone.append(call.undone)
-        return result
-
-    monkeypatch.setattr(kernels, "take_steps", recording)
     runs = {}
     for backend in ("numba", "numpy"):
-        undone.clear()
+        kernel_calls.clear()
         sim = Simulation(
             lattice=Lattice(n_bases=200), mechanics=Mechanics(f_max=NO_BREAKS),
             growth=_NaNRadiusAfter(t_bad=(bad_step - 0.5) * dt), integrator=EulerCromer(),
             breakers=[ThresholdBreaker()], seed=4, numerics=Numerics(dt=dt, backend=backend, stepping="adaptive"))
         with pytest.raises(NonFiniteStateError):
             sim.run(Stop(until_time=100.0))
-        runs[backend] = sim, list(undone)
+        runs[backend] = sim, list(kernel_calls)
     (a, calls), (b, _) = runs["numba"], runs["numpy"]
-    assert len(calls) == 1 and calls[0]  # one call, which took its refused step back itself
+    assert len(calls) == 1 and calls[0].undone  # one call, which took its refused step back itself
     assert a.step_count == b.step_count >= bad_step - 1 and a.state.t == b.state.t
     assert a.state.is_finite() and np.all(np.isfinite(a.state.anchor))
     for name in ("x", "v", "anchor", "intact"):
