@@ -107,22 +107,30 @@ def test_adaptive_numpy_and_numba_agree(make_sim):
     np.testing.assert_allclose(runs["numpy"].state.x, runs["numba"].state.x, rtol=0, atol=1e-12)
 
 
-def test_short_calls_replay_a_refused_step_and_give_the_same_bits(make_sim, kernel_calls):
-    """A call allowed only a few steps (bases joining every 0.1 time units end many) is replayed up to
-    a refused step, not taken back in the call (``IN_PLACE_STEPS``): the same bits as the numpy
-    backend."""
+@pytest.mark.parametrize("bulged", [False, True])
+def test_short_calls_take_a_refused_step_back_as_their_radius_asks_with_the_same_bits(make_sim, kernel_calls, bulged):
+    """A call allowed only a few steps (bases joining every 0.1 time units end many) takes a refused
+    step back itself at a uniform radius (two buffers: nothing is copied per step), and is replayed
+    up to it where the radius depends on height (taken back in the call, the bases would be copied
+    every step: ``IN_PLACE_STEPS``) — either way to the numpy backend's bits, which replays."""
     from bark.engine.kernels.numba_backend import IN_PLACE_STEPS
     from bark.model.lattice import Lattice
+    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 
     lattice = Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
-    runs = {}
+    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
+    runs, calls = {}, {}
     for backend in ("numpy", "numba"):
         kernel_calls.clear()
-        runs[backend] = make_sim(backend=backend, lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive")
+        runs[backend] = make_sim(backend=backend, lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive",
+                                 **({"growth": growth} if bulged else {}))
         runs[backend].run(Stop(until_time=5.0))
-    short = [c for c in kernel_calls if c.plan.n <= IN_PLACE_STEPS]  # the numba run's
-    assert not any(c.undone for c in short)
-    assert any(c.replayed for c in short)  # refused steps of short calls there were, replayed
+        calls[backend] = [c for c in kernel_calls if c.plan.n <= IN_PLACE_STEPS]  # the short ones
+    assert any(c.replayed for c in calls["numpy"])  # refused steps of short calls there were
+    if bulged:
+        assert not any(c.undone for c in calls["numba"]) and any(c.replayed for c in calls["numba"])
+    else:  # none replayed, and fewer calls: a halved step goes on in the call that refused it
+        assert not any(c.replayed for c in calls["numba"]) and len(calls["numba"]) < len(calls["numpy"])
     a, b = runs["numpy"], runs["numba"]
     assert a.n_broken > 20 and a.step_count == b.step_count
     for name in ("x", "v", "anchor", "intact"):

@@ -110,14 +110,16 @@ def _no_flow(length, rest, own, q, h, params):
 
 
 IN_PLACE_STEPS = 8
-"""Steps a call must be allowed to take before a step adaptive stepping refuses is taken back in the
-call rather than by replaying the call to it.  A replay costs the steps before the refused one, at
-most ``Plan.n − 1``, and only when a step is refused.  Taken back in the call, with a uniform radius
-each step is written into the other of two buffers (the state before it left in the one it is read
-from), which costs a copy into the state's vectors at the end of a call that ends in the other one;
-with a radius that depends on height each step's bases are first copied (a pass over them every
-step).  Calls of a few steps (the whole tree's, ended by every join) replay; long calls (a trunk
-segment's, up to 128 steps) take back in the call.  The bits are the same."""
+"""Steps a call at per-base radii must be allowed to take before a step adaptive stepping refuses is
+taken back in the call rather than by replaying the call to it.  A replay costs the steps before
+the refused one, at most ``Plan.n − 1``, the forces made again, and a call of its own for the
+halved step; it is paid only when a step is refused.  Taken back in the call, a radius that
+depends on height has each step's bases copied first (a pass over them every step), so calls of a
+few steps (the whole tree's, ended by every join) replay and long ones (up to 128 steps) take back
+in the call.  A uniform radius takes back in the call whatever its length: each step is written
+into the other of two buffers (the state before it left in the one it is read from), which costs
+a copy into the state's vectors at the end of a call that ends in the other one.  The bits are the
+same either way."""
 
 BLOCK = 2048
 """Bases or springs a block (``NumbaBackend.block``): the loops over them go a block at a time (each
@@ -664,8 +666,8 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
     step is replayed from them), and, when the last step is accepted, receives the positions it ends
     with (for the next call's comparison).  Where adaptive stepping may refuse a step, the resin does
-    not flow and the call may take more than ``IN_PLACE_STEPS`` steps, a refused step is taken back
-    here (its breaks undone) instead of by a replay of the call.  ``start``'s vectors from the tenth on
+    not flow and the radius is uniform or the call may take more than ``IN_PLACE_STEPS`` steps, a
+    refused step is taken back here (its breaks undone) instead of by a replay of the call.  ``start``'s vectors from the tenth on
     then serve: with a uniform radius, its first six are the second of two buffers of positions and
     velocities (``_joined``), each step read from one and written into the other and taken when it is
     kept, a refused one taken back by not taking it, and a call that ends in the second buffer copies
@@ -691,8 +693,9 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     log_id, log_step, log_t = log
     # a step adaptive stepping may refuse is taken back here (a resin that flows changes its springs too: that
     # call is replayed from its start by the caller instead): with a uniform radius by not taking it (each step
-    # written into the other of two buffers), else from a copy of the bases before it
-    in_place = over < np.inf and levels > 0 and not evolve and ends.shape[0] > IN_PLACE_STEPS
+    # written into the other of two buffers), else, in calls long enough to pay for it, from a copy of the
+    # bases before it
+    in_place = over < np.inf and levels > 0 and not evolve and (uniform or ends.shape[0] > IN_PLACE_STEPS)
     apart = in_place and uniform  # two buffers
     prev = (start[9], start[10], start[11], start[12], start[13], start[14], start[15], start[16], start[17])
     here = (x0, x1, x2, v0, v1, v2)  # the state's positions and velocities
