@@ -125,6 +125,35 @@ def test_a_run_of_the_fit_measures_what_the_run_folder_says(tmp_path):
         assert (got[k] is None and want[k] is None) or got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-12), k
 
 
+NO_LAW = r"""
+import json, sys
+from bark.engine.scene import merge, read_toml
+from bark.studies.fit import STATISTICS, Observed, simulate_statistics
+observed = Observed.read(sys.argv[2])
+got = simulate_statistics(merge(read_toml("reticulate"), json.loads(sys.argv[1])), STATISTICS)
+print(json.dumps([observed.values, got, "scipy.optimize" in sys.modules]))
+"""
+
+
+def test_a_fits_runs_and_its_observed_pattern_fit_no_size_law(tmp_path):
+    """A fit compares the patch sizes' mean, never a law of them: neither its observed pattern nor
+    its runs fit one, so scipy's optimiser is never imported (half a second of every worker's
+    start) — and the statistics are those of the run's folder."""
+    r = CliRunner().invoke(cli, ["simulate", "--scene", "reticulate", *TINY_SET, "--seed", "5", "--out", str(tmp_path / "r"),
+                                 "--quiet"])
+    assert r.exit_code == 0, r.output
+    scene = merge(TINY, {"run": {"seed": 5, "backend": "numpy"}})
+    done = subprocess.run([sys.executable, "-c", NO_LAW, json.dumps(scene), str(tmp_path / "r")], capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    observed, got, optimiser = json.loads(done.stdout.strip().splitlines()[-1])
+    assert not optimiser
+    assert observed == Observed.read(tmp_path / "r").values  # as this process reads it
+    assert got.keys() == observed.keys() and got["size_mean"] is not None and got["n_bar"] is not None, got
+    for k in got:
+        assert (got[k] is None and observed[k] is None) or got[k] == pytest.approx(observed[k], rel=1e-9, abs=1e-12), k
+
+
 def test_a_statistic_a_run_lacks_makes_it_far_not_undefined():
     import pyabc
 

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bark.analysis.network import crack_network, size_distribution
 
@@ -38,6 +40,17 @@ def test_a_power_law_and_a_log_normal_are_told_apart_and_fitted():
     assert got["size_mean"] == pytest.approx(logn.mean()) and got["size_sd"] == pytest.approx(logn.std(ddof=1))
     assert size_distribution([7, 7, 7], 7)["powerlaw_alpha"] is None  # nothing to fit
     assert size_distribution([], 7)["size_mean"] is None
+
+
+@settings(max_examples=60)
+@given(sizes=st.lists(st.integers(1, 400), max_size=60), s_min=st.integers(1, 9))
+def test_without_the_law_the_sizes_mean_and_sd_are_the_same_and_no_law_is_fitted(sizes, s_min):
+    """``law=False`` (what a fit asks) gives the mean and SD bits the whole measure gives, and every
+    law's key ``None``."""
+    whole, plain = size_distribution(sizes, s_min), size_distribution(sizes, s_min, law=False)
+    assert plain.keys() == whole.keys()
+    assert (plain["size_mean"], plain["size_sd"]) == (whole["size_mean"], whole["size_sd"])
+    assert all(plain[k] is None for k in plain if k not in ("size_mean", "size_sd"))
 
 
 def test_a_brick_wall_has_t_junctions_three_patches_each_and_six_a_brick():

@@ -51,8 +51,10 @@ SIZE_KEYS = ("size_mean", "size_sd", "powerlaw_alpha", "lognormal_mu", "lognorma
 NETWORK_KEYS = ("n_junctions", "n_bar", "v_bar", "t_fraction", "y_fraction", "nematic_order", "crack_director_deg")
 
 
-def size_distribution(sizes, s_min: int) -> dict:
-    """The patch-size statistics of ``sizes`` (bases per patch) of at least ``s_min`` (module docstring)."""
+def size_distribution(sizes, s_min: int, law: bool = True) -> dict:
+    """The patch-size statistics of ``sizes`` (bases per patch) of at least ``s_min`` (module
+    docstring).  ``law=False``: the mean and SD only, the laws' keys ``None`` — what asks for no law
+    (a fit compares the mean) pays neither their fit nor scipy's optimiser."""
     s = np.asarray(sizes, dtype=float)
     s = s[s >= s_min]
     n = s.size
@@ -60,7 +62,7 @@ def size_distribution(sizes, s_min: int) -> dict:
     if n == 0:
         return out
     out.update(size_mean=float(s.mean()), size_sd=float(s.std(ddof=1)) if n > 1 else None)
-    if n < 3 or np.all(s == s[0]):
+    if not law or n < 3 or np.all(s == s[0]):
         return out
     from scipy.optimize import minimize  # only where there is a law to fit: a run with one patch never pays it
     from scipy.special import erfc, log_ndtr
@@ -230,15 +232,16 @@ def _trios(who: np.ndarray, junctions: np.ndarray) -> dict:
 
 
 def measure(points: np.ndarray, labels: np.ndarray, s_min: int, pairs=None, intact=None,
-            offsets: tuple[int, ...] | None = None) -> dict:
+            offsets: tuple[int, ...] | None = None, law: bool = True) -> dict:
     """Every statistic of this module of a pattern: the patch sizes always, the crack network where it
     has springs (``pairs``, ``intact``) on a lattice of two offsets.  ``points`` are 3-D positions on
     the trunk (unrolled at their mean radius, a period round it) or 2-D ones in a plane (no period);
-    ``offsets`` the lattice's, else the two commonest among the springs.  What a run writes in
-    summary.json, ``bark analyze`` finds in its files and the network analyzer measures: one function."""
+    ``offsets`` the lattice's, else the two commonest among the springs; ``law`` as for
+    :func:`size_distribution`.  What a run writes in summary.json, ``bark analyze`` finds in its
+    files and the network analyzer measures: one function."""
     labels = np.asarray(labels)
     sizes = np.unique(labels, return_counts=True)[1] if labels.size else np.empty(0, np.int64)
-    out = size_distribution(sizes, s_min)
+    out = size_distribution(sizes, s_min, law)
     if pairs is None or len(pairs) == 0:
         return out
     pairs = np.asarray(pairs, dtype=np.int64)
@@ -265,11 +268,12 @@ def of_state(x: np.ndarray, labels: np.ndarray, pairs: np.ndarray, intact: np.nd
     return measure(x, labels, s_min, pairs, intact)
 
 
-def of_pattern(path, patch_sizes, min_size: int | None) -> dict:
+def of_pattern(path, patch_sizes, min_size: int | None, law: bool = True) -> dict:
     """The statistics beyond the paper's of the pattern at ``path`` (as ``bark.analysis.pattern.read``
     takes it) whose patches have ``patch_sizes`` bases: the sizes' statistics always, and the crack
     network's where the pattern has springs (a run's folder or state file).  ``min_size`` ``None``:
-    the run's own (the summary.json beside it), else the default."""
+    the run's own (the summary.json beside it), else the default; ``law`` as for
+    :func:`size_distribution`."""
     from pathlib import Path
 
     from bark.analysis.pattern import run_min_size
@@ -281,5 +285,5 @@ def of_pattern(path, patch_sizes, min_size: int | None) -> dict:
     if state is not None:
         with np.load(state, allow_pickle=False) as d:
             if {"x", "labels", "pairs", "intact"} <= set(d.files):
-                return measure(d["x"], d["labels"], min_size, d["pairs"], d["intact"])
-    return size_distribution(patch_sizes, min_size)
+                return measure(d["x"], d["labels"], min_size, d["pairs"], d["intact"], law=law)
+    return size_distribution(patch_sizes, min_size, law)

@@ -185,7 +185,7 @@ class Observed:
         from bark.analysis.pattern import read
 
         stats = read(path, min_size)
-        network = None if stats.patches is None else of_pattern(path, stats.patches.size, min_size)
+        network = None if stats.patches is None else of_pattern(path, stats.patches.size, min_size, law=False)
         if mirror:
             stats = stats.mirrored()
         return cls(name=stats.name or Path(path).name, values=measured(stats, network), source=stats.source or str(path))
@@ -284,7 +284,7 @@ class Fit:
 
 def simulate_statistics(scene: dict, names: Iterable[str]) -> dict[str, float | None]:
     """Run ``scene`` in memory and measure the statistics of ``names`` (:data:`STATISTICS`), nothing
-    more: the crack network only where a network statistic is asked for.  A run whose state went
+    more: the crack network only where a network statistic is asked for, and no patch-size law.  A run whose state went
     non-finite, or that made no patch, has no statistics (``None``): the fit rejects it."""
     from bark.analysis.network import measure
     from bark.analysis.pattern import Pattern
@@ -305,7 +305,7 @@ def simulate_statistics(scene: dict, names: Iterable[str]) -> dict[str, float | 
     network = None
     if stats.patches is not None and any(n in names for n in ("size_mean", *NETWORK_STATISTICS)):
         springs = (s.pairs, s.intact, tuple(sim.lattice.offsets)) if any(n in names for n in NETWORK_STATISTICS) else ()
-        network = measure(s.x, labels, min_size, *springs)
+        network = measure(s.x, labels, min_size, *springs, law=False)  # a fit compares no size law
     values = measured(stats, network)
     return {n: values[n] for n in names}
 
