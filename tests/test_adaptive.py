@@ -160,6 +160,35 @@ def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, ker
     assert all(np.array_equal(la[k], lb[k]) for k in la) and a.step_count == b.step_count and la["spring"].size > 20
 
 
+@pytest.mark.parametrize("bulged", [False, True])
+def test_a_call_leaves_the_next_one_the_positions_its_forces_are_of(make_sim, kernel_calls, bulged):
+    """The numba kernel leaves the forces of the positions a call ended with for the next call,
+    which takes them where those positions are still the state's (compared to the bit, else every
+    force is made again: the same bits, only slower).  So after every call whose forces it kept,
+    ``start``'s first vectors hold the state's positions — also where an adaptive call at a uniform
+    radius ended in its second buffer (an odd count of steps kept) and copied it back into the
+    state, and where per-base radii took a refused step back from a copy or replayed.  Bases join
+    every 0.1 time units: many calls, the positions of the bases there before each join compared."""
+    from bark.model.lattice import Lattice
+    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
+
+    lattice = Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
+    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
+    sim = make_sim(backend="numba", lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive",
+                   **({"growth": growth} if bulged else {}))
+    odd = []
+
+    def compare(sim):
+        fr = sim.backend._frame
+        if fr.forces is not None:  # kept for the next call
+            odd.append(kernel_calls[-1].result.done % 2 == 1)
+            assert np.array_equal(fr.start[0][:fr.kept], sim.state.x[:fr.kept]), (len(odd), kernel_calls[-1])
+
+    sim.run(Stop(until_time=5.0), compare)
+    assert sum(odd) > 3 and len(odd) - sum(odd) > 3, odd  # calls that ended in either buffer
+    assert any(c.undone or c.halved for c in kernel_calls) and sim.n_broken > 20
+
+
 def test_adaptive_stepping_also_keeps_explicit_steps_stable(make_sim):
     """A largest step above the stability limit is split, as with stepping = auto."""
     sim = make_sim(n_bases=200, dt=2.0, stepping="adaptive")
