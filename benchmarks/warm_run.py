@@ -8,7 +8,10 @@ loaded — or compiled: the worker says it runs many, as a fit's does, so that `
 even where its kernel is not compiled yet) and then once per seed, timing each run's CPU
 (``time.process_time``), the share of it inside its calls' ``take`` (the compiled kernel and the
 building of its arguments: what is not Python per pass of the loop), and counting its passes of the
-loop (``Simulation.advance``: one call of the kernel each). With ``--against DIR`` (a
+loop (``Simulation.advance``: one call of the kernel each).  What a pass costs outside the kernel's
+calls is split among the parts of the loop that this checkout has: the bases joining
+(``Simulation.join``), ``break_springs``, ``stepping.plan`` and the call around the kernel
+(``Backend.steps`` less the kernel's ``take``: the frame, the live springs, the result). With ``--against DIR`` (a
 checkout of bark, e.g. ``git worktree add /tmp/base <commit>``) the same worker runs that code too,
 the two interleaved round by round so that a change in the machine's load falls on both, and the
 script prints both, the median of the pairwise ratios this / that, and whether the final states and
@@ -55,6 +58,25 @@ def keeping(self, *a, **k):
     return run(self, *a, **k)
 
 Simulation.advance, Simulation.run = counting, keeping
+PARTS = {"join": (Simulation, "join"), "break_springs": (Simulation, "break_springs"),
+         "plan": (__import__("bark.engine.stepping", fromlist=["plan"]), "plan"),
+         "steps": (getattr(kernels, "Backend", None), "steps")}
+
+
+def part_timed(key, f):
+    def timed(*a, **k):
+        t0 = time.process_time()
+        try:
+            return f(*a, **k)
+        finally:
+            counted[key] += time.process_time() - t0
+    return timed
+
+
+for key, (owner, name) in PARTS.items():  # where a pass's Python goes (each part that this checkout has)
+    if getattr(owner, name, None) is not None:
+        counted[key] = 0.0
+        setattr(owner, name, part_timed(key, getattr(owner, name)))
 if hasattr(kernels, "take_steps"):  # the CPU inside each call's take (the kernel, and building its arguments)
     steps_of = kernels.take_steps
 
@@ -77,7 +99,7 @@ data = read_toml(scene)
 names = ("orientation", "sd", "anisotropy")  # what a fit compares by default
 simulate_statistics({**data, "run": {**data.get("run", {}), "seed": 10_000}}, names)  # warm: imports, kernels
 for seed in seeds:
-    counted["advances"], counted["kernel"] = 0, 0.0
+    counted.update({key: 0.0 for key in PARTS if key in counted}, advances=0, kernel=0.0)
     t0 = time.process_time()
     stats = simulate_statistics({**data, "run": {**data.get("run", {}), "seed": seed}}, names)
     cpu = time.process_time() - t0
@@ -86,6 +108,7 @@ for seed in seeds:
     for a in (sim.state.x, sim.state.intact, *(sim.breaks.arrays()[k] for k in sorted(sim.breaks.arrays()))):
         digest.update(np.ascontiguousarray(a).tobytes())
     print(json.dumps({"seed": seed, "cpu": cpu, "kernel": counted["kernel"], "advances": counted["advances"], "steps": sim.step_count,
+                      "parts": {key: counted[key] for key in PARTS if key in counted},
                       "t": sim.state.t, "stats": stats, "bits": digest.hexdigest()}), flush=True)
 """
 
@@ -93,6 +116,21 @@ for seed in seeds:
 def worker(code: Path | None, scene: str, seeds: list[int], links: Path) -> list[dict]:
     """One worker process on ``code`` (``None``: this checkout as installed): its runs' records."""
     return worker_records(code, links, WORKER, scene, ",".join(map(str, seeds)))
+
+
+def _pass(rounds: list[list[dict]]) -> str:
+    """Where a pass's CPU outside the kernel's calls goes, in µs (medians over the runs)."""
+    runs = [r for rnd in rounds for r in rnd if r.get("parts")]
+    if not runs:
+        return "where a pass's Python goes: not measured"
+    per = lambda r, v: 1e6 * v / max(r["advances"], 1)  # noqa: E731
+    outside = statistics.median(per(r, r["cpu"] - r["kernel"]) for r in runs)
+    parts = {k: statistics.median(per(r, r["parts"][k] - (r["kernel"] if k == "steps" else 0.0)) for r in runs)
+             for k in runs[0]["parts"]}
+    named = {"steps": "the call around the kernel"}
+    return (f"outside the kernel's calls, per pass (the scene's building and statistics included): {outside:.0f} µs; "
+            "of it " +
+            ", ".join(f"{named.get(k, k)} {v:.0f}" for k, v in parts.items()))
 
 
 def main() -> None:
@@ -119,6 +157,7 @@ def main() -> None:
         print(f"{side} ({code or ROOT}): CPU per run {statistics.median(cpu):.3f} s (median), "
               + (f"{100 * share:.0f} % of it in the kernel's calls, " if share is not None else "") + "passes of the loop "
               f"{[r['advances'] for r in last]}, steps {[r['steps'] for r in last]}, t {[round(r['t'], 3) for r in last]}")
+        print(f"  {_pass(runs[side])}")
     if "that" in sides:
         ratios = [a["cpu"] / b["cpu"] for ra, rb in zip(runs["this"], runs["that"]) for a, b in zip(ra, rb)]
         same = all(a["bits"] == b["bits"] for a, b in zip(runs["this"][-1], runs["that"][-1]))
