@@ -11,7 +11,9 @@ building of its arguments: what is not Python per pass of the loop), and countin
 loop (``Simulation.advance``: one call of the kernel each).  What a pass costs outside the kernel's
 calls is split among the parts of the loop that this checkout has: the bases joining
 (``Simulation.join``), ``break_springs``, ``stepping.plan`` and the call around the kernel
-(``Backend.steps`` less the kernel's ``take``: the frame, the live springs, the result). With ``--against DIR`` (a
+(``Backend.steps`` less the kernel's ``take``: the frame, the live springs, the result); what a
+run spends outside its passes (building the scene, its first bases joined, its statistics) is
+said apart. With ``--against DIR`` (a
 checkout of bark, e.g. ``git worktree add /tmp/base <commit>``) the same worker runs that code too,
 the two interleaved round by round so that a change in the machine's load falls on both, and the
 script prints both, the median of the pairwise ratios this / that, and whether the final states and
@@ -46,12 +48,17 @@ if hasattr(kernels, "expect_many"):  # as a fit's worker says: its warm-up compi
     kernels.expect_many()
 
 scene, seeds = sys.argv[1], [int(s) for s in sys.argv[2].split(",")]
-counted = {"advances": 0, "sim": None, "kernel": 0.0}
+counted = {"advances": 0, "sim": None, "kernel": 0.0, "passes": 0.0, "in_pass": False}
 advance, run = Simulation.advance, Simulation.run
 
 def counting(self, *a, **k):
     counted["advances"] += 1
-    return advance(self, *a, **k)
+    t0, counted["in_pass"] = time.process_time(), True
+    try:
+        return advance(self, *a, **k)
+    finally:
+        counted["passes"] += time.process_time() - t0
+        counted["in_pass"] = False
 
 def keeping(self, *a, **k):
     counted["sim"] = self
@@ -65,11 +72,13 @@ PARTS = {"join": (Simulation, "join"), "break_springs": (Simulation, "break_spri
 
 def part_timed(key, f):
     def timed(*a, **k):
-        t0 = time.process_time()
+        if not counted["in_pass"]:  # e.g. the first bases joined when the scene is built: not a pass's
+            return f(*a, **k)
+        t0, k0 = time.process_time(), counted["kernel"]
         try:
             return f(*a, **k)
-        finally:
-            counted[key] += time.process_time() - t0
+        finally:  # less the kernel's calls made inside (Backend.steps: the call around the kernel)
+            counted[key] += time.process_time() - t0 - (counted["kernel"] - k0)
     return timed
 
 
@@ -99,7 +108,7 @@ data = read_toml(scene)
 names = ("orientation", "sd", "anisotropy")  # what a fit compares by default
 simulate_statistics({**data, "run": {**data.get("run", {}), "seed": 10_000}}, names)  # warm: imports, kernels
 for seed in seeds:
-    counted.update({key: 0.0 for key in PARTS if key in counted}, advances=0, kernel=0.0)
+    counted.update({key: 0.0 for key in PARTS if key in counted}, advances=0, kernel=0.0, passes=0.0)
     t0 = time.process_time()
     stats = simulate_statistics({**data, "run": {**data.get("run", {}), "seed": seed}}, names)
     cpu = time.process_time() - t0
@@ -107,7 +116,8 @@ for seed in seeds:
     digest = hashlib.sha256()
     for a in (sim.state.x, sim.state.intact, *(sim.breaks.arrays()[k] for k in sorted(sim.breaks.arrays()))):
         digest.update(np.ascontiguousarray(a).tobytes())
-    print(json.dumps({"seed": seed, "cpu": cpu, "kernel": counted["kernel"], "advances": counted["advances"], "steps": sim.step_count,
+    print(json.dumps({"seed": seed, "cpu": cpu, "kernel": counted["kernel"], "advances": counted["advances"],
+                      "passes": counted["passes"], "steps": sim.step_count,
                       "parts": {key: counted[key] for key in PARTS if key in counted},
                       "t": sim.state.t, "stats": stats, "bits": digest.hexdigest()}), flush=True)
 """
@@ -119,18 +129,19 @@ def worker(code: Path | None, scene: str, seeds: list[int], links: Path) -> list
 
 
 def _pass(rounds: list[list[dict]]) -> str:
-    """Where a pass's CPU outside the kernel's calls goes, in µs (medians over the runs)."""
+    """Where a pass's CPU outside the kernel's calls goes, in µs, and what a run spends outside its
+    passes (medians over the runs)."""
     runs = [r for rnd in rounds for r in rnd if r.get("parts")]
     if not runs:
         return "where a pass's Python goes: not measured"
     per = lambda r, v: 1e6 * v / max(r["advances"], 1)  # noqa: E731
-    outside = statistics.median(per(r, r["cpu"] - r["kernel"]) for r in runs)
-    parts = {k: statistics.median(per(r, r["parts"][k] - (r["kernel"] if k == "steps" else 0.0)) for r in runs)
-             for k in runs[0]["parts"]}
+    outside = statistics.median(per(r, r["passes"] - r["kernel"]) for r in runs)
+    parts = {k: statistics.median(per(r, r["parts"][k]) for r in runs) for k in runs[0]["parts"]}
     named = {"steps": "the call around the kernel"}
-    return (f"outside the kernel's calls, per pass (the scene's building and statistics included): {outside:.0f} µs; "
-            "of it " +
-            ", ".join(f"{named.get(k, k)} {v:.0f}" for k, v in parts.items()))
+    rest = statistics.median(1e3 * (r["cpu"] - r["passes"]) for r in runs)
+    return (f"a pass outside the kernel's calls: {outside:.0f} µs; of it " +
+            ", ".join(f"{named.get(k, k)} {v:.0f}" for k, v in parts.items()) +
+            f"; outside the passes (the scene built, its statistics): {rest:.1f} ms a run")
 
 
 def main() -> None:
