@@ -2,9 +2,10 @@
 
     python benchmarks/base_pass_layout.py [--n 3000] [--sweeps 5000] [--rounds 5] [--offset 0]
 
-To take a refused step back in a long call (``numba_backend.IN_PLACE_STEPS``), adaptive stepping
-at a uniform radius reads each step from one of two buffers and writes it into the other, leaving
-a refused step untaken; at per-base radii it copies the bases before every step.  Two buffers pay
+To take a refused step back inside a call, adaptive stepping at a uniform radius reads each step
+from one of two buffers and writes it into the other, leaving a refused step untaken; at per-base
+radii it copies the bases before every step (in calls of more than
+``numba_backend.IN_PLACE_STEPS`` steps; shorter ones are replayed).  Two buffers pay
 only if the base pass's loop stays as fast once the vectors it writes are not those it reads.  The
 compiler cannot know they do not overlap, so it checks at run time and takes its vectorised loop
 where they do not.

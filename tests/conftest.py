@@ -63,8 +63,10 @@ class KernelCall:
 
     @property
     def halved(self) -> bool:
-        """Whether it halved a step and went on: the sizes of the steps it kept shrink somewhere."""
-        return bool((np.diff(self.sizes) < 0).any())
+        """Whether it halved a step and went on: a step it kept is smaller than the one kept
+        before it, or than the step it began with."""
+        began = 1 << (self.plan.levels - self.plan.halvings)  # in ticks, as the sizes
+        return bool((np.diff(np.r_[began, self.sizes]) < 0).any())
 
     @property
     def doubled(self) -> bool:
@@ -74,8 +76,9 @@ class KernelCall:
 
 @contextlib.contextmanager
 def recorded_calls():
-    """Every kernel call made inside the block, in order, in the list it yields (a test may clear it
-    between runs).  A plain context manager, so that a script a test runs in a process of its own
+    """Every call of the backends' step algorithm (``Backend.steps``: the compiled path; the
+    Python path's steps are not recorded) made inside the block, in order, in the list it yields (a
+    test may clear it between runs).  A plain context manager, so that a script a test runs in a process of its own
     can record its calls too; in-process tests take the ``kernel_calls`` fixture."""
     from bark.engine import kernels
 

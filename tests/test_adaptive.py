@@ -77,7 +77,8 @@ def test_smallest_step_overshoot_is_recorded_not_silent(make_sim, backend):
 @pytest.mark.parametrize("seed", [0, 5])
 def test_quiet_kernel_and_step_by_step_agree_under_adaptive_stepping(make_sim, seed):
     """advance() (compiled chunks — halved steps too, each chunk ending where the clock may double
-    the step; rejected last steps replayed) and step() decide alike, to the bit."""
+    the step; a rejected step taken back in the call, halved, and the call going on) and step()
+    decide alike, to the bit."""
     kw = dict(n_bases=300, G=0.05, dt=0.3, seed=seed, stepping="adaptive", overshoot_tol=0.005, backend="numba")
     chunked, stepped = make_sim(**kw), make_sim(**kw)
     stop = Stop(until_time=8.1)  # 27 full steps: run() keeps h, as step() by hand does

@@ -134,7 +134,8 @@ def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, kernel
     """The threaded kernel's passes, in blocks of 16 shared between two threads, ready to take a step
     back at a uniform radius: the base pass writes each block into the second buffer, the spring
     pass reads the positions there, and a refused step is left untaken — the serial kernel's bits,
-    breaks and steps.  At per-base radii (the base pass copies each block before it moves it) the
+    breaks and steps, in long calls (no joins) and in short ones (bases joining every 0.1), which
+    take a refused step back too.  At per-base radii (the base pass copies each block before it moves it) the
     same is checked by ``tests/test_alongside.py``'s ``bark compile`` test, on the threaded kernel it
     compiles.  Slow: a threaded kernel compiles for a minute or two."""
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
@@ -144,6 +145,12 @@ def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, kernel
     shared = _threaded(2, 16, "sqrt", long_calls, until_time=6.0, in_kernel=True)
     assert (serial.backend.threads, shared.backend.threads) == (1, 2)
     assert any(c.halved and not c.undone for c in kernel_calls) and shared.n_broken > 20  # refused steps taken back inside calls that went on
+    _same(serial, shared)
+    assert serial.step_count == shared.step_count
+    kernel_calls.clear()  # and short calls (bases joining every 0.1), which take a refused step back too
+    serial, shared = (_threaded(t, block, "sqrt", until_time=4.0, in_kernel=True) for t, block in ((1, numba_backend.BLOCK), (2, 16)))
+    short = [c for c in kernel_calls if c.plan.n <= numba_backend.IN_PLACE_STEPS]
+    assert short and not any(c.replayed for c in short) and any(c.halved for c in short)
     _same(serial, shared)
     assert serial.step_count == shared.step_count
 

@@ -293,8 +293,8 @@ def _bounded(sim, stop, n: int) -> tuple[int, float, bool]:
     where bases next join, a trigger is next due or a time stop can next hold, and after ``n``
     steps: cut where a trigger counting steps is next due, and where the present step would reach
     ``t_limit`` (or a radius stop: the call then may not go on at a doubled step).  A doubled step
-    only reaches them sooner, so the cut is the most steps the call can take, which is what decides
-    how a refused step is taken back (``IN_PLACE_STEPS``)."""
+    only reaches them sooner, so the cut is the most steps the call can take, which is what decides,
+    at per-base radii, how a refused step is taken back (``IN_PLACE_STEPS``)."""
     eps = 1e-9 * sim.clock.h
     limits = [sim.packing.next_join(sim.state.t, sim.state.n_bases)]
     for trigger, _ in sim.actions:

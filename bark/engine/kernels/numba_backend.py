@@ -1762,8 +1762,9 @@ class _Frame:
     start: tuple
     """Copies of x, v and anchor at the start of a call, made by the kernel: an undone step is replayed
     from them; after an accepted call, x is the positions it ended with.  Then, for a call that takes
-    a refused step back itself (``IN_PLACE_STEPS``), the kernel's second buffer of x and v (a uniform
-    radius), or the bases and anchors before the last step (per-base radii)."""
+    a refused step back itself, the kernel's second buffer of x and v (a uniform radius), or the
+    bases and anchors before the last step (per-base radii, in calls of more than
+    ``IN_PLACE_STEPS`` steps)."""
     log: tuple
     start_columns: tuple = ()
     """``start`` as the kernel takes it: one vector per coordinate (made with the views)."""
