@@ -43,7 +43,7 @@ import numpy as np
 from bark.engine.scene import read_toml
 from bark.engine.simulation import Simulation
 from bark.studies.fit import simulate_statistics
-from bark.engine import kernels
+from bark.engine import kernels, stepping
 if hasattr(kernels, "expect_many"):  # as a fit's worker says: its warm-up compiles a kernel not yet compiled
     kernels.expect_many()
 
@@ -65,8 +65,7 @@ def keeping(self, *a, **k):
     return run(self, *a, **k)
 
 Simulation.advance, Simulation.run = counting, keeping
-PARTS = {"join": (Simulation, "join"), "break_springs": (Simulation, "break_springs"),
-         "plan": (__import__("bark.engine.stepping", fromlist=["plan"]), "plan"),
+PARTS = {"join": (Simulation, "join"), "break_springs": (Simulation, "break_springs"), "plan": (stepping, "plan"),
          "steps": (getattr(kernels, "Backend", None), "steps")}
 
 
@@ -101,7 +100,6 @@ if hasattr(kernels, "take_steps"):  # the CPU inside each call's take (the kerne
         call.take = timed
         return steps_of(call, *rest)
     kernels.take_steps = timed_steps
-    from bark.engine import stepping
     if getattr(stepping, "take_steps", None) is steps_of:  # the Python path's steps take the algorithm by name
         stepping.take_steps = timed_steps
 data = read_toml(scene)

@@ -77,9 +77,10 @@ class KernelCall:
 @contextlib.contextmanager
 def recorded_calls():
     """Every call of the backends' step algorithm (``Backend.steps``: the compiled path; the
-    Python path's steps are not recorded) made inside the block, in order, in the list it yields (a
-    test may clear it between runs).  A plain context manager, so that a script a test runs in a process of its own
-    can record its calls too; in-process tests take the ``kernel_calls`` fixture."""
+    Python path's steps are not recorded) made inside the block, in order, in the list it yields
+    (a test may clear it between runs).  A plain context manager, so that a script a test runs in
+    a process of its own can record its calls too; in-process tests take the ``kernel_calls``
+    fixture."""
     from bark.engine import kernels
 
     calls: list[KernelCall] = []

@@ -135,9 +135,9 @@ def test_threads_take_a_refused_step_back_to_the_serial_bits(monkeypatch, kernel
     back at a uniform radius: the base pass writes each block into the second buffer, the spring
     pass reads the positions there, and a refused step is left untaken — the serial kernel's bits,
     breaks and steps, in long calls (no joins) and in short ones (bases joining every 0.1), which
-    take a refused step back too.  At per-base radii (the base pass copies each block before it moves it) the
-    same is checked by ``tests/test_alongside.py``'s ``bark compile`` test, on the threaded kernel it
-    compiles.  Slow: a threaded kernel compiles for a minute or two."""
+    take a refused step back too.  At per-base radii (the base pass copies each block before it
+    moves it) the same is checked by ``tests/test_alongside.py``'s ``bark compile`` test, on the
+    threaded kernel it compiles.  Slow: a threaded kernel compiles for a minute or two."""
     monkeypatch.setattr(numba_backend, "ALONGSIDE", False)
     long_calls = Lattice(n_bases=2000, jitter=0.05)  # no joins: the kernel takes refused steps back itself
     serial = _threaded(1, numba_backend.BLOCK, "sqrt", long_calls, until_time=6.0, in_kernel=True)

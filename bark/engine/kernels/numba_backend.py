@@ -661,22 +661,22 @@ def _steps_kernel(bases, runs, work, rest, fmax, inv_fmax, own, live, constants,
     the bases from ``fresh`` on (0: all); the others' are taken from ``f`` as the last call left them
     — when ``kept >= 0`` and the positions of the first ``kept`` bases are still those the last call
     ended with (kept in ``start``: compared here, to the bit), which the backend knows to be all that
-    can have changed (``NumbaBackend.steps``); else all are made again.
+    can have changed (``_NumbaCall``: ``kept`` and ``fresh``); else all are made again.
 
     ``start`` also keeps the positions, velocities and anchors this call begins from (an undone
     step is replayed from them), and, when the last step is accepted, receives the positions it ends
     with (for the next call's comparison).  Where adaptive stepping may refuse a step, the resin does
     not flow and the radius is uniform or the call may take more than ``IN_PLACE_STEPS`` steps, a
-    refused step is taken back here (its breaks undone) instead of by a replay of the call.  ``start``'s vectors from the tenth on
-    then serve: with a uniform radius, its first six are the second of two buffers of positions and
-    velocities (``_joined``), each step read from one and written into the other and taken when it is
-    kept, a refused one taken back by not taking it, and a call that ends in the second buffer copies
-    it into the state's vectors; with a radius that depends on height, they receive each step's bases
-    (and anchors) before it moves them in place, and a refused step is copied back from them
-    (``_take_back``).  Where the step may still be halved it is
-    halved and the call goes on, the forces of the bases made again by the pass that begins a
-    call; else the call ends, its steps those before it (the forces in ``f`` are then the refused
-    step's, and the next call makes them again).
+    refused step is taken back here (its breaks undone) instead of by a replay of the call.
+    ``start``'s vectors from the tenth on then serve: with a uniform radius, its first six are the
+    second of two buffers of positions and velocities (``_joined``), each step read from one and
+    written into the other and taken when it is kept, a refused one taken back by not taking it,
+    and a call that ends in the second buffer copies it into the state's vectors; with a radius
+    that depends on height, they receive each step's bases (and anchors) before it moves them in
+    place, and a refused step is copied back from them (``_take_back``).  Where the step may still
+    be halved it is halved and the call goes on, the forces of the bases made again by the pass
+    that begins a call; else the call ends, its steps those before it (the forces in ``f`` are then
+    the refused step's, and the next call makes them again).
 
     ``constants`` ends with the patch-count stop's goal and least patch (``Plan.patch_goal``, 0:
     none): after a kept step at which the call's breaks reach ``break_budget``, the patches the live
@@ -1774,7 +1774,7 @@ class _Frame:
     kept: int = 0
     refresh_from: int = 0
     """Bases from this id on have springs (or are bases) that came after those forces: theirs are
-    made again at the next call, the others' kept (``NumbaBackend.steps``)."""
+    made again at the next call, the others' kept (``_NumbaCall``: ``fresh``)."""
     weights: "_Weights | None" = None
     """The anchors' growth-law weights (``NumbaBackend._heights``)."""
     material: int = 0
