@@ -16,6 +16,22 @@ from bark.errors import BarkError
 from conftest import build_sim
 
 
+def _radius(bulged: bool) -> dict:
+    """``make_sim``'s keywords for a radius that depends on height (a bulge on the sqrt law:
+    ``bulged``), else none (the uniform sqrt law)."""
+    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
+
+    return {"growth": BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),))} \
+        if bulged else {}
+
+
+def _joining():
+    """A lattice of 300 bases to which 100 join, two every 0.1 time units: calls of a few steps."""
+    from bark.model.lattice import Lattice
+
+    return Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
+
+
 def _overshoots(sim) -> np.ndarray:
     log = sim.breaks.arrays()
     return log["tension"] / sim.state.fmax[log["spring"]] - 1.0
@@ -115,16 +131,12 @@ def test_short_calls_take_a_refused_step_back_as_their_radius_asks_with_the_same
     up to it where the radius depends on height (taken back in the call, the bases would be copied
     every step: ``IN_PLACE_STEPS``) — either way to the numpy backend's bits, which replays."""
     from bark.engine.kernels.numba_backend import IN_PLACE_STEPS
-    from bark.model.lattice import Lattice
-    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
 
-    lattice = Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
-    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
     runs, calls = {}, {}
     for backend in ("numpy", "numba"):
         kernel_calls.clear()
-        runs[backend] = make_sim(backend=backend, lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive",
-                                 **({"growth": growth} if bulged else {}))
+        runs[backend] = make_sim(backend=backend, lattice=_joining(), G=0.05, dt=0.3, seed=3, stepping="adaptive",
+                                 **_radius(bulged))
         runs[backend].run(Stop(until_time=5.0))
         calls[backend] = [c for c in kernel_calls if c.plan.n <= IN_PLACE_STEPS]  # the short ones
     assert any(c.replayed for c in calls["numpy"])  # refused steps of short calls there were
@@ -145,10 +157,7 @@ def test_a_refused_step_taken_back_in_place_gives_the_replays_bits(make_sim, ker
     the bases and anchors before it — halves it and goes on: the
     same bits, steps and breaks as the numpy backend, which ends the call there and replays it up
     to that step."""
-    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
-
-    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
-    kw = dict(n_bases=300, G=0.05, dt=0.3, seed=3, stepping="adaptive", **({"growth": growth} if bulged else {}))
+    kw = dict(n_bases=300, G=0.05, dt=0.3, seed=3, stepping="adaptive", **_radius(bulged))
     runs = {}
     for backend in ("numpy", "numba"):
         runs[backend] = make_sim(backend=backend, **kw)
@@ -170,13 +179,7 @@ def test_a_call_leaves_the_next_one_the_positions_its_forces_are_of(make_sim, ke
     radius ended in its second buffer (an odd count of steps kept) and copied it back into the
     state, and where per-base radii took a refused step back from a copy or replayed.  Bases join
     every 0.1 time units: many calls, the positions of the bases there before each join compared."""
-    from bark.model.lattice import Lattice
-    from bark_plugins.growth import Bulge, BulgeGrowth, SqrtGrowth
-
-    lattice = Lattice(n_bases=400, n_start=300, join_rate=20.0, join_every=0.1, jitter=0.05)
-    growth = BulgeGrowth(base=SqrtGrowth(G=0.05), bulges=(Bulge(z=0.5, half_width=0.3, magnitude=0.02),)) if bulged else None
-    sim = make_sim(backend="numba", lattice=lattice, G=0.05, dt=0.3, seed=3, stepping="adaptive",
-                   **({"growth": growth} if bulged else {}))
+    sim = make_sim(backend="numba", lattice=_joining(), G=0.05, dt=0.3, seed=3, stepping="adaptive", **_radius(bulged))
     odd = []
 
     def compare(sim):
